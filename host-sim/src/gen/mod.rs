@@ -1,0 +1,1 @@
+//! Procedural generators for the bundled scenes: being written.

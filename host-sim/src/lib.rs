@@ -1,0 +1,4 @@
+//! The host side of LINKS-1: scene files, procedural scene generators, and the `links` CLI.
+
+pub mod gen;
+pub mod scene_file;

@@ -1,0 +1,384 @@
+//! Vectors, rays, axis-aligned boxes and error-bounded ray origins.
+//!
+//! Coordinates are LINKS-1's *view coordinates* once the DM has run: the eye at the origin,
+//! X to the right of the screen, Y up, +Z into the screen. With those axes the system is
+//! left-handed (X × Y = +Z points away from the viewer); cross products are the ordinary
+//! component formula, so a triangle wound clockwise as seen by the eye has its geometric
+//! normal pointing at the eye.
+
+use crate::num::Real;
+use core::ops::{Add, Index, Mul, Neg, Sub};
+
+/// A 3-vector of any [`Real`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vec3<T> {
+    pub x: T,
+    pub y: T,
+    pub z: T,
+}
+
+impl<T: Real> Vec3<T> {
+    #[inline]
+    pub const fn new(x: T, y: T, z: T) -> Self {
+        Self { x, y, z }
+    }
+    #[inline]
+    pub fn zero() -> Self {
+        Self::new(T::ZERO, T::ZERO, T::ZERO)
+    }
+    #[inline]
+    pub fn splat(v: T) -> Self {
+        Self::new(v, v, v)
+    }
+    #[inline]
+    pub fn from_f32(a: [f32; 3]) -> Self {
+        Self::new(T::from_f32(a[0]), T::from_f32(a[1]), T::from_f32(a[2]))
+    }
+    #[inline]
+    pub fn to_f64(self) -> [f64; 3] {
+        [self.x.to_f64(), self.y.to_f64(), self.z.to_f64()]
+    }
+    #[inline]
+    pub fn dot(self, o: Self) -> T {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+    #[inline]
+    pub fn cross(self, o: Self) -> Self {
+        Self::new(
+            self.y * o.z - self.z * o.y,
+            self.z * o.x - self.x * o.z,
+            self.x * o.y - self.y * o.x,
+        )
+    }
+    #[inline]
+    pub fn length_sq(self) -> T {
+        self.dot(self)
+    }
+    #[inline]
+    pub fn length(self) -> T {
+        self.length_sq().sqrt()
+    }
+    /// Unit vector, or `None` when the length is zero or not finite.
+    #[inline]
+    pub fn try_normalize(self) -> Option<Self> {
+        let l = self.length();
+        if l > T::ZERO && l.is_finite() {
+            Some(self * l.recip())
+        } else {
+            None
+        }
+    }
+    /// Unit vector; a zero vector stays zero (callers guarantee non-degenerate input).
+    #[inline]
+    pub fn normalize(self) -> Self {
+        self.try_normalize().unwrap_or(self)
+    }
+    #[inline]
+    pub fn abs(self) -> Self {
+        Self::new(self.x.abs(), self.y.abs(), self.z.abs())
+    }
+    #[inline]
+    pub fn mul_elem(self, o: Self) -> Self {
+        Self::new(self.x * o.x, self.y * o.y, self.z * o.z)
+    }
+    #[inline]
+    pub fn min(self, o: Self) -> Self {
+        Self::new(self.x.min(o.x), self.y.min(o.y), self.z.min(o.z))
+    }
+    #[inline]
+    pub fn max(self, o: Self) -> Self {
+        Self::new(self.x.max(o.x), self.y.max(o.y), self.z.max(o.z))
+    }
+    #[inline]
+    pub fn max_component(self) -> T {
+        self.x.max(self.y).max(self.z)
+    }
+    /// Index (0, 1, 2) of the largest component.
+    #[inline]
+    pub fn max_dimension(self) -> usize {
+        if self.x > self.y {
+            if self.x > self.z {
+                0
+            } else {
+                2
+            }
+        } else if self.y > self.z {
+            1
+        } else {
+            2
+        }
+    }
+    #[inline]
+    pub fn permute(self, x: usize, y: usize, z: usize) -> Self {
+        Self::new(self[x], self[y], self[z])
+    }
+    #[inline]
+    pub fn is_finite(self) -> bool {
+        self.x.is_finite() && self.y.is_finite() && self.z.is_finite()
+    }
+    /// Mirror `self` (pointing away from the surface) about normal `n`.
+    #[inline]
+    pub fn reflect(self, n: Self) -> Self {
+        self - n * (T::TWO * self.dot(n))
+    }
+}
+
+impl<T: Real> Index<usize> for Vec3<T> {
+    type Output = T;
+    #[inline]
+    fn index(&self, i: usize) -> &T {
+        match i {
+            0 => &self.x,
+            1 => &self.y,
+            _ => &self.z,
+        }
+    }
+}
+
+impl<T: Real> Add for Vec3<T> {
+    type Output = Self;
+    #[inline]
+    fn add(self, o: Self) -> Self {
+        Self::new(self.x + o.x, self.y + o.y, self.z + o.z)
+    }
+}
+impl<T: Real> Sub for Vec3<T> {
+    type Output = Self;
+    #[inline]
+    fn sub(self, o: Self) -> Self {
+        Self::new(self.x - o.x, self.y - o.y, self.z - o.z)
+    }
+}
+impl<T: Real> Mul<T> for Vec3<T> {
+    type Output = Self;
+    #[inline]
+    fn mul(self, s: T) -> Self {
+        Self::new(self.x * s, self.y * s, self.z * s)
+    }
+}
+impl<T: Real> Neg for Vec3<T> {
+    type Output = Self;
+    #[inline]
+    fn neg(self) -> Self {
+        Self::new(-self.x, -self.y, -self.z)
+    }
+}
+
+/// A row-major 3x3 matrix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Mat3<T> {
+    pub r: [Vec3<T>; 3],
+}
+
+impl<T: Real> Mat3<T> {
+    #[inline]
+    pub fn from_f32(m: [f32; 9]) -> Self {
+        Self {
+            r: [
+                Vec3::from_f32([m[0], m[1], m[2]]),
+                Vec3::from_f32([m[3], m[4], m[5]]),
+                Vec3::from_f32([m[6], m[7], m[8]]),
+            ],
+        }
+    }
+    #[inline]
+    pub fn mul_vec(&self, v: Vec3<T>) -> Vec3<T> {
+        Vec3::new(self.r[0].dot(v), self.r[1].dot(v), self.r[2].dot(v))
+    }
+    /// `Mᵀ v`: how normals leave a local frame whose inverse transform is `M`.
+    #[inline]
+    pub fn mul_transpose_vec(&self, v: Vec3<T>) -> Vec3<T> {
+        self.r[0] * v.x + self.r[1] * v.y + self.r[2] * v.z
+    }
+}
+
+/// A ray `origin + t * dir`, `t` in `(0, t_max)`. `dir` need not be unit length for the
+/// intersection routines, but the renderer keeps it unit so `t` is a distance.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray<T> {
+    pub origin: Vec3<T>,
+    pub dir: Vec3<T>,
+}
+
+impl<T: Real> Ray<T> {
+    #[inline]
+    pub fn new(origin: Vec3<T>, dir: Vec3<T>) -> Self {
+        Self { origin, dir }
+    }
+    #[inline]
+    pub fn at(&self, t: T) -> Vec3<T> {
+        self.origin + self.dir * t
+    }
+}
+
+/// Per-ray data the slab test reuses for every box: the reciprocal direction.
+#[derive(Clone, Copy, Debug)]
+pub struct RayInv<T> {
+    pub inv_dir: Vec3<T>,
+}
+
+impl<T: Real> RayInv<T> {
+    /// Reciprocals of a direction. A zero component gives ±inf for floats, which the slab
+    /// test handles (a ray parallel to a slab is inside it or misses it for every t).
+    #[inline]
+    pub fn new(dir: Vec3<T>) -> Self {
+        Self {
+            inv_dir: Vec3::new(dir.x.recip(), dir.y.recip(), dir.z.recip()),
+        }
+    }
+}
+
+/// An axis-aligned bounding box.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb<T> {
+    pub min: Vec3<T>,
+    pub max: Vec3<T>,
+}
+
+impl<T: Real> Aabb<T> {
+    /// The empty box (grows by union).
+    pub fn empty() -> Self {
+        Self {
+            min: Vec3::splat(T::MAX),
+            max: Vec3::splat(-T::MAX),
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        self.min.x > self.max.x || self.min.y > self.max.y || self.min.z > self.max.z
+    }
+    pub fn union_point(self, p: Vec3<T>) -> Self {
+        Self {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
+    }
+    pub fn union(self, o: Self) -> Self {
+        Self {
+            min: self.min.min(o.min),
+            max: self.max.max(o.max),
+        }
+    }
+    pub fn contains(&self, p: Vec3<T>) -> bool {
+        p.x >= self.min.x
+            && p.x <= self.max.x
+            && p.y >= self.min.y
+            && p.y <= self.max.y
+            && p.z >= self.min.z
+            && p.z <= self.max.z
+    }
+    /// Slab test (LINKS-1 4.2): does the ray hit the box for some t in `[0, t_max]`?
+    ///
+    /// NaN-safe: `0 * inf` (a ray in a slab's plane) gives NaN, and the comparisons are
+    /// written so that a NaN bound never shrinks the interval. The far bound is widened by
+    /// 1 + 2·gamma(3) (pbrt) so rounding can't make a ray graze past a box it touches.
+    #[inline]
+    pub fn hit(&self, ray: &Ray<T>, inv: &RayInv<T>, t_max: T) -> bool {
+        let mut t0 = T::ZERO;
+        let mut t1 = t_max;
+        let widen = T::ONE + T::TWO * T::gamma(3);
+        let mut axis = 0;
+        while axis < 3 {
+            let o = ray.origin[axis];
+            let id = inv.inv_dir[axis];
+            let mut tn = (self.min[axis] - o) * id;
+            let mut tf = (self.max[axis] - o) * id;
+            if tn > tf {
+                core::mem::swap(&mut tn, &mut tf);
+            }
+            tf = tf * widen;
+            // `x > t0` is false for NaN, so NaN leaves the interval unchanged.
+            if tn > t0 {
+                t0 = tn;
+            }
+            if tf < t1 {
+                t1 = tf;
+            }
+            if t0 > t1 {
+                return false;
+            }
+            axis += 1;
+        }
+        true
+    }
+}
+
+/// Offset a spawned ray's origin off the surface by the hit point's error bound (pbrt's
+/// OffsetRayOrigin): move along the geometric normal far enough that the rounding error of
+/// the hit point can't put the origin on the wrong side, to the side `dir` leaves through.
+#[inline]
+pub fn offset_ray_origin<T: Real>(p: Vec3<T>, p_error: Vec3<T>, n: Vec3<T>, dir: Vec3<T>) -> Vec3<T> {
+    let d = n.abs().dot(p_error);
+    let mut offset = n * d;
+    if dir.dot(n) < T::ZERO {
+        offset = -offset;
+    }
+    let mut po = p + offset;
+    // Round away from p so the offset itself can't be lost to rounding.
+    let mut i = 0;
+    while i < 3 {
+        let c = match i {
+            0 => &mut po.x,
+            1 => &mut po.y,
+            _ => &mut po.z,
+        };
+        if offset[i] > T::ZERO {
+            *c = c.next_up();
+        } else if offset[i] < T::ZERO {
+            *c = c.next_down();
+        }
+        i += 1;
+    }
+    po
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit_box() -> Aabb<f64> {
+        Aabb {
+            min: Vec3::new(-1.0, -1.0, -1.0),
+            max: Vec3::new(1.0, 1.0, 1.0),
+        }
+    }
+
+    #[test]
+    fn slab_hits_and_misses() {
+        let b = unit_box();
+        let r = Ray::new(Vec3::new(0.0, 0.0, -5.0), Vec3::new(0.0, 0.0, 1.0));
+        assert!(b.hit(&r, &RayInv::new(r.dir), f64::MAX));
+        assert!(!b.hit(&r, &RayInv::new(r.dir), 3.0), "box starts at t=4");
+        let r = Ray::new(Vec3::new(0.0, 2.0, -5.0), Vec3::new(0.0, 0.0, 1.0));
+        assert!(!b.hit(&r, &RayInv::new(r.dir), f64::MAX));
+        let r = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::new(0.0, 0.0, 1.0));
+        assert!(!b.hit(&r, &RayInv::new(r.dir), f64::MAX), "box is behind the ray");
+    }
+
+    #[test]
+    fn slab_ray_in_a_face_plane_is_nan_safe() {
+        // Origin exactly on the y = 1 slab plane, direction parallel to it: 0 * inf = NaN.
+        let b = unit_box();
+        let r = Ray::new(Vec3::new(0.0, 1.0, -5.0), Vec3::new(0.0, 0.0, 1.0));
+        assert!(b.hit(&r, &RayInv::new(r.dir), f64::MAX));
+        let r = Ray::new(Vec3::new(0.0, 1.0 + 1e-9, -5.0), Vec3::new(0.0, 0.0, 1.0));
+        assert!(!b.hit(&r, &RayInv::new(r.dir), f64::MAX));
+    }
+
+    #[test]
+    fn offset_origin_lands_on_the_leaving_side() {
+        let p = Vec3::new(0.0f32, 0.0, 1.0);
+        let n = Vec3::new(0.0f32, 0.0, -1.0);
+        let err = Vec3::splat(1e-6f32);
+        let out = offset_ray_origin(p, err, n, Vec3::new(0.0, 0.0, -1.0));
+        assert!(out.z < 1.0);
+        let inside = offset_ray_origin(p, err, n, Vec3::new(0.0, 0.0, 1.0));
+        assert!(inside.z > 1.0);
+    }
+
+    #[test]
+    fn reflect_mirrors_about_the_normal() {
+        let d = Vec3::new(1.0f64, -1.0, 0.0);
+        let r = d.reflect(Vec3::new(0.0, 1.0, 0.0));
+        assert_eq!(r, Vec3::new(1.0, 1.0, 0.0));
+    }
+}

@@ -1,0 +1,18 @@
+//! LINKS-1's ray tracer, as a no_std, no-heap core shared by the node firmware, the root
+//! firmware and the host simulator.
+//!
+//! Module map (one concept each):
+//! - [`num`]: the number formats the renderer is generic over.
+//! - [`geom`]: vectors, rays, bounding boxes, error-bounded ray origins.
+//! - [`shape`]: the primitives (triangle, ellipsoid + cut plane, box, density spheres).
+//! - [`image`]: the SceneImage byte layout and its zero-copy view.
+//! - [`render`]: the tracer and shading (eq. 2.1, 2.2), one run of pixels at a time.
+//! - `desc` and `dm` (feature `std`): the scene description and the DM scene compiler.
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![forbid(unsafe_code)]
+
+#[cfg(feature = "std")]
+pub mod desc;
+pub mod geom;
+pub mod num;
+pub mod shape;

@@ -1,0 +1,1 @@
+//! Density spheres (metaballs): being written.

@@ -1,0 +1,3 @@
+//! The primitives of LINKS-1 (section 2): a closed set, dispatched by `match`, never `dyn`.
+
+pub mod blob;
