@@ -1,4 +1,5 @@
 //! The host side of LINKS-1: scene files, procedural scene generators, and the `links` CLI.
 
+pub mod frame;
 pub mod gen;
 pub mod scene_file;

@@ -1,1 +1,189 @@
-fn main() {}
+//! `links`: render LINKS-1 scenes on the host.
+
+use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use links_core::desc::TransparencyMode;
+use links_core::dm::{compile, CompileOptions};
+use links_core::image::{Section, SceneView};
+use links_host::frame::{encode_png, render_frame, Precision};
+use links_host::scene_file::load_scene;
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(name = "links", version, about = "LINKS-1 ray tracer: render scenes, inspect scene images")]
+struct Cli {
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum PrecisionArg {
+    F32,
+    F64,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum TransparencyArg {
+    Refractive,
+    NonRefractive,
+}
+
+#[derive(clap::Args)]
+struct SceneArgs {
+    /// Scene file (.ron)
+    scene: PathBuf,
+    /// Image width in pixels (default: the scene's)
+    #[arg(long)]
+    width: Option<u32>,
+    /// Image height in pixels (default: the scene's)
+    #[arg(long)]
+    height: Option<u32>,
+    /// Maximum recursion depth for reflection/refraction (default: the scene's)
+    #[arg(long)]
+    max_depth: Option<u32>,
+    /// Override the scene's transparency mode
+    #[arg(long, value_enum)]
+    transparency: Option<TransparencyArg>,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Render a scene to a PNG file
+    Render {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Output PNG file
+        #[arg(short, long, default_value = "out.png")]
+        output: PathBuf,
+        /// Host threads (0 = all cores); the image does not depend on it
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
+        /// Number type of the render
+        #[arg(long, value_enum, default_value = "f32")]
+        precision: PrecisionArg,
+        /// No progress bar or stats line
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Compile a scene and print its SceneImage size by section
+    Info {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Also write the SceneImage bytes to this file
+        #[arg(long)]
+        image: Option<PathBuf>,
+    },
+    /// Regenerate the procedural meshes and textures of the bundled scenes
+    GenAssets {
+        /// Output directory
+        #[arg(long, default_value = "scenes/assets")]
+        dir: PathBuf,
+    },
+}
+
+fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
+    let desc = load_scene(&a.scene).map_err(|e| e.to_string())?;
+    let opts = CompileOptions {
+        width: a.width,
+        height: a.height,
+        max_depth: a.max_depth,
+        transparency: a.transparency.map(|t| match t {
+            TransparencyArg::Refractive => TransparencyMode::Refractive,
+            TransparencyArg::NonRefractive => TransparencyMode::NonRefractive,
+        }),
+        flat_meshes: false,
+    };
+    let compiled = compile(&desc, &opts).map_err(|e| format!("{}: {e}", a.scene.display()))?;
+    Ok(compiled.bytes)
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.cmd {
+        Cmd::Render { scene, output, threads, precision, quiet } => {
+            let image = compile_scene(&scene)?;
+            let view = SceneView::new(&image).map_err(|e| e.to_string())?;
+            let f = view.frame::<f32>();
+            let bar = if quiet || !std::io::stderr().is_terminal() {
+                ProgressBar::hidden()
+            } else {
+                let b = ProgressBar::with_draw_target(Some(f.height as u64), ProgressDrawTarget::stderr());
+                b.set_style(
+                    ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} rows, {elapsed} (eta {eta})")
+                        .map_err(|e| e.to_string())?,
+                );
+                b
+            };
+            let precision = match precision {
+                PrecisionArg::F32 => Precision::F32,
+                PrecisionArg::F64 => Precision::F64,
+            };
+            let frame = render_frame(&image, precision, threads, &|| bar.inc(1)).map_err(|e| e.to_string())?;
+            bar.finish_and_clear();
+            let png = encode_png(frame.width, frame.height, &frame.rgb).map_err(|e| e.to_string())?;
+            std::fs::write(&output, png).map_err(|e| format!("{}: {e}", output.display()))?;
+            if !quiet {
+                let s = &frame.stats;
+                let secs = frame.elapsed.as_secs_f64();
+                eprintln!(
+                    "{}: {}x{} {} in {:.3} s, {:.3} Mrays/s | rays: primary {}, shadow {}, reflect {}, refract {}, straight {} | tests: box {}, triangle {}, ellipsoid {}, box-shape {}, blob {} (field evals {}) | shadings {} | scene image {} B",
+                    output.display(),
+                    frame.width,
+                    frame.height,
+                    precision.name(),
+                    secs,
+                    s.rays() as f64 / secs.max(1e-9) / 1e6,
+                    s.primary_rays,
+                    s.shadow_rays,
+                    s.reflect_rays,
+                    s.refract_rays,
+                    s.straight_rays,
+                    s.box_tests,
+                    s.triangle_tests,
+                    s.ellipsoid_tests,
+                    s.box_shape_tests,
+                    s.blob_tests,
+                    s.blob_field_evals,
+                    s.shadings,
+                    image.len()
+                );
+            }
+            Ok(())
+        }
+        Cmd::Info { scene, image } => {
+            let bytes = compile_scene(&scene)?;
+            let view = SceneView::new(&bytes).map_err(|e| e.to_string())?;
+            let f = view.frame::<f32>();
+            println!("{}: SceneImage {} bytes ({}x{})", scene.scene.display(), bytes.len(), f.width, f.height);
+            println!("  {:<12} {:>8} {:>10}", "section", "records", "bytes");
+            for s in Section::ALL {
+                if view.count(s) > 0 {
+                    println!("  {:<12} {:>8} {:>10}", s.name(), view.count(s), view.section_bytes(s));
+                }
+            }
+            if let Some(path) = image {
+                std::fs::write(&path, &bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+            }
+            Ok(())
+        }
+        Cmd::GenAssets { dir } => {
+            std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            let written = links_host::gen::write_bundled_assets(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            for p in written {
+                println!("wrote {}", p.display());
+            }
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

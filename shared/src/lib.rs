@@ -15,4 +15,8 @@
 pub mod desc;
 pub mod geom;
 pub mod num;
+pub mod image;
+pub mod render;
 pub mod shape;
+#[cfg(feature = "std")]
+pub mod dm;

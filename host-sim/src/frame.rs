@@ -1,0 +1,152 @@
+//! Rendering a whole frame on the host: the core's per-run renderer over every scanline,
+//! spread over host threads. Rows are independent and the statistics are sums, so the image
+//! and the counts never depend on the thread count.
+
+use links_core::image::{ImageError, SceneView};
+use links_core::num::Real;
+use links_core::render::{render_run, Stats, Tracer};
+use rayon::prelude::*;
+use std::fmt;
+use std::time::{Duration, Instant};
+
+/// The number type a render computes with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Precision {
+    #[default]
+    F32,
+    F64,
+}
+
+impl Precision {
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
+impl std::str::FromStr for Precision {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "f32" => Ok(Precision::F32),
+            "f64" => Ok(Precision::F64),
+            other => Err(format!("unknown precision '{other}' (expected f32 or f64)")),
+        }
+    }
+}
+
+/// A rendered frame: RGB8 rows, top first.
+#[derive(Clone, Debug)]
+pub struct FrameImage {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<u8>,
+    pub stats: Stats,
+    pub elapsed: Duration,
+}
+
+#[derive(Debug)]
+pub enum FrameError {
+    Image(ImageError),
+    Threads(String),
+}
+
+impl fmt::Display for FrameError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FrameError::Image(e) => write!(f, "{e}"),
+            FrameError::Threads(e) => write!(f, "cannot start render threads: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for FrameError {}
+
+/// Render every pixel of a SceneImage. `threads` = 0 uses all cores; `progress` is called
+/// once per finished scanline (from any thread).
+pub fn render_frame(
+    image: &[u8],
+    precision: Precision,
+    threads: usize,
+    progress: &(dyn Fn() + Sync),
+) -> Result<FrameImage, FrameError> {
+    let view = SceneView::new(image).map_err(FrameError::Image)?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| FrameError::Threads(e.to_string()))?;
+    let start = Instant::now();
+    let (rgb, stats) = pool.install(|| match precision {
+        Precision::F32 => rows::<f32>(view, progress),
+        Precision::F64 => rows::<f64>(view, progress),
+    });
+    let f = view.frame::<f32>();
+    Ok(FrameImage { width: f.width, height: f.height, rgb, stats, elapsed: start.elapsed() })
+}
+
+fn rows<T: Real>(view: SceneView<'_>, progress: &(dyn Fn() + Sync)) -> (Vec<u8>, Stats) {
+    let f = view.frame::<f32>();
+    let (w, h) = (f.width as usize, f.height as usize);
+    let mut rgb = vec![0u8; w * h * 3];
+    let stats: Vec<Stats> = rgb
+        .par_chunks_mut(w * 3)
+        .enumerate()
+        .map(|(y, row)| {
+            let mut tracer = Tracer::<T>::new(view);
+            let mut px = vec![[0u8; 3]; w];
+            // The run is the whole row, which always lies inside the frame.
+            if render_run(&mut tracer, y as u32, 0, &mut px).is_ok() {
+                for (dst, src) in row.chunks_exact_mut(3).zip(&px) {
+                    dst.copy_from_slice(src);
+                }
+            }
+            progress();
+            tracer.stats
+        })
+        .collect();
+    let mut total = Stats::default();
+    for s in &stats {
+        total.add(s);
+    }
+    debug_assert_eq!(h, stats.len());
+    (rgb, total)
+}
+
+/// Encode RGB8 rows as a PNG file.
+pub fn encode_png(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, png::EncodingError> {
+    let mut out = Vec::new();
+    {
+        let mut enc = png::Encoder::new(&mut out, width, height);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header()?;
+        w.write_image_data(rgb)?;
+    }
+    Ok(out)
+}
+
+/// Decode an 8-bit RGB PNG (as written by [`encode_png`]) for comparisons.
+pub fn decode_png_rgb(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
+    let dec = png::Decoder::new(std::io::Cursor::new(bytes));
+    let mut reader = dec.read_info().map_err(|e| e.to_string())?;
+    let mut buf = vec![0; reader.output_buffer_size().ok_or("PNG too large")?];
+    let info = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
+    if info.color_type != png::ColorType::Rgb || info.bit_depth != png::BitDepth::Eight {
+        return Err(format!("expected 8-bit RGB, found {:?} {:?}", info.color_type, info.bit_depth));
+    }
+    buf.truncate(info.buffer_size());
+    Ok((info.width, info.height, buf))
+}
+
+/// Peak signal-to-noise ratio of two RGB8 images in dB (infinite when identical).
+pub fn psnr(a: &[u8], b: &[u8]) -> f64 {
+    assert_eq!(a.len(), b.len(), "images differ in size");
+    let se: f64 = a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum();
+    if se == 0.0 {
+        return f64::INFINITY;
+    }
+    let mse = se / a.len() as f64;
+    10.0 * (255.0f64 * 255.0 / mse).log10()
+}

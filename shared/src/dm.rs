@@ -1,0 +1,669 @@
+//! The DM ("data manipulation" module): compiles a [`SceneDesc`] into a SceneImage.
+//!
+//! It places every cluster (LINKS-1 4.1), transforms all shape data into view coordinates
+//! (4.3: eye at the origin, X right, Y up, +Z into the screen), computes a bounding box per
+//! shape and per cluster (4.2) and writes the flat node list the tracer walks. Runs on the
+//! host in f64; the image stores f32, with every bounding box rounded outward so it still
+//! contains its shape after rounding.
+//!
+//! Large meshes are split by the DM into sub-clusters of at most [`MESH_LEAF_SIZE`]
+//! triangles (median split on the longest axis), so a ray that touches a mesh's box only
+//! tests the triangles near it.
+
+use crate::desc::{self, Cluster, Light, Node, SceneDesc, Shape, TransparencyMode};
+use crate::image::writer::ImageWriter;
+use crate::image::{Section, ShapeKind, ShapeRef, MAX_DEPTH_LIMIT, NONE};
+use core::fmt;
+use std::string::{String, ToString};
+use std::vec::Vec;
+
+/// Largest number of triangles the DM leaves in one mesh sub-cluster.
+pub const MESH_LEAF_SIZE: usize = 4;
+
+/// Settings that are not part of the scene file.
+#[derive(Clone, Debug, Default)]
+pub struct CompileOptions {
+    /// Output size; `None` uses the scene's.
+    pub width: Option<u32>,
+    pub height: Option<u32>,
+    pub max_depth: Option<u32>,
+    pub transparency: Option<TransparencyMode>,
+    /// Keep every mesh as one flat cluster (no DM sub-clusters), for measuring.
+    pub flat_meshes: bool,
+}
+
+/// Why a scene could not be compiled.
+#[derive(Clone, Debug, PartialEq)]
+pub enum DmError {
+    /// The eye, look-at and up vectors do not define a view.
+    DegenerateCamera(String),
+    /// A transform collapses space (zero scale) or is not finite.
+    DegenerateTransform { cluster: String },
+    /// A shape becomes degenerate in view coordinates (after f32 rounding).
+    DegenerateShape { cluster: String, what: String },
+    /// Density spheres can only be moved, rotated and scaled uniformly.
+    NonUniformBlobScale { cluster: String },
+    BadIndex { what: String },
+    BadSetting(String),
+    TooLarge { what: String },
+}
+
+impl fmt::Display for DmError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DmError::DegenerateCamera(s) => write!(f, "camera: {s}"),
+            DmError::DegenerateTransform { cluster } => {
+                write!(f, "cluster '{cluster}': transform is degenerate (zero scale or not finite)")
+            }
+            DmError::DegenerateShape { cluster, what } => {
+                write!(f, "cluster '{cluster}': {what} is degenerate in view coordinates")
+            }
+            DmError::NonUniformBlobScale { cluster } => write!(
+                f,
+                "cluster '{cluster}': density spheres need a uniform scale (balls must stay round)"
+            ),
+            DmError::BadIndex { what } => write!(f, "{what}"),
+            DmError::BadSetting(s) => write!(f, "{s}"),
+            DmError::TooLarge { what } => write!(f, "scene too large: {what}"),
+        }
+    }
+}
+
+impl std::error::Error for DmError {}
+
+type M3 = [[f64; 3]; 3];
+
+/// An affine map `p -> a p + t` in f64.
+#[derive(Clone, Copy, Debug)]
+struct Affine {
+    a: M3,
+    t: [f64; 3],
+}
+
+fn mat_mul(x: &M3, y: &M3) -> M3 {
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] = (0..3).map(|k| x[i][k] * y[k][j]).sum();
+        }
+    }
+    r
+}
+fn mat_vec(x: &M3, v: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|i| x[i][0] * v[0] + x[i][1] * v[1] + x[i][2] * v[2])
+}
+fn transpose(x: &M3) -> M3 {
+    [0, 1, 2].map(|i| [x[0][i], x[1][i], x[2][i]])
+}
+fn det(m: &M3) -> f64 {
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+}
+fn inverse(m: &M3) -> Option<M3> {
+    let d = det(m);
+    let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+    if !d.is_finite() || d.abs() <= 1e-12 * scale * scale * scale || scale == 0.0 {
+        return None;
+    }
+    let c = |r0: usize, c0: usize, r1: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
+    let adj = [
+        [c(1, 1, 2, 2), -c(0, 1, 2, 2), c(0, 1, 1, 2)],
+        [-c(1, 0, 2, 2), c(0, 0, 2, 2), -c(0, 0, 1, 2)],
+        [c(1, 0, 2, 1), -c(0, 0, 2, 1), c(0, 0, 1, 1)],
+    ];
+    Some(adj.map(|row| row.map(|v| v / d)))
+}
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+fn normalize(a: [f64; 3]) -> Option<[f64; 3]> {
+    let l = dot(a, a).sqrt();
+    (l > 0.0 && l.is_finite()).then(|| a.map(|v| v / l))
+}
+fn diag(s: [f64; 3]) -> M3 {
+    [[s[0], 0.0, 0.0], [0.0, s[1], 0.0], [0.0, 0.0, s[2]]]
+}
+
+/// Rz · Ry · Rx for angles in degrees.
+fn rotation(deg: [f64; 3]) -> M3 {
+    let [x, y, z] = deg.map(f64::to_radians);
+    let rx = [[1.0, 0.0, 0.0], [0.0, x.cos(), -x.sin()], [0.0, x.sin(), x.cos()]];
+    let ry = [[y.cos(), 0.0, y.sin()], [0.0, 1.0, 0.0], [-y.sin(), 0.0, y.cos()]];
+    let rz = [[z.cos(), -z.sin(), 0.0], [z.sin(), z.cos(), 0.0], [0.0, 0.0, 1.0]];
+    mat_mul(&rz, &mat_mul(&ry, &rx))
+}
+
+impl Affine {
+    fn from_trs(t: [f64; 3], rot_deg: [f64; 3], s: [f64; 3]) -> Self {
+        Self { a: mat_mul(&rotation(rot_deg), &diag(s)), t }
+    }
+    /// `self ∘ o` (apply `o` first).
+    fn then(&self, o: &Affine) -> Affine {
+        Affine { a: mat_mul(&self.a, &o.a), t: add(mat_vec(&self.a, o.t), self.t) }
+    }
+    fn point(&self, p: [f64; 3]) -> [f64; 3] {
+        add(mat_vec(&self.a, p), self.t)
+    }
+    fn is_finite(&self) -> bool {
+        self.a.iter().flatten().chain(self.t.iter()).all(|v| v.is_finite())
+    }
+}
+
+fn f32s(v: [f64; 3]) -> [f32; 3] {
+    v.map(|x| x as f32)
+}
+fn mat_f32(m: &M3) -> [f32; 9] {
+    [m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2]].map(|v| v as f32)
+}
+
+/// An f32 box that contains an f64 box.
+#[derive(Clone, Copy, Debug)]
+struct Bounds {
+    min: [f32; 3],
+    max: [f32; 3],
+}
+
+impl Bounds {
+    fn empty() -> Self {
+        Self { min: [f32::MAX; 3], max: [f32::MIN; 3] }
+    }
+    fn from_f64(min: [f64; 3], max: [f64; 3]) -> Self {
+        let lo = min.map(|v| (v as f32).next_down());
+        let hi = max.map(|v| (v as f32).next_up());
+        Self { min: lo, max: hi }
+    }
+    fn union(self, o: Bounds) -> Self {
+        Self {
+            min: [0, 1, 2].map(|i| self.min[i].min(o.min[i])),
+            max: [0, 1, 2].map(|i| self.max[i].max(o.max[i])),
+        }
+    }
+    fn is_empty(&self) -> bool {
+        (0..3).any(|i| self.min[i] > self.max[i])
+    }
+}
+
+/// What the DM produced, with per-section sizes for reports.
+#[derive(Clone, Debug)]
+pub struct Compiled {
+    pub bytes: Vec<u8>,
+}
+
+struct Dm<'a> {
+    desc: &'a SceneDesc,
+    w: ImageWriter,
+    opts: &'a CompileOptions,
+}
+
+/// A triangle ready to write: view-space vertices and optional normals / uvs.
+struct TriData {
+    p: [[f32; 3]; 3],
+    n: Option<[[f32; 3]; 3]>,
+    uv: Option<[[f32; 2]; 3]>,
+    material: u32,
+}
+
+impl TriData {
+    /// World -> view mirrors space (right-handed world, left-handed view), which would turn
+    /// counter-clockwise (outward-facing) triangles clockwise: swap two vertices to undo it.
+    fn keep_winding(&mut self, full: &Affine) {
+        if det(&full.a) < 0.0 {
+            self.p.swap(1, 2);
+            if let Some(n) = &mut self.n {
+                n.swap(1, 2);
+            }
+            if let Some(uv) = &mut self.uv {
+                uv.swap(1, 2);
+            }
+        }
+    }
+    fn centroid(&self, axis: usize) -> f32 {
+        (self.p[0][axis] + self.p[1][axis] + self.p[2][axis]) / 3.0
+    }
+    fn bounds(&self) -> Bounds {
+        // The stored vertices are f32 already, so their box is exact.
+        let mut b = Bounds::empty();
+        for v in &self.p {
+            b = b.union(Bounds { min: *v, max: *v });
+        }
+        b
+    }
+}
+
+/// Compile a scene for one frame.
+pub fn compile(desc: &SceneDesc, opts: &CompileOptions) -> Result<Compiled, DmError> {
+    let mut dm = Dm { desc, w: ImageWriter::new(), opts };
+    dm.run()?;
+    Ok(Compiled { bytes: dm.w.finish() })
+}
+
+impl Dm<'_> {
+    fn run(&mut self) -> Result<(), DmError> {
+        let d = self.desc;
+        let width = self.opts.width.unwrap_or(d.width);
+        let height = self.opts.height.unwrap_or(d.height);
+        if width == 0 || height == 0 || width > 65535 || height > 65535 {
+            return Err(DmError::BadSetting(format!("image size {width}x{height} out of range 1..65535")));
+        }
+        let max_depth = self.opts.max_depth.unwrap_or(d.max_depth);
+        if max_depth > MAX_DEPTH_LIMIT {
+            return Err(DmError::BadSetting(format!(
+                "max depth {max_depth} exceeds the node limit {MAX_DEPTH_LIMIT}"
+            )));
+        }
+        let mode = self.opts.transparency.unwrap_or(d.transparency);
+
+        // View transform: rows are the screen's right, up and forward axes in world space.
+        let cam = &d.camera;
+        let fwd = normalize(sub(cam.look_at, cam.eye))
+            .ok_or_else(|| DmError::DegenerateCamera("eye and look_at coincide".into()))?;
+        let right = normalize(cross(fwd, cam.up))
+            .ok_or_else(|| DmError::DegenerateCamera("up is parallel to the view direction".into()))?;
+        let up = cross(right, fwd);
+        let rot = [right, up, fwd];
+        let view = Affine { a: rot, t: mat_vec(&rot, cam.eye).map(|v| -v) };
+        if !(cam.fov_y_deg > 0.0 && cam.fov_y_deg < 180.0) {
+            return Err(DmError::DegenerateCamera(format!("fov_y {} not in (0, 180)", cam.fov_y_deg)));
+        }
+
+        // Frame record: pixel centres on the z = 1 plane.
+        let tan_half = (cam.fov_y_deg.to_radians() * 0.5).tan();
+        let dy = 2.0 * tan_half / height as f64;
+        let dx = dy;
+        let x0 = -dx * width as f64 * 0.5;
+        let flags = u32::from(mode == TransparencyMode::NonRefractive);
+        self.w
+            .push(Section::Frame)
+            .1
+            .u(width)
+            .u(height)
+            .fs(&[x0 as f32, tan_half as f32, dx as f32, dy as f32])
+            .fs(&d.background)
+            .fs(&d.ambient)
+            .u(max_depth)
+            .u(flags);
+
+        for (i, t) in d.textures.iter().enumerate() {
+            if t.width == 0 || t.height == 0 || t.rgb.len() != (t.width * t.height * 3) as usize {
+                return Err(DmError::BadIndex { what: format!("texture {i} ('{}') has a bad size", t.name) });
+            }
+            let off = self.w.push_texels(&t.rgb);
+            self.w.push(Section::Textures).1.u(t.width).u(t.height).u(off);
+        }
+        // The texel section must keep later sections aligned: the writer pads.
+        for m in &d.materials {
+            self.material(m)?;
+        }
+        for l in &d.lights {
+            self.light(l, &view)?;
+        }
+        self.cluster(&d.root, &view, d.root.name.as_str())?;
+        if self.w.count(Section::Nodes) >= (1 << ShapeRef::INDEX_BITS) {
+            return Err(DmError::TooLarge { what: "too many nodes".into() });
+        }
+        Ok(())
+    }
+
+    fn material(&mut self, m: &desc::Material) -> Result<(), DmError> {
+        let (tex, target, scale) = match &m.map {
+            Some(map) => {
+                if map.texture as usize >= self.desc.textures.len() {
+                    return Err(DmError::BadIndex {
+                        what: format!("material '{}' uses missing texture {}", m.name, map.texture),
+                    });
+                }
+                (map.texture, map.target as u32, map.scale)
+            }
+            None => (NONE, 0, [1.0, 1.0]),
+        };
+        self.w
+            .push(Section::Materials)
+            .1
+            .fs(&m.diffuse)
+            .fs(&[m.specular, m.specular_edge, m.shininess, m.reflect, m.reflect_edge])
+            .fs(&m.transmit)
+            .f(m.ior)
+            .u(tex)
+            .u(target)
+            .fs(&scale);
+        Ok(())
+    }
+
+    fn light(&mut self, l: &Light, view: &Affine) -> Result<(), DmError> {
+        let dir_of = |d: [f64; 3]| {
+            normalize(mat_vec(&view.a, d)).ok_or_else(|| DmError::BadSetting("light direction is zero".into()))
+        };
+        let (kind, color, pos, dir, ci, co, e, fall) = match l {
+            Light::Directional { dir, color } => (0, color, [0.0; 3], dir_of(*dir)?, 1.0, 1.0, 0.0, false),
+            Light::Point { pos, color, falloff } => (1, color, view.point(*pos), [0.0; 3], 1.0, 1.0, 0.0, *falloff),
+            Light::Spot { pos, dir, color, inner_deg, outer_deg, exponent } => (
+                2,
+                color,
+                view.point(*pos),
+                dir_of(*dir)?,
+                inner_deg.to_radians().cos(),
+                outer_deg.to_radians().cos(),
+                *exponent,
+                false,
+            ),
+        };
+        self.w
+            .push(Section::Lights)
+            .1
+            .u(kind)
+            .fs(color)
+            .fs(&f32s(pos))
+            .fs(&f32s(dir))
+            .fs(&[ci as f32, co as f32, e])
+            .u(u32::from(fall));
+        Ok(())
+    }
+
+    /// Start a cluster node; returns its index so `close` can patch skip and bounds.
+    fn open_node(&mut self) -> u32 {
+        let (i, r) = self.w.push(Section::Nodes);
+        r.fs(&[0.0; 6]).u(0).u(NONE);
+        i
+    }
+
+    fn close_node(&mut self, i: u32, b: Bounds) {
+        let skip = self.w.count(Section::Nodes);
+        self.w.patch_u32(Section::Nodes, i, 24, skip);
+        for k in 0..3 {
+            self.w.patch_u32(Section::Nodes, i, 4 * k, b.min[k].to_bits());
+            self.w.patch_u32(Section::Nodes, i, 12 + 4 * k, b.max[k].to_bits());
+        }
+    }
+
+    fn leaf(&mut self, shape: ShapeRef, b: Bounds) {
+        let (i, r) = self.w.push(Section::Nodes);
+        r.fs(&b.min).fs(&b.max).u(i + 1).u(shape.encode());
+    }
+
+    fn cluster(&mut self, c: &Cluster, parent: &Affine, path: &str) -> Result<Bounds, DmError> {
+        let t = &c.transform;
+        let local = Affine::from_trs(t.translate, t.rotate_deg, t.scale);
+        let full = parent.then(&local);
+        if !full.is_finite() || inverse(&full.a).is_none() {
+            return Err(DmError::DegenerateTransform { cluster: path.to_string() });
+        }
+        let node = self.open_node();
+        let mut b = Bounds::empty();
+        for child in &c.children {
+            let cb = match child {
+                Node::Cluster(sub) => {
+                    let p = format!("{path}/{}", sub.name);
+                    self.cluster(sub, &full, &p)?
+                }
+                Node::Shape(s) => self.shape(s, &full, path)?,
+            };
+            b = b.union(cb);
+        }
+        self.close_node(node, b);
+        Ok(b)
+    }
+
+    fn check_material(&self, m: u32) -> Result<u32, DmError> {
+        if (m as usize) < self.desc.materials.len() {
+            Ok(m)
+        } else {
+            Err(DmError::BadIndex { what: format!("shape uses missing material {m}") })
+        }
+    }
+
+    fn shape(&mut self, s: &Shape, full: &Affine, path: &str) -> Result<Bounds, DmError> {
+        let normal_m = transpose(&inverse(&full.a).ok_or_else(|| DmError::DegenerateTransform {
+            cluster: path.to_string(),
+        })?);
+        let xn = |n: [f64; 3]| normalize(mat_vec(&normal_m, n)).map(f32s);
+        match s {
+            Shape::Triangle { v, normals, uv, material } => {
+                let material = self.check_material(*material)?;
+                let p = v.map(|p| f32s(full.point(p)));
+                let n = match normals {
+                    Some(ns) => {
+                        let mut out = [[0.0f32; 3]; 3];
+                        for k in 0..3 {
+                            out[k] = xn(ns[k]).ok_or_else(|| DmError::DegenerateShape {
+                                cluster: path.to_string(),
+                                what: "a triangle vertex normal".into(),
+                            })?;
+                        }
+                        Some(out)
+                    }
+                    None => None,
+                };
+                let mut tri = TriData { p, n, uv: uv.map(|u| u.map(|q| q.map(|x| x as f32))), material };
+                tri.keep_winding(full);
+                self.check_triangle(&tri, path)?;
+                Ok(self.triangles(vec![tri]))
+            }
+            Shape::Mesh { mesh, material, smooth } => {
+                let material = self.check_material(*material)?;
+                let tris = self.mesh_triangles(mesh, *smooth, material, full, &normal_m, path)?;
+                let node = self.open_node();
+                let b = self.triangles(tris);
+                self.close_node(node, b);
+                Ok(b)
+            }
+            Shape::Ellipsoid { center, radii, rotate_deg, cut, material } => {
+                let material = self.check_material(*material)?;
+                let obj = Affine::from_trs(*center, *rotate_deg, *radii);
+                let m = full.then(&obj);
+                let inv = inverse(&m.a).ok_or_else(|| DmError::DegenerateShape {
+                    cluster: path.to_string(),
+                    what: "an ellipsoid".into(),
+                })?;
+                let (flags, cn, cd) = match cut {
+                    Some(c) => {
+                        let sn = [c.normal[0] * radii[0], c.normal[1] * radii[1], c.normal[2] * radii[2]];
+                        let len = dot(sn, sn).sqrt();
+                        if len == 0.0 || !len.is_finite() {
+                            return Err(DmError::DegenerateShape {
+                                cluster: path.to_string(),
+                                what: "an ellipsoid's cut plane".into(),
+                            });
+                        }
+                        (1 | (u32::from(c.capped) << 1), sn.map(|v| v / len), c.offset / len)
+                    }
+                    None => (0, [0.0; 3], 0.0),
+                };
+                let (i, r) = self.w.push(Section::Ellipsoids);
+                r.fs(&f32s(m.t)).fs(&mat_f32(&inv)).fs(&mat_f32(&m.a)).u(material).u(flags).fs(&f32s(cn)).f(cd as f32);
+                // Half-extent of a transformed unit sphere along axis i: |row i of L|.
+                let half = [0, 1, 2].map(|k| dot(m.a[k], m.a[k]).sqrt());
+                let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
+                self.leaf(ShapeRef { kind: ShapeKind::Ellipsoid, index: i }, b);
+                Ok(b)
+            }
+            Shape::Box { min, max, material } => {
+                let material = self.check_material(*material)?;
+                let c = [0, 1, 2].map(|k| 0.5 * (min[k] + max[k]));
+                let h = [0, 1, 2].map(|k| 0.5 * (max[k] - min[k]));
+                let m = full.then(&Affine { a: diag(h), t: c });
+                let inv = inverse(&m.a).ok_or_else(|| DmError::DegenerateShape {
+                    cluster: path.to_string(),
+                    what: "a box".into(),
+                })?;
+                let (i, r) = self.w.push(Section::Boxes);
+                r.fs(&f32s(m.t)).fs(&mat_f32(&inv)).fs(&mat_f32(&m.a)).u(material);
+                let half = [0, 1, 2].map(|k| m.a[k].iter().map(|v| v.abs()).sum::<f64>());
+                let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
+                self.leaf(ShapeRef { kind: ShapeKind::Box, index: i }, b);
+                Ok(b)
+            }
+            Shape::Blobs { balls, threshold, kernel, material } => {
+                let material = self.check_material(*material)?;
+                // Uniform scale s: columns of the linear part are orthogonal with equal length.
+                let ata = mat_mul(&transpose(&full.a), &full.a);
+                let s2 = ata[0][0];
+                let tol = 1e-9 * s2;
+                let uniform = (0..3).all(|i| (0..3).all(|j| (ata[i][j] - if i == j { s2 } else { 0.0 }).abs() <= tol));
+                if !uniform || s2 <= 0.0 {
+                    return Err(DmError::NonUniformBlobScale { cluster: path.to_string() });
+                }
+                if balls.is_empty() {
+                    return Err(DmError::DegenerateShape { cluster: path.to_string(), what: "an empty blob group".into() });
+                }
+                let s = s2.sqrt();
+                let first = self.w.count(Section::Balls);
+                let mut lo = [f64::MAX; 3];
+                let mut hi = [f64::MIN; 3];
+                for ball in balls {
+                    let c = full.point(ball.center);
+                    let r = ball.radius * s;
+                    self.w.push(Section::Balls).1.fs(&f32s(c)).f(r as f32).f(ball.strength as f32);
+                    if ball.strength > 0.0 {
+                        for k in 0..3 {
+                            lo[k] = lo[k].min(c[k] - r);
+                            hi[k] = hi[k].max(c[k] + r);
+                        }
+                    }
+                }
+                let (i, r) = self.w.push(Section::BlobGroups);
+                let k = match kernel {
+                    desc::BlobKernel::Links => 0,
+                    desc::BlobKernel::Wyvill => 1,
+                };
+                r.u(material).u(k).f(*threshold as f32).u(first).u(balls.len() as u32);
+                // Grow by a relative margin: the root finder may stop a tolerance outside.
+                let pad = [0, 1, 2].map(|k| 1e-4 * (hi[k] - lo[k]).abs());
+                let b = if lo[0] > hi[0] { Bounds::empty() } else { Bounds::from_f64(sub(lo, pad), add(hi, pad)) };
+                self.leaf(ShapeRef { kind: ShapeKind::Blob, index: i }, b);
+                Ok(b)
+            }
+        }
+    }
+
+    fn check_triangle(&self, t: &TriData, path: &str) -> Result<(), DmError> {
+        let v = t.p.map(|p| p.map(f64::from));
+        let area2 = cross(sub(v[1], v[0]), sub(v[2], v[0]));
+        if dot(area2, area2) == 0.0 || !t.p.iter().flatten().all(|x| x.is_finite()) {
+            return Err(DmError::DegenerateShape { cluster: path.to_string(), what: "a triangle".into() });
+        }
+        Ok(())
+    }
+
+    fn mesh_triangles(
+        &self,
+        mesh: &desc::Mesh,
+        smooth: bool,
+        material: u32,
+        full: &Affine,
+        normal_m: &M3,
+        path: &str,
+    ) -> Result<Vec<TriData>, DmError> {
+        let bad = |what: String| DmError::BadIndex { what: format!("mesh '{}': {what}", mesh.source) };
+        let pos = |i: u32| mesh.positions.get(i as usize).copied().ok_or_else(|| bad(format!("position {i} missing")));
+        // Area-weighted vertex normals for smooth meshes without their own.
+        let computed: Option<Vec<[f64; 3]>> = (smooth && mesh.normals.is_empty()).then(|| {
+            let mut acc = vec![[0.0; 3]; mesh.positions.len()];
+            for f in &mesh.faces {
+                let p: Vec<[f64; 3]> = f.iter().filter_map(|v| mesh.positions.get(v.position as usize).copied()).collect();
+                if p.len() == 3 {
+                    let n = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+                    for v in f {
+                        if let Some(a) = acc.get_mut(v.position as usize) {
+                            *a = add(*a, n);
+                        }
+                    }
+                }
+            }
+            acc
+        });
+        let mut out = Vec::with_capacity(mesh.faces.len());
+        for (fi, f) in mesh.faces.iter().enumerate() {
+            let mut p = [[0.0f32; 3]; 3];
+            let mut n = [[0.0f32; 3]; 3];
+            let mut has_n = true;
+            let mut uv = [[0.0f32; 2]; 3];
+            let mut has_uv = true;
+            for k in 0..3 {
+                let v = f[k];
+                p[k] = f32s(full.point(pos(v.position)?));
+                let world_n = match (&computed, v.normal) {
+                    (Some(c), _) => c.get(v.position as usize).copied(),
+                    (None, Some(ni)) => {
+                        Some(mesh.normals.get(ni as usize).copied().ok_or_else(|| bad(format!("normal {ni} missing")))?)
+                    }
+                    (None, None) => None,
+                };
+                match world_n.and_then(|wn| normalize(mat_vec(normal_m, wn))) {
+                    Some(vn) => n[k] = f32s(vn),
+                    None => has_n = false,
+                }
+                match v.uv {
+                    Some(ti) => {
+                        let t = mesh.uvs.get(ti as usize).copied().ok_or_else(|| bad(format!("uv {ti} missing")))?;
+                        uv[k] = [t[0] as f32, t[1] as f32];
+                    }
+                    None => has_uv = false,
+                }
+            }
+            let mut tri = TriData { p, n: has_n.then_some(n), uv: has_uv.then_some(uv), material };
+            tri.keep_winding(full);
+            self.check_triangle(&tri, &format!("{path} (mesh '{}', face {})", mesh.source, fi + 1))?;
+            out.push(tri);
+        }
+        Ok(out)
+    }
+
+    /// Write triangles, splitting into sub-clusters of at most MESH_LEAF_SIZE.
+    fn triangles(&mut self, mut tris: Vec<TriData>) -> Bounds {
+        if self.opts.flat_meshes || tris.len() <= MESH_LEAF_SIZE {
+            let mut b = Bounds::empty();
+            for t in tris {
+                let tb = t.bounds();
+                let idx = self.write_triangle(t);
+                self.leaf(ShapeRef { kind: ShapeKind::Triangle, index: idx }, tb);
+                b = b.union(tb);
+            }
+            return b;
+        }
+        let all = tris.iter().fold(Bounds::empty(), |b, t| b.union(t.bounds()));
+        let ext = [0, 1, 2].map(|k| all.max[k] - all.min[k]);
+        let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] { 0 } else if ext[1] >= ext[2] { 1 } else { 2 };
+        tris.sort_by(|a, b| a.centroid(axis).total_cmp(&b.centroid(axis)));
+        let right = tris.split_off(tris.len() / 2);
+        let mut b = Bounds::empty();
+        for half in [tris, right] {
+            let node = self.open_node();
+            let hb = self.triangles(half);
+            self.close_node(node, hb);
+            b = b.union(hb);
+        }
+        debug_assert!(!b.is_empty());
+        b
+    }
+
+    fn write_triangle(&mut self, t: TriData) -> u32 {
+        let ni = match t.n {
+            Some(n) => {
+                let (i, r) = self.w.push(Section::Normals);
+                r.fs(&n[0]).fs(&n[1]).fs(&n[2]);
+                i
+            }
+            None => NONE,
+        };
+        let ui = match t.uv {
+            Some(uv) => {
+                let (i, r) = self.w.push(Section::Uvs);
+                r.fs(&uv[0]).fs(&uv[1]).fs(&uv[2]);
+                i
+            }
+            None => NONE,
+        };
+        let (i, r) = self.w.push(Section::Triangles);
+        r.fs(&t.p[0]).fs(&t.p[1]).fs(&t.p[2]).u(t.material).u(ni).u(ui);
+        i
+    }
+}

@@ -1,0 +1,743 @@
+//! The SceneImage: one contiguous, versioned byte image of a compiled scene.
+//!
+//! The DM writes it once; a node receives it over the link into a bank and renders straight
+//! from those bytes through [`SceneView`]: nothing is copied or allocated, each record is
+//! decoded into registers when it is used. Only sections the scene uses take space.
+//!
+//! ## Layout (version 1, all little-endian, every section 4-byte aligned)
+//! ```text
+//! offset size
+//!  0     4    magic "LNK1"
+//!  4     2    version (1)
+//!  6     1    number format of stored scalars (0 = f32)
+//!  7     1    reserved (0)
+//!  8     4    total length in bytes
+//! 12     4    reserved (0)
+//! 16   8*13   section table: (offset u32, record count u32) for each [`Section`]
+//! 120   ...   sections, in table order
+//! ```
+//! Record layouts are given on each `*_SIZE` constant below; `f` = stored scalar (f32),
+//! `u` = u32. Indices that may be absent use [`NONE`].
+
+use crate::geom::{Aabb, Mat3, Vec3};
+use crate::num::Real;
+use crate::shape::boxshape::BoxShape;
+use crate::shape::ellipsoid::{CutPlane, Ellipsoid};
+use crate::shape::triangle::Triangle;
+use core::fmt;
+
+pub const MAGIC: [u8; 4] = *b"LNK1";
+pub const VERSION: u16 = 1;
+/// "No index" marker.
+pub const NONE: u32 = u32::MAX;
+pub const HEADER_SIZE: usize = 16 + 8 * SECTION_COUNT;
+/// Deepest recursion an image may ask for (each level is a stack frame on a node).
+pub const MAX_DEPTH_LIMIT: u32 = 16;
+
+/// The sections of an image, in table order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Section {
+    Frame = 0,
+    Materials,
+    Lights,
+    Textures,
+    Texels,
+    Nodes,
+    Triangles,
+    Normals,
+    Uvs,
+    Ellipsoids,
+    Boxes,
+    BlobGroups,
+    Balls,
+}
+pub const SECTION_COUNT: usize = 13;
+
+impl Section {
+    pub const ALL: [Section; SECTION_COUNT] = [
+        Section::Frame,
+        Section::Materials,
+        Section::Lights,
+        Section::Textures,
+        Section::Texels,
+        Section::Nodes,
+        Section::Triangles,
+        Section::Normals,
+        Section::Uvs,
+        Section::Ellipsoids,
+        Section::Boxes,
+        Section::BlobGroups,
+        Section::Balls,
+    ];
+    /// Bytes per record.
+    pub const fn record_size(self) -> usize {
+        match self {
+            Section::Frame => FRAME_SIZE,
+            Section::Materials => MATERIAL_SIZE,
+            Section::Lights => LIGHT_SIZE,
+            Section::Textures => TEXTURE_SIZE,
+            Section::Texels => 1,
+            Section::Nodes => NODE_SIZE,
+            Section::Triangles => TRIANGLE_SIZE,
+            Section::Normals => NORMALS_SIZE,
+            Section::Uvs => UVS_SIZE,
+            Section::Ellipsoids => ELLIPSOID_SIZE,
+            Section::Boxes => BOX_SIZE,
+            Section::BlobGroups => BLOB_GROUP_SIZE,
+            Section::Balls => BALL_SIZE,
+        }
+    }
+    pub const fn name(self) -> &'static str {
+        match self {
+            Section::Frame => "frame",
+            Section::Materials => "materials",
+            Section::Lights => "lights",
+            Section::Textures => "textures",
+            Section::Texels => "texels",
+            Section::Nodes => "nodes",
+            Section::Triangles => "triangles",
+            Section::Normals => "normals",
+            Section::Uvs => "uvs",
+            Section::Ellipsoids => "ellipsoids",
+            Section::Boxes => "boxes",
+            Section::BlobGroups => "blob groups",
+            Section::Balls => "balls",
+        }
+    }
+}
+
+/// width u, height u, x0 f, y0 f, dx f, dy f, background f[3], ambient f[3], max_depth u,
+/// flags u (bit 0: non-refractive transparency everywhere).
+pub const FRAME_SIZE: usize = 4 * 14;
+/// diffuse f[3], specular f, specular_edge f, shininess f, reflect f, reflect_edge f,
+/// transmit f[3], ior f, texture u, target u, scale f[2].
+pub const MATERIAL_SIZE: usize = 4 * 16;
+/// kind u, color f[3], pos f[3], dir f[3], cos_inner f, cos_outer f, exponent f, falloff u.
+pub const LIGHT_SIZE: usize = 4 * 14;
+/// width u, height u, texel offset u (byte offset into the texel section, RGB8 rows).
+pub const TEXTURE_SIZE: usize = 4 * 3;
+/// aabb min f[3], max f[3], skip u (index after this node's subtree), shape u ([`NONE`] for
+/// a cluster; else kind in the top 4 bits, index below).
+pub const NODE_SIZE: usize = 4 * 8;
+/// p0 f[3], p1 f[3], p2 f[3], material u, normals u, uvs u.
+pub const TRIANGLE_SIZE: usize = 4 * 12;
+/// n0 f[3], n1 f[3], n2 f[3] (unit, view coordinates).
+pub const NORMALS_SIZE: usize = 4 * 9;
+/// uv0 f[2], uv1 f[2], uv2 f[2].
+pub const UVS_SIZE: usize = 4 * 6;
+/// center f[3], m f[9], l f[9], material u, flags u (bit 0 cut, bit 1 capped), cut n f[3],
+/// cut d f.
+pub const ELLIPSOID_SIZE: usize = 4 * 27;
+/// center f[3], m f[9], l f[9], material u.
+pub const BOX_SIZE: usize = 4 * 22;
+/// material u, kernel u (0 LINKS, 1 Wyvill), threshold f, first ball u, ball count u.
+pub const BLOB_GROUP_SIZE: usize = 4 * 5;
+/// center f[3], radius f, strength f.
+pub const BALL_SIZE: usize = 4 * 5;
+
+/// Shape kinds as stored in a node's shape word.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShapeKind {
+    Triangle = 0,
+    Ellipsoid = 1,
+    Box = 2,
+    Blob = 3,
+}
+
+/// A reference to one shape: kind and index into that kind's section.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ShapeRef {
+    pub kind: ShapeKind,
+    pub index: u32,
+}
+
+impl ShapeRef {
+    pub const INDEX_BITS: u32 = 28;
+    pub fn encode(self) -> u32 {
+        ((self.kind as u32) << Self::INDEX_BITS) | self.index
+    }
+    pub fn decode(w: u32) -> Option<Self> {
+        let kind = match w >> Self::INDEX_BITS {
+            0 => ShapeKind::Triangle,
+            1 => ShapeKind::Ellipsoid,
+            2 => ShapeKind::Box,
+            3 => ShapeKind::Blob,
+            _ => return None,
+        };
+        Some(Self { kind, index: w & ((1 << Self::INDEX_BITS) - 1) })
+    }
+}
+
+/// Why bytes are not a usable SceneImage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ImageError {
+    TooShort { len: u32 },
+    BadMagic,
+    UnsupportedVersion { found: u16 },
+    UnsupportedFormat { found: u8 },
+    LengthMismatch { header: u32, actual: u32 },
+    SectionOutOfBounds { section: u8 },
+    Misaligned { section: u8 },
+    MissingFrame,
+    BadReference { section: u8, record: u32 },
+    BadValue { section: u8, record: u32 },
+}
+
+impl fmt::Display for ImageError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let name = |s: u8| Section::ALL.get(s as usize).map_or("?", |s| s.name());
+        match *self {
+            ImageError::TooShort { len } => write!(f, "scene image too short ({len} bytes)"),
+            ImageError::BadMagic => write!(f, "not a scene image (bad magic)"),
+            ImageError::UnsupportedVersion { found } => {
+                write!(f, "scene image version {found} not supported (expected {VERSION})")
+            }
+            ImageError::UnsupportedFormat { found } => {
+                write!(f, "scene image number format {found} not supported")
+            }
+            ImageError::LengthMismatch { header, actual } => {
+                write!(f, "scene image says {header} bytes but {actual} were given")
+            }
+            ImageError::SectionOutOfBounds { section } => {
+                write!(f, "section '{}' lies outside the image", name(section))
+            }
+            ImageError::Misaligned { section } => {
+                write!(f, "section '{}' is not 4-byte aligned", name(section))
+            }
+            ImageError::MissingFrame => write!(f, "scene image has no frame record"),
+            ImageError::BadReference { section, record } => {
+                write!(f, "{} record {record} refers to a missing record", name(section))
+            }
+            ImageError::BadValue { section, record } => {
+                write!(f, "{} record {record} holds an invalid value", name(section))
+            }
+        }
+    }
+}
+
+impl core::error::Error for ImageError {}
+
+/// Screen and global settings.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame<T> {
+    pub width: u32,
+    pub height: u32,
+    /// Direction to pixel (x, y)'s centre: (x0 + (x + ½) dx, y0 - (y + ½) dy, 1).
+    pub x0: T,
+    pub y0: T,
+    pub dx: T,
+    pub dy: T,
+    pub background: Vec3<T>,
+    pub ambient: Vec3<T>,
+    pub max_depth: u32,
+    pub non_refractive: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MapTarget {
+    Diffuse = 0,
+    Specular = 1,
+    Reflect = 2,
+    Transmit = 3,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Material<T> {
+    pub diffuse: Vec3<T>,
+    pub specular: T,
+    pub specular_edge: T,
+    pub shininess: T,
+    pub reflect: T,
+    pub reflect_edge: T,
+    pub transmit: Vec3<T>,
+    pub ior: T,
+    pub texture: u32,
+    pub target: MapTarget,
+    pub scale: [T; 2],
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightKind {
+    Directional = 0,
+    Point = 1,
+    Spot = 2,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Light<T> {
+    pub kind: LightKind,
+    pub color: Vec3<T>,
+    pub pos: Vec3<T>,
+    /// Unit direction the light travels (directional, spot axis).
+    pub dir: Vec3<T>,
+    pub cos_inner: T,
+    pub cos_outer: T,
+    pub exponent: T,
+    pub falloff: bool,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct TextureView<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: &'a [u8],
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Node<T> {
+    pub bounds: Aabb<T>,
+    pub skip: u32,
+    pub shape: Option<ShapeRef>,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct TriangleRec<T> {
+    pub tri: Triangle<T>,
+    pub material: u32,
+    pub normals: u32,
+    pub uvs: u32,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct EllipsoidRec<T> {
+    pub shape: Ellipsoid<T>,
+    pub material: u32,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct BoxRec<T> {
+    pub shape: BoxShape<T>,
+    pub material: u32,
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct BlobGroupRec<T> {
+    pub material: u32,
+    pub kernel: crate::shape::blob::Kernel,
+    pub threshold: T,
+    pub first: u32,
+    pub count: u32,
+}
+
+/// A validated, zero-copy view of a SceneImage.
+#[derive(Clone, Copy, Debug)]
+pub struct SceneView<'a> {
+    bytes: &'a [u8],
+    table: [(u32, u32); SECTION_COUNT],
+}
+
+#[inline]
+fn rd_u32(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+impl<'a> SceneView<'a> {
+    /// Check the header, every section's bounds and every cross-reference, so that the
+    /// accessors below can never index out of range.
+    pub fn new(bytes: &'a [u8]) -> Result<Self, ImageError> {
+        if bytes.len() < HEADER_SIZE {
+            return Err(ImageError::TooShort { len: bytes.len() as u32 });
+        }
+        if bytes[0..4] != MAGIC {
+            return Err(ImageError::BadMagic);
+        }
+        let version = u16::from_le_bytes([bytes[4], bytes[5]]);
+        if version != VERSION {
+            return Err(ImageError::UnsupportedVersion { found: version });
+        }
+        if bytes[6] != 0 {
+            return Err(ImageError::UnsupportedFormat { found: bytes[6] });
+        }
+        let total = rd_u32(bytes, 8);
+        if total as usize != bytes.len() {
+            return Err(ImageError::LengthMismatch { header: total, actual: bytes.len() as u32 });
+        }
+        let mut table = [(0u32, 0u32); SECTION_COUNT];
+        for (i, s) in Section::ALL.iter().enumerate() {
+            let off = rd_u32(bytes, 16 + 8 * i);
+            let count = rd_u32(bytes, 20 + 8 * i);
+            let size = (count as u64) * (s.record_size() as u64);
+            if count > 0 && ((off as u64) < HEADER_SIZE as u64 || off as u64 + size > total as u64) {
+                return Err(ImageError::SectionOutOfBounds { section: i as u8 });
+            }
+            if off % 4 != 0 {
+                return Err(ImageError::Misaligned { section: i as u8 });
+            }
+            table[i] = (off, count);
+        }
+        let view = Self { bytes, table };
+        view.check_references()?;
+        Ok(view)
+    }
+
+    /// Unit round-off of the stored scalars (f32): error bounds of quantities the DM
+    /// rounded separately (a matrix and its inverse) are multiples of it.
+    pub fn storage_epsilon<T: Real>(&self) -> T {
+        T::from_f32(f32::EPSILON * 0.5)
+    }
+
+    /// The raw bytes (for sending over the link).
+    pub fn bytes(&self) -> &'a [u8] {
+        self.bytes
+    }
+
+    /// Number of records in a section.
+    pub fn count(&self, s: Section) -> u32 {
+        self.table[s as usize].1
+    }
+
+    /// Bytes a section occupies.
+    pub fn section_bytes(&self, s: Section) -> usize {
+        self.count(s) as usize * s.record_size()
+    }
+
+    fn check_references(&self) -> Result<(), ImageError> {
+        let bad = |s: Section, i: u32| ImageError::BadReference { section: s as u8, record: i };
+        let badv = |s: Section, i: u32| ImageError::BadValue { section: s as u8, record: i };
+        if self.count(Section::Frame) != 1 {
+            return Err(ImageError::MissingFrame);
+        }
+        let frame = self.frame::<f32>();
+        if frame.max_depth > MAX_DEPTH_LIMIT || frame.width == 0 || frame.height == 0 {
+            return Err(badv(Section::Frame, 0));
+        }
+        let nmat = self.count(Section::Materials);
+        let ntex = self.count(Section::Textures);
+        for i in 0..nmat {
+            let at = self.rec(Section::Materials, i);
+            let tex = self.u(at + 4 * 12);
+            let target = self.u(at + 4 * 13);
+            if (tex != NONE && tex >= ntex) || target > 3 {
+                return Err(bad(Section::Materials, i));
+            }
+        }
+        for i in 0..self.count(Section::Lights) {
+            if self.u(self.rec(Section::Lights, i)) > 2 {
+                return Err(badv(Section::Lights, i));
+            }
+        }
+        let ntexels = self.count(Section::Texels) as u64;
+        for i in 0..ntex {
+            let at = self.rec(Section::Textures, i);
+            let (w, h, off) = (self.u(at) as u64, self.u(at + 4) as u64, self.u(at + 8) as u64);
+            if w == 0 || h == 0 || off + w * h * 3 > ntexels {
+                return Err(bad(Section::Textures, i));
+            }
+        }
+        let nnodes = self.count(Section::Nodes);
+        for i in 0..nnodes {
+            let at = self.rec(Section::Nodes, i);
+            let skip = self.u(at + 24);
+            let shape = self.u(at + 28);
+            if skip <= i || skip > nnodes {
+                return Err(bad(Section::Nodes, i));
+            }
+            if shape != NONE {
+                let r = ShapeRef::decode(shape).ok_or(bad(Section::Nodes, i))?;
+                let n = match r.kind {
+                    ShapeKind::Triangle => self.count(Section::Triangles),
+                    ShapeKind::Ellipsoid => self.count(Section::Ellipsoids),
+                    ShapeKind::Box => self.count(Section::Boxes),
+                    ShapeKind::Blob => self.count(Section::BlobGroups),
+                };
+                if r.index >= n || skip != i + 1 {
+                    return Err(bad(Section::Nodes, i));
+                }
+            }
+        }
+        let (nn, nuv) = (self.count(Section::Normals), self.count(Section::Uvs));
+        for i in 0..self.count(Section::Triangles) {
+            let at = self.rec(Section::Triangles, i);
+            let (m, n, uv) = (self.u(at + 36), self.u(at + 40), self.u(at + 44));
+            if m >= nmat || (n != NONE && n >= nn) || (uv != NONE && uv >= nuv) {
+                return Err(bad(Section::Triangles, i));
+            }
+        }
+        for i in 0..self.count(Section::Ellipsoids) {
+            if self.u(self.rec(Section::Ellipsoids, i) + 4 * 21) >= nmat {
+                return Err(bad(Section::Ellipsoids, i));
+            }
+        }
+        for i in 0..self.count(Section::Boxes) {
+            if self.u(self.rec(Section::Boxes, i) + 4 * 21) >= nmat {
+                return Err(bad(Section::Boxes, i));
+            }
+        }
+        let nballs = self.count(Section::Balls) as u64;
+        for i in 0..self.count(Section::BlobGroups) {
+            let at = self.rec(Section::BlobGroups, i);
+            let (m, k, first, count) =
+                (self.u(at), self.u(at + 4), self.u(at + 12) as u64, self.u(at + 16) as u64);
+            if m >= nmat || k > 1 || count == 0 || first + count > nballs {
+                return Err(bad(Section::BlobGroups, i));
+            }
+        }
+        Ok(())
+    }
+
+    #[inline]
+    fn rec(&self, s: Section, i: u32) -> usize {
+        self.table[s as usize].0 as usize + i as usize * s.record_size()
+    }
+    #[inline]
+    fn u(&self, at: usize) -> u32 {
+        rd_u32(self.bytes, at)
+    }
+    #[inline]
+    fn f<T: Real>(&self, at: usize) -> T {
+        T::from_f32(f32::from_bits(rd_u32(self.bytes, at)))
+    }
+    #[inline]
+    fn v3<T: Real>(&self, at: usize) -> Vec3<T> {
+        Vec3::new(self.f(at), self.f(at + 4), self.f(at + 8))
+    }
+    #[inline]
+    fn m3<T: Real>(&self, at: usize) -> Mat3<T> {
+        Mat3 { r: [self.v3(at), self.v3(at + 12), self.v3(at + 24)] }
+    }
+
+    pub fn frame<T: Real>(&self) -> Frame<T> {
+        let at = self.rec(Section::Frame, 0);
+        Frame {
+            width: self.u(at),
+            height: self.u(at + 4),
+            x0: self.f(at + 8),
+            y0: self.f(at + 12),
+            dx: self.f(at + 16),
+            dy: self.f(at + 20),
+            background: self.v3(at + 24),
+            ambient: self.v3(at + 36),
+            max_depth: self.u(at + 48),
+            non_refractive: self.u(at + 52) & 1 != 0,
+        }
+    }
+
+    /// Material `i` (`i` comes from a validated record).
+    pub fn material<T: Real>(&self, i: u32) -> Material<T> {
+        let at = self.rec(Section::Materials, i);
+        Material {
+            diffuse: self.v3(at),
+            specular: self.f(at + 12),
+            specular_edge: self.f(at + 16),
+            shininess: self.f(at + 20),
+            reflect: self.f(at + 24),
+            reflect_edge: self.f(at + 28),
+            transmit: self.v3(at + 32),
+            ior: self.f(at + 44),
+            texture: self.u(at + 48),
+            target: match self.u(at + 52) {
+                1 => MapTarget::Specular,
+                2 => MapTarget::Reflect,
+                3 => MapTarget::Transmit,
+                _ => MapTarget::Diffuse,
+            },
+            scale: [self.f(at + 56), self.f(at + 60)],
+        }
+    }
+
+    pub fn light_count(&self) -> u32 {
+        self.count(Section::Lights)
+    }
+
+    pub fn light<T: Real>(&self, i: u32) -> Light<T> {
+        let at = self.rec(Section::Lights, i);
+        Light {
+            kind: match self.u(at) {
+                1 => LightKind::Point,
+                2 => LightKind::Spot,
+                _ => LightKind::Directional,
+            },
+            color: self.v3(at + 4),
+            pos: self.v3(at + 16),
+            dir: self.v3(at + 28),
+            cos_inner: self.f(at + 40),
+            cos_outer: self.f(at + 44),
+            exponent: self.f(at + 48),
+            falloff: self.u(at + 52) != 0,
+        }
+    }
+
+    pub fn texture(&self, i: u32) -> TextureView<'a> {
+        let at = self.rec(Section::Textures, i);
+        let (w, h, off) = (self.u(at), self.u(at + 4), self.u(at + 8) as usize);
+        let base = self.table[Section::Texels as usize].0 as usize + off;
+        TextureView { width: w, height: h, rgb: &self.bytes[base..base + (w * h * 3) as usize] }
+    }
+
+    pub fn node_count(&self) -> u32 {
+        self.count(Section::Nodes)
+    }
+
+    #[inline]
+    pub fn node<T: Real>(&self, i: u32) -> Node<T> {
+        let at = self.rec(Section::Nodes, i);
+        let shape = self.u(at + 28);
+        Node {
+            bounds: Aabb { min: self.v3(at), max: self.v3(at + 12) },
+            skip: self.u(at + 24),
+            shape: if shape == NONE { None } else { ShapeRef::decode(shape) },
+        }
+    }
+
+    #[inline]
+    pub fn triangle<T: Real>(&self, i: u32) -> TriangleRec<T> {
+        let at = self.rec(Section::Triangles, i);
+        TriangleRec {
+            tri: Triangle { p: [self.v3(at), self.v3(at + 12), self.v3(at + 24)] },
+            material: self.u(at + 36),
+            normals: self.u(at + 40),
+            uvs: self.u(at + 44),
+        }
+    }
+
+    pub fn normals<T: Real>(&self, i: u32) -> [Vec3<T>; 3] {
+        let at = self.rec(Section::Normals, i);
+        [self.v3(at), self.v3(at + 12), self.v3(at + 24)]
+    }
+
+    pub fn uvs<T: Real>(&self, i: u32) -> [[T; 2]; 3] {
+        let at = self.rec(Section::Uvs, i);
+        [
+            [self.f(at), self.f(at + 4)],
+            [self.f(at + 8), self.f(at + 12)],
+            [self.f(at + 16), self.f(at + 20)],
+        ]
+    }
+
+    #[inline]
+    pub fn ellipsoid<T: Real>(&self, i: u32) -> EllipsoidRec<T> {
+        let at = self.rec(Section::Ellipsoids, i);
+        let flags = self.u(at + 4 * 22);
+        let cut = if flags & 1 != 0 {
+            Some(CutPlane { n: self.v3(at + 4 * 23), d: self.f(at + 4 * 26), capped: flags & 2 != 0 })
+        } else {
+            None
+        };
+        EllipsoidRec {
+            shape: Ellipsoid { center: self.v3(at), m: self.m3(at + 12), l: self.m3(at + 48), cut },
+            material: self.u(at + 4 * 21),
+        }
+    }
+
+    #[inline]
+    pub fn boxshape<T: Real>(&self, i: u32) -> BoxRec<T> {
+        let at = self.rec(Section::Boxes, i);
+        BoxRec {
+            shape: BoxShape { center: self.v3(at), m: self.m3(at + 12), l: self.m3(at + 48) },
+            material: self.u(at + 4 * 21),
+        }
+    }
+
+    pub fn blob_group<T: Real>(&self, i: u32) -> BlobGroupRec<T> {
+        let at = self.rec(Section::BlobGroups, i);
+        BlobGroupRec {
+            material: self.u(at),
+            kernel: if self.u(at + 4) == 1 {
+                crate::shape::blob::Kernel::Wyvill
+            } else {
+                crate::shape::blob::Kernel::Links
+            },
+            threshold: self.f(at + 8),
+            first: self.u(at + 12),
+            count: self.u(at + 16),
+        }
+    }
+
+    #[inline]
+    pub fn ball<T: Real>(&self, i: u32) -> crate::shape::blob::Ball<T> {
+        let at = self.rec(Section::Balls, i);
+        crate::shape::blob::Ball { center: self.v3(at), radius: self.f(at + 12), strength: self.f(at + 16) }
+    }
+}
+
+/// Writes an image section by section (host side, used by the DM).
+#[cfg(feature = "std")]
+pub mod writer {
+    use super::*;
+    use std::vec::Vec;
+
+    /// Accumulates the records of each section, then lays them out.
+    #[derive(Default)]
+    pub struct ImageWriter {
+        sections: [Vec<u8>; SECTION_COUNT],
+        counts: [u32; SECTION_COUNT],
+    }
+
+    /// Appends one record's fields.
+    pub struct Rec<'w>(&'w mut Vec<u8>);
+    impl Rec<'_> {
+        pub fn f(self, v: f32) -> Self {
+            self.0.extend_from_slice(&v.to_le_bytes());
+            self
+        }
+        pub fn fs(mut self, v: &[f32]) -> Self {
+            for x in v {
+                self = self.f(*x);
+            }
+            self
+        }
+        pub fn u(self, v: u32) -> Self {
+            self.0.extend_from_slice(&v.to_le_bytes());
+            self
+        }
+        pub fn bytes(self, b: &[u8]) -> Self {
+            self.0.extend_from_slice(b);
+            self
+        }
+    }
+
+    impl ImageWriter {
+        pub fn new() -> Self {
+            Self::default()
+        }
+        /// Start a record in section `s`; returns its index.
+        pub fn push(&mut self, s: Section) -> (u32, Rec<'_>) {
+            let i = self.counts[s as usize];
+            self.counts[s as usize] += if s == Section::Texels { 0 } else { 1 };
+            (i, Rec(&mut self.sections[s as usize]))
+        }
+        /// Append texel bytes, returning their offset within the texel section.
+        pub fn push_texels(&mut self, rgb: &[u8]) -> u32 {
+            let v = &mut self.sections[Section::Texels as usize];
+            let off = v.len() as u32;
+            v.extend_from_slice(rgb);
+            self.counts[Section::Texels as usize] = v.len() as u32;
+            off
+        }
+        pub fn count(&self, s: Section) -> u32 {
+            self.counts[s as usize]
+        }
+        /// Overwrite a u32 field of an already written record (patching `skip`).
+        pub fn patch_u32(&mut self, s: Section, record: u32, field_offset: usize, v: u32) {
+            let at = record as usize * s.record_size() + field_offset;
+            self.sections[s as usize][at..at + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        pub fn finish(self) -> Vec<u8> {
+            let mut out = Vec::new();
+            out.extend_from_slice(&MAGIC);
+            out.extend_from_slice(&VERSION.to_le_bytes());
+            out.push(0);
+            out.push(0);
+            out.extend_from_slice(&[0; 8]);
+            out.resize(HEADER_SIZE, 0);
+            for (i, data) in self.sections.iter().enumerate() {
+                debug_assert_eq!(
+                    data.len(),
+                    self.counts[i] as usize * Section::ALL[i].record_size()
+                );
+                let off = if data.is_empty() { 0 } else { out.len() as u32 };
+                out[16 + 8 * i..20 + 8 * i].copy_from_slice(&off.to_le_bytes());
+                out[20 + 8 * i..24 + 8 * i].copy_from_slice(&self.counts[i].to_le_bytes());
+                out.extend_from_slice(data);
+                while out.len() % 4 != 0 {
+                    out.push(0);
+                }
+            }
+            let len = out.len() as u32;
+            out[8..12].copy_from_slice(&len.to_le_bytes());
+            out
+        }
+    }
+}

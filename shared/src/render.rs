@@ -1,0 +1,588 @@
+//! The tracer: LINKS-1's line-of-sight search with eq. 2.1 shading and eq. 2.2 recursion.
+//!
+//! The node's unit of work is one run of pixels on one scanline ([`render_run`]). Everything
+//! is generic over the number type and reads the SceneImage in place. Recursion depth is
+//! bounded by the image's `max_depth` (validated <= [`MAX_DEPTH_LIMIT`]); at the cut-off a
+//! transmitted ray continues straight through (non-refractive transparency, LINKS-1 4.5)
+//! in a loop, so deep nesting costs no stack.
+//!
+//! Colours are linear RGB in [0, 1] per channel, written as 8-bit without gamma (as a 1983
+//! frame memory would hold them).
+
+use crate::geom::{offset_ray_origin, Ray, RayInv, Vec3};
+use crate::image::{
+    Frame, LightKind, MapTarget, Material, SceneView, ShapeKind, ShapeRef, MAX_DEPTH_LIMIT, NONE,
+};
+use crate::num::Real;
+use crate::shape::blob::{BlobGroup, BlobStats};
+use crate::shape::boxshape::BoxHit;
+use crate::shape::ellipsoid::EllipsoidHit;
+use core::fmt;
+
+/// Most surfaces a shadow ray or a straight-through ray may cross before it gives up (the
+/// light is then treated as blocked, the straight ray as ending in the background).
+pub const MAX_CROSSINGS: u32 = 64;
+
+/// An 8-bit RGB pixel.
+pub type Rgb8 = [u8; 3];
+
+/// Deterministic operation counts (the cost model's input).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stats {
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+    pub reflect_rays: u64,
+    pub refract_rays: u64,
+    /// Straight-through (non-refractive) transmission rays.
+    pub straight_rays: u64,
+    pub box_tests: u64,
+    pub triangle_tests: u64,
+    pub ellipsoid_tests: u64,
+    pub box_shape_tests: u64,
+    pub blob_tests: u64,
+    pub blob_field_evals: u64,
+    /// Evaluations of eq. 2.1 (one per shaded surface point).
+    pub shadings: u64,
+}
+
+impl Stats {
+    pub fn rays(&self) -> u64 {
+        self.primary_rays + self.shadow_rays + self.reflect_rays + self.refract_rays + self.straight_rays
+    }
+    pub fn add(&mut self, o: &Stats) {
+        self.primary_rays += o.primary_rays;
+        self.shadow_rays += o.shadow_rays;
+        self.reflect_rays += o.reflect_rays;
+        self.refract_rays += o.refract_rays;
+        self.straight_rays += o.straight_rays;
+        self.box_tests += o.box_tests;
+        self.triangle_tests += o.triangle_tests;
+        self.ellipsoid_tests += o.ellipsoid_tests;
+        self.box_shape_tests += o.box_shape_tests;
+        self.blob_tests += o.blob_tests;
+        self.blob_field_evals += o.blob_field_evals;
+        self.shadings += o.shadings;
+    }
+}
+
+/// Why a run could not be rendered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RenderError {
+    /// The run does not lie inside the frame.
+    RunOutsideFrame { x: u32, y: u32, len: u32 },
+}
+
+impl fmt::Display for RenderError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            RenderError::RunOutsideFrame { x, y, len } => {
+                write!(f, "pixel run x={x} y={y} len={len} lies outside the frame")
+            }
+        }
+    }
+}
+
+impl core::error::Error for RenderError {}
+
+/// Which shape a ray hit, with what each kind needs to finish the hit.
+#[derive(Clone, Copy, Debug)]
+enum HitDetail<T> {
+    Triangle([T; 3]),
+    Ellipsoid(EllipsoidHit<T>),
+    Box(BoxHit<T>),
+    Blob { t_error: T },
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Hit<T> {
+    t: T,
+    shape: ShapeRef,
+    detail: HitDetail<T>,
+}
+
+/// A finished hit: where, how accurately, which way the surface faces, what it is made of.
+#[derive(Clone, Copy, Debug)]
+pub struct Surface<T> {
+    pub p: Vec3<T>,
+    pub p_error: Vec3<T>,
+    /// Geometric normal, unit, pointing out of the object.
+    pub ng: Vec3<T>,
+    /// Shading normal (interpolated on smooth triangles), unit, same side as `ng`.
+    pub ns: Vec3<T>,
+    pub uv: [T; 2],
+    pub material: u32,
+    pub shape: ShapeRef,
+}
+
+/// A material with its texture map already applied at a surface point.
+#[derive(Clone, Copy, Debug)]
+struct Mat<T> {
+    diffuse: Vec3<T>,
+    specular: T,
+    specular_edge: T,
+    shininess: T,
+    reflect: T,
+    reflect_edge: T,
+    transmit: Vec3<T>,
+    ior: T,
+}
+
+fn schlick<T: Real>(at_normal: T, at_edge: T, cos: T) -> T {
+    let m = (T::ONE - cos.clamp01()).max(T::ZERO);
+    let m2 = m * m;
+    at_normal + (at_edge - at_normal) * (m2 * m2 * m)
+}
+
+/// The tracer for one scene and number type.
+pub struct Tracer<'a, T: Real> {
+    scene: SceneView<'a>,
+    frame: Frame<T>,
+    pub stats: Stats,
+}
+
+impl<'a, T: Real> Tracer<'a, T> {
+    pub fn new(scene: SceneView<'a>) -> Self {
+        let frame = scene.frame::<T>();
+        Self { scene, frame, stats: Stats::default() }
+    }
+
+    pub fn frame(&self) -> &Frame<T> {
+        &self.frame
+    }
+
+    /// The primary ray through the centre of pixel (x, y): from the eye at the origin.
+    pub fn primary_ray(&self, x: u32, y: u32) -> Ray<T> {
+        let f = &self.frame;
+        let half = T::HALF;
+        let dx = f.x0 + (T::from_i32(x as i32) + half) * f.dx;
+        let dy = f.y0 - (T::from_i32(y as i32) + half) * f.dy;
+        Ray::new(Vec3::zero(), Vec3::new(dx, dy, T::ONE).normalize())
+    }
+
+    /// Colour of the primary ray through pixel (x, y), linear RGB.
+    pub fn pixel(&mut self, x: u32, y: u32) -> Vec3<T> {
+        self.stats.primary_rays += 1;
+        let ray = self.primary_ray(x, y);
+        self.trace(&ray, 0)
+    }
+
+    /// Nearest shape along `ray` in (0, t_max): walk the node list, skipping the subtree of
+    /// every box the ray misses (LINKS-1 4.2). The list is in depth-first order with a skip
+    /// index per node, so the walk needs no stack.
+    fn closest_hit(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
+        let inv = RayInv::new(ray.dir);
+        let n = self.scene.node_count();
+        let mut best: Option<Hit<T>> = None;
+        let mut t_best = t_max;
+        let mut i = 0;
+        while i < n {
+            let node = self.scene.node::<T>(i);
+            self.stats.box_tests += 1;
+            if !node.bounds.hit(ray, &inv, t_best) {
+                i = node.skip;
+                continue;
+            }
+            if let Some(shape) = node.shape {
+                if let Some(h) = self.intersect_shape(shape, ray, t_best) {
+                    t_best = h.t;
+                    best = Some(h);
+                }
+            }
+            i += 1;
+        }
+        best
+    }
+
+    fn intersect_shape(&mut self, shape: ShapeRef, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
+        let s = &self.scene;
+        match shape.kind {
+            ShapeKind::Triangle => {
+                self.stats.triangle_tests += 1;
+                let rec = s.triangle::<T>(shape.index);
+                rec.tri
+                    .intersect(ray, t_max)
+                    .map(|h| Hit { t: h.t, shape, detail: HitDetail::Triangle(h.b) })
+            }
+            ShapeKind::Ellipsoid => {
+                self.stats.ellipsoid_tests += 1;
+                let rec = s.ellipsoid::<T>(shape.index);
+                rec.shape
+                    .intersect(ray, t_max)
+                    .map(|h| Hit { t: h.t, shape, detail: HitDetail::Ellipsoid(h) })
+            }
+            ShapeKind::Box => {
+                self.stats.box_shape_tests += 1;
+                let rec = s.boxshape::<T>(shape.index);
+                rec.shape.intersect(ray, t_max).map(|h| Hit { t: h.t, shape, detail: HitDetail::Box(h) })
+            }
+            ShapeKind::Blob => {
+                self.stats.blob_tests += 1;
+                let g = s.blob_group::<T>(shape.index);
+                let scene = *s;
+                let first = g.first;
+                let group = BlobGroup {
+                    count: g.count as usize,
+                    ball: |k: usize| scene.ball::<T>(first + k as u32),
+                    kernel: g.kernel,
+                    threshold: g.threshold,
+                };
+                let mut bs = BlobStats::default();
+                let h = group.intersect(ray, T::ZERO, t_max, &mut bs);
+                self.stats.blob_field_evals += bs.field_evals as u64;
+                h.map(|h| Hit { t: h.t, shape, detail: HitDetail::Blob { t_error: h.t_error } })
+            }
+        }
+    }
+
+    /// Complete a hit: position with error bound, normals, texture coordinates.
+    fn surface(&self, ray: &Ray<T>, hit: &Hit<T>) -> Surface<T> {
+        let s = &self.scene;
+        let shape = hit.shape;
+        match hit.detail {
+            HitDetail::Triangle(b) => {
+                let rec = s.triangle::<T>(shape.index);
+                let (p, p_error) = rec.tri.point(b);
+                let mut ng = rec.tri.face_normal().normalize();
+                let ns = if rec.normals != NONE {
+                    let n = s.normals::<T>(rec.normals);
+                    let ns = (n[0] * b[0] + n[1] * b[1] + n[2] * b[2]).normalize();
+                    // Vertex normals say which side is outside; make ng agree.
+                    if ns.dot(ng) < T::ZERO {
+                        ng = -ng;
+                    }
+                    ns
+                } else {
+                    ng
+                };
+                let uv = if rec.uvs != NONE {
+                    let t = s.uvs::<T>(rec.uvs);
+                    [
+                        t[0][0] * b[0] + t[1][0] * b[1] + t[2][0] * b[2],
+                        t[0][1] * b[0] + t[1][1] * b[1] + t[2][1] * b[2],
+                    ]
+                } else {
+                    [b[1], b[2]]
+                };
+                Surface { p, p_error, ng, ns, uv, material: rec.material, shape }
+            }
+            HitDetail::Ellipsoid(h) => {
+                let rec = s.ellipsoid::<T>(shape.index);
+                let ls = rec.shape.surface(ray, &h, s.storage_epsilon());
+                let q = ls.local;
+                // Spherical mapping in the unit frame; the cap maps planar.
+                let uv = if h.part == crate::shape::ellipsoid::EllipsoidPart::Cap {
+                    [(q.x + T::ONE) * T::HALF, (q.z + T::ONE) * T::HALF]
+                } else {
+                    let two_pi = T::TWO * T::PI;
+                    [T::HALF + q.z.atan2(q.x) / two_pi, q.y.max(-T::ONE).min(T::ONE).acos() / T::PI]
+                };
+                Surface { p: ls.p, p_error: ls.p_error, ng: ls.n, ns: ls.n, uv, material: rec.material, shape }
+            }
+            HitDetail::Box(h) => {
+                let rec = s.boxshape::<T>(shape.index);
+                let ls = rec.shape.surface(ray, &h, s.storage_epsilon());
+                let q = ls.local;
+                // Planar mapping on each face from the two other local axes.
+                let (a, b) = match h.face & 3 {
+                    0 => (q.z, q.y),
+                    1 => (q.x, q.z),
+                    _ => (q.x, q.y),
+                };
+                let uv = [(a + T::ONE) * T::HALF, (b + T::ONE) * T::HALF];
+                Surface { p: ls.p, p_error: ls.p_error, ng: ls.n, ns: ls.n, uv, material: rec.material, shape }
+            }
+            HitDetail::Blob { t_error } => {
+                let g = s.blob_group::<T>(shape.index);
+                let scene = *s;
+                let first = g.first;
+                let group = BlobGroup {
+                    count: g.count as usize,
+                    ball: |k: usize| scene.ball::<T>(first + k as u32),
+                    kernel: g.kernel,
+                    threshold: g.threshold,
+                };
+                let p = ray.at(hit.t);
+                let n = (-group.gradient(p)).normalize();
+                let p_error = ray.dir.abs() * t_error + p.abs() * T::gamma(4);
+                Surface { p, p_error, ng: n, ns: n, uv: [T::ZERO, T::ZERO], material: g.material, shape }
+            }
+        }
+    }
+
+    /// Material at a surface point, with its texture or coefficient map applied (bilinear).
+    fn material_at(&self, surf: &Surface<T>) -> Mat<T> {
+        let m: Material<T> = self.scene.material(surf.material);
+        let mut out = Mat {
+            diffuse: m.diffuse,
+            specular: m.specular,
+            specular_edge: m.specular_edge,
+            shininess: m.shininess,
+            reflect: m.reflect,
+            reflect_edge: m.reflect_edge,
+            transmit: m.transmit,
+            ior: m.ior,
+        };
+        if m.texture != NONE {
+            let texel = self.texture_lookup(m.texture, surf.uv[0] * m.scale[0], surf.uv[1] * m.scale[1]);
+            let lum = texel.x * T::from_f32(0.299) + texel.y * T::from_f32(0.587) + texel.z * T::from_f32(0.114);
+            match m.target {
+                MapTarget::Diffuse => out.diffuse = out.diffuse.mul_elem(texel),
+                MapTarget::Specular => {
+                    out.specular *= lum;
+                    out.specular_edge *= lum;
+                }
+                MapTarget::Reflect => {
+                    out.reflect *= lum;
+                    out.reflect_edge *= lum;
+                }
+                MapTarget::Transmit => out.transmit = out.transmit * lum,
+            }
+        }
+        out
+    }
+
+    /// Bilinear, wrapping texture lookup; v = 0 is the bottom row of the image.
+    fn texture_lookup(&self, index: u32, u: T, v: T) -> Vec3<T> {
+        let tex = self.scene.texture(index);
+        let (w, h) = (tex.width as i32, tex.height as i32);
+        let u = u - u.floor();
+        let v = v - v.floor();
+        let x = u * T::from_i32(w) - T::HALF;
+        let y = (T::ONE - v) * T::from_i32(h) - T::HALF;
+        let xf = x.floor();
+        let yf = y.floor();
+        let fx = x - xf;
+        let fy = y - yf;
+        let xi = xf.to_f32() as i32;
+        let yi = yf.to_f32() as i32;
+        let texel = |xx: i32, yy: i32| -> Vec3<T> {
+            let xx = xx.rem_euclid(w) as usize;
+            let yy = yy.rem_euclid(h) as usize;
+            let at = (yy * w as usize + xx) * 3;
+            let c = |k: usize| T::from_i32(tex.rgb[at + k] as i32) / T::from_i32(255);
+            Vec3::new(c(0), c(1), c(2))
+        };
+        let top = texel(xi, yi) * (T::ONE - fx) + texel(xi + 1, yi) * fx;
+        let bot = texel(xi, yi + 1) * (T::ONE - fx) + texel(xi + 1, yi + 1) * fx;
+        top * (T::ONE - fy) + bot * fy
+    }
+
+    /// Direction to light `i` from `p`, its distance (MAX for parallel light) and the
+    /// light's intensity arriving at `p` before shadowing.
+    fn light_at(&self, i: u32, p: Vec3<T>) -> Option<(Vec3<T>, T, Vec3<T>)> {
+        let l = self.scene.light::<T>(i);
+        match l.kind {
+            LightKind::Directional => Some((-l.dir, T::MAX, l.color)),
+            LightKind::Point | LightKind::Spot => {
+                let to = l.pos - p;
+                let d2 = to.length_sq();
+                let d = d2.sqrt();
+                if d == T::ZERO {
+                    return None;
+                }
+                let dir = to * d.recip();
+                let mut c = l.color;
+                if l.kind == LightKind::Point {
+                    if l.falloff {
+                        c = c * d2.recip();
+                    }
+                } else {
+                    let cos_axis = -dir.dot(l.dir);
+                    if cos_axis <= l.cos_outer {
+                        return None;
+                    }
+                    let edge = if cos_axis >= l.cos_inner || l.cos_inner <= l.cos_outer {
+                        T::ONE
+                    } else {
+                        let s = (cos_axis - l.cos_outer) / (l.cos_inner - l.cos_outer);
+                        s * s * (T::from_i32(3) - T::TWO * s)
+                    };
+                    let shape = if l.exponent > T::ZERO { cos_axis.powf(l.exponent) } else { T::ONE };
+                    c = c * (edge * shape);
+                }
+                Some((dir, d, c))
+            }
+        }
+    }
+
+    /// Light transmitted from `surf` towards a light `dist` away along `dir`: the product of
+    /// the transmittances of every surface crossed (LINKS-1: transparent objects cast
+    /// lighter shadows).
+    fn shadow(&mut self, surf: &Surface<T>, dir: Vec3<T>, dist: T) -> Vec3<T> {
+        self.stats.shadow_rays += 1;
+        let mut atten = Vec3::splat(T::ONE);
+        let mut origin = offset_ray_origin(surf.p, surf.p_error, surf.ng, dir);
+        let far = dist < T::MAX;
+        let light_pos = surf.p + dir * dist;
+        let mut k = 0;
+        while k < MAX_CROSSINGS {
+            let t_max = if far { (light_pos - origin).dot(dir) } else { T::MAX };
+            if t_max <= T::ZERO {
+                return atten;
+            }
+            let ray = Ray::new(origin, dir);
+            let Some(hit) = self.closest_hit(&ray, t_max) else {
+                return atten;
+            };
+            let s = self.surface(&ray, &hit);
+            let m = self.material_at(&s);
+            atten = atten.mul_elem(m.transmit);
+            if atten.max_component() < T::from_f32(1.0 / 1024.0) {
+                return Vec3::zero();
+            }
+            origin = offset_ray_origin(s.p, s.p_error, s.ng, dir);
+            k += 1;
+        }
+        Vec3::zero()
+    }
+
+    /// Eq. 2.1 at a surface point seen along `view` (unit, towards the eye).
+    fn local_shade(&mut self, surf: &Surface<T>, m: &Mat<T>, view: Vec3<T>) -> Vec3<T> {
+        self.stats.shadings += 1;
+        let n = if surf.ns.dot(view) < T::ZERO { -surf.ns } else { surf.ns };
+        let mut c = m.diffuse.mul_elem(self.frame.ambient);
+        for i in 0..self.scene.light_count() {
+            let Some((ldir, dist, ls)) = self.light_at(i, surf.p) else {
+                continue;
+            };
+            let cos_t = n.dot(ldir);
+            if cos_t <= T::ZERO {
+                continue;
+            }
+            let t = self.shadow(surf, ldir, dist);
+            if t.max_component() <= T::ZERO {
+                continue;
+            }
+            let ls = ls.mul_elem(t);
+            c = c + m.diffuse.mul_elem(ls) * cos_t;
+            let src = schlick(m.specular, m.specular_edge, cos_t);
+            if src > T::ZERO {
+                // Mirror of the light direction about n, against the view direction.
+                let r = n * (T::TWO * cos_t) - ldir;
+                let cos_p = r.dot(view);
+                if cos_p > T::ZERO {
+                    c = c + ls * (src * cos_p.powf(m.shininess));
+                }
+            }
+        }
+        c
+    }
+
+    /// Eq. 2.2: local shading plus reflected and transmitted light, recursively.
+    pub fn trace(&mut self, ray: &Ray<T>, depth: u32) -> Vec3<T> {
+        let Some(hit) = self.closest_hit(ray, T::MAX) else {
+            return self.frame.background;
+        };
+        let surf = self.surface(ray, &hit);
+        let m = self.material_at(&surf);
+        let view = -ray.dir;
+        let mut c = self.local_shade(&surf, &m, view);
+
+        let entering = surf.ng.dot(ray.dir) < T::ZERO;
+        let n = if entering { surf.ns } else { -surf.ns };
+        let can_recurse = depth < self.frame.max_depth && depth < MAX_DEPTH_LIMIT;
+        let cos_v = n.dot(view).clamp01();
+
+        let rc = schlick(m.reflect, m.reflect_edge, cos_v);
+        if rc > T::ZERO && can_recurse {
+            self.stats.reflect_rays += 1;
+            let rdir = ray.dir.reflect(n).normalize();
+            let r = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, rdir), rdir);
+            c = c + self.trace(&r, depth + 1) * rc;
+        }
+
+        let tc = m.transmit;
+        if tc.max_component() > T::ZERO {
+            let it = if !can_recurse {
+                self.straight_through(&surf, ray.dir)
+            } else if self.frame.non_refractive {
+                self.stats.straight_rays += 1;
+                let r = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, ray.dir), ray.dir);
+                self.trace(&r, depth + 1)
+            } else {
+                // Snell's law; the outside is air.
+                let eta = if entering { m.ior.recip() } else { m.ior };
+                let cos_i = cos_v;
+                let k = T::ONE - eta * eta * (T::ONE - cos_i * cos_i);
+                let dir = if k < T::ZERO {
+                    // Total internal reflection: the transmitted share reflects.
+                    self.stats.reflect_rays += 1;
+                    ray.dir.reflect(n).normalize()
+                } else {
+                    self.stats.refract_rays += 1;
+                    (ray.dir * eta + n * (eta * cos_i - k.sqrt())).normalize()
+                };
+                let r = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, dir), dir);
+                self.trace(&r, depth + 1)
+            };
+            c = c + it.mul_elem(tc);
+        }
+        c
+    }
+
+    /// Non-refractive transparency without recursion: follow the ray straight on, adding
+    /// each crossed surface's eq. 2.1 light weighted by the transmittance so far.
+    fn straight_through(&mut self, from: &Surface<T>, dir: Vec3<T>) -> Vec3<T> {
+        let mut acc = Vec3::zero();
+        let mut w = Vec3::splat(T::ONE);
+        let mut origin = offset_ray_origin(from.p, from.p_error, from.ng, dir);
+        let mut k = 0;
+        while k < MAX_CROSSINGS {
+            self.stats.straight_rays += 1;
+            let ray = Ray::new(origin, dir);
+            let Some(hit) = self.closest_hit(&ray, T::MAX) else {
+                return acc + w.mul_elem(self.frame.background);
+            };
+            let s = self.surface(&ray, &hit);
+            let m = self.material_at(&s);
+            acc = acc + w.mul_elem(self.local_shade(&s, &m, -dir));
+            w = w.mul_elem(m.transmit);
+            if w.max_component() < T::from_f32(1.0 / 1024.0) {
+                return acc;
+            }
+            origin = offset_ray_origin(s.p, s.p_error, s.ng, dir);
+            k += 1;
+        }
+        acc
+    }
+
+    /// The nearest surface a ray hits, for tests and tools.
+    pub fn first_surface(&mut self, ray: &Ray<T>) -> Option<(T, Surface<T>)> {
+        let hit = self.closest_hit(ray, T::MAX)?;
+        Some((hit.t, self.surface(ray, &hit)))
+    }
+}
+
+/// Quantise a linear colour to 8 bits (clamped, rounded to nearest).
+pub fn to_rgb8<T: Real>(c: Vec3<T>) -> Rgb8 {
+    let q = |v: T| {
+        let x = v.clamp01().to_f32() * 255.0 + 0.5;
+        if x >= 255.0 {
+            255
+        } else if x > 0.0 {
+            x as u8
+        } else {
+            0
+        }
+    };
+    [q(c.x), q(c.y), q(c.z)]
+}
+
+/// Render `out.len()` pixels of scanline `y` starting at column `x`: the node's unit of work.
+pub fn render_run<T: Real>(
+    tracer: &mut Tracer<'_, T>,
+    y: u32,
+    x: u32,
+    out: &mut [Rgb8],
+) -> Result<(), RenderError> {
+    let f = tracer.frame();
+    let len = out.len() as u32;
+    if y >= f.height || x.checked_add(len).is_none_or(|end| end > f.width) {
+        return Err(RenderError::RunOutsideFrame { x, y, len });
+    }
+    for (i, px) in out.iter_mut().enumerate() {
+        *px = to_rgb8(tracer.pixel(x + i as u32, y));
+    }
+    Ok(())
+}

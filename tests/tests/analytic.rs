@@ -1,0 +1,213 @@
+//! Analytic cases: renders compared with eq. 2.1 / 2.2 worked out independently here.
+
+use links_core::desc::*;
+use links_tests::*;
+
+/// Direction of pixel (x, y)'s primary ray in view coordinates, computed from the camera.
+fn pixel_dir(w: u32, h: u32, fov_y_deg: f64, x: u32, y: u32) -> [f64; 3] {
+    let tan_half = (fov_y_deg.to_radians() / 2.0).tan();
+    let d = 2.0 * tan_half / h as f64;
+    let v = [-d * w as f64 / 2.0 + (x as f64 + 0.5) * d, tan_half - (y as f64 + 0.5) * d, 1.0];
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|c| c / l)
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+fn q8(v: f64) -> i32 {
+    (v.clamp(0.0, 1.0) * 255.0 + 0.5).floor() as i32
+}
+
+#[test]
+fn sphere_under_parallel_light_matches_eq_2_1() {
+    let (w, h, fov) = (64, 48, 40.0);
+    let mut s = scene(w, h, fov, vec![Shape::Ellipsoid {
+        center: [0.0, 0.0, -10.0],
+        radii: [3.0; 3],
+        rotate_deg: [0.0; 3],
+        cut: None,
+        material: 0,
+    }]);
+    s.ambient = [0.2, 0.2, 0.2];
+    s.materials[0] = Material {
+        diffuse: [0.7, 0.5, 0.3],
+        specular: 0.4,
+        specular_edge: 0.9,
+        shininess: 12.0,
+        ..Material::default()
+    };
+    // World direction the light travels; in view coordinates z flips.
+    let lw = [-1.0f64, -2.0, -1.5];
+    s.lights = vec![Light::Directional { dir: lw, color: [0.9, 0.9, 0.8] }];
+    let img = image_of(&s);
+
+    let ll = dot(lw, lw).sqrt();
+    let to_light = [-lw[0] / ll, -lw[1] / ll, lw[2] / ll];
+    let mut checked = 0;
+    for (x, y) in [(32, 24), (28, 20), (36, 30), (25, 27), (40, 18), (31, 14)] {
+        let d = pixel_dir(w, h, fov, x, y);
+        // |t d - c|² = r² with c = (0, 0, 10) in view coordinates.
+        let c = [0.0, 0.0, 10.0];
+        let b = dot(d, c);
+        let disc = b * b - (dot(c, c) - 9.0);
+        assert!(disc > 0.0, "pixel ({x},{y}) must see the sphere");
+        let t = b - disc.sqrt();
+        let p = d.map(|v| v * t);
+        let n = [0, 1, 2].map(|k| (p[k] - c[k]) / 3.0);
+        let cos_t = dot(n, to_light).max(0.0);
+        let view = d.map(|v| -v);
+        let r = [0, 1, 2].map(|k| 2.0 * cos_t * n[k] - to_light[k]);
+        let cos_p = dot(r, view).max(0.0);
+        let src = 0.4 + (0.9 - 0.4) * (1.0 - cos_t).powi(5);
+        let diffuse = [0.7, 0.5, 0.3];
+        let ls = [0.9, 0.9, 0.8];
+        let expect: Vec<i32> = (0..3)
+            .map(|k| {
+                let spec = if cos_t > 0.0 { src * ls[k] * cos_p.powf(12.0) } else { 0.0 };
+                q8(diffuse[k] * 0.2 + diffuse[k] * ls[k] * cos_t + spec)
+            })
+            .collect();
+        for got in [pixel::<f64>(&img, x, y), pixel::<f32>(&img, x, y)] {
+            for k in 0..3 {
+                assert!(
+                    (got[k] as i32 - expect[k]).abs() <= 1,
+                    "pixel ({x},{y}) channel {k}: got {got:?}, eq. 2.1 gives {expect:?}"
+                );
+            }
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 6);
+}
+
+#[test]
+fn mirror_reflects_a_known_colour() {
+    // A mirror square facing the eye, tilted 45° about Y, reflects a red box to the side.
+    let (w, h, fov) = (33, 33, 20.0);
+    let mirror = Shape::Box { min: [-2.0, -2.0, -0.05], max: [2.0, 2.0, 0.05], material: 1 };
+    let mut s = scene(w, h, fov, vec![Shape::Box { min: [8.0, -3.0, -14.0], max: [9.0, 3.0, -6.0], material: 2 }]);
+    s.root.children.push(Node::Cluster(Cluster {
+        name: "mirror".into(),
+        transform: Transform { translate: [0.0, 0.0, -10.0], rotate_deg: [0.0, 45.0, 0.0], scale: [1.0; 3] },
+        children: vec![Node::Shape(mirror)],
+    }));
+    s.ambient = [1.0, 1.0, 1.0];
+    s.materials.push(Material {
+        name: "mirror".into(),
+        diffuse: [0.0; 3],
+        reflect: 1.0,
+        reflect_edge: 1.0,
+        ..Material::default()
+    });
+    s.materials.push(matte("red", [0.9, 0.1, 0.0]));
+    let img = image_of(&s);
+    // The centre ray meets the mirror at 45° and leaves along +X in view space: the box.
+    assert_eq!(pixel::<f64>(&img, 16, 16), [q8(0.9) as u8, q8(0.1) as u8, 0]);
+    assert_eq!(pixel::<f32>(&img, 16, 16), [q8(0.9) as u8, q8(0.1) as u8, 0]);
+    // Without the reflection the mirror itself is black.
+    let mut dull = s.clone();
+    dull.materials[1].reflect = 0.0;
+    dull.materials[1].reflect_edge = 0.0;
+    assert_eq!(pixel::<f64>(&image_of(&dull), 16, 16), [0, 0, 0]);
+}
+
+#[test]
+fn glass_slab_shifts_a_ray_by_the_snell_offset() {
+    // Slab between view z = 4 and 6 (world z = -4..-6), ior 1.5, clear; a black wall at
+    // z = 10 with a 0.02-wide white stripe. The stripe is seen only where Snell says.
+    let (w, h, fov) = (101, 3, 40.0);
+    let x = 80;
+    let d = pixel_dir(w, h, fov, x, 1);
+    assert_eq!(d[1], 0.0, "middle row of an odd-height frame is level");
+    let tan_i = d[0] / d[2];
+    let sin_i = d[0];
+    let sin_t = sin_i / 1.5;
+    let tan_t = sin_t / (1.0 - sin_t * sin_t).sqrt();
+    let landing = 4.0 * tan_i + 2.0 * tan_t + 4.0 * tan_i;
+    let straight = 10.0 * tan_i;
+    let shift = straight - landing;
+    assert!(shift > 0.1, "the test needs a visible shift, got {shift}");
+    let build = |stripe_x: f64, slab: bool| {
+        let mut shapes = vec![
+            Shape::Box { min: [-50.0, -50.0, -10.5], max: [50.0, 50.0, -10.0], material: 1 },
+            Shape::Box { min: [stripe_x - 0.01, -5.0, -10.0], max: [stripe_x + 0.01, 5.0, -9.999], material: 2 },
+        ];
+        if slab {
+            shapes.push(Shape::Box { min: [-50.0, -50.0, -6.0], max: [50.0, 50.0, -4.0], material: 3 });
+        }
+        let mut s = scene(w, h, fov, shapes);
+        s.ambient = [1.0; 3];
+        s.materials.push(matte("wall", [0.0; 3]));
+        s.materials.push(matte("stripe", [1.0; 3]));
+        s.materials.push(Material { name: "glass".into(), diffuse: [0.0; 3], transmit: [1.0; 3], ior: 1.5, ..Material::default() });
+        image_of(&s)
+    };
+    let lit = |img: &[u8]| pixel::<f64>(img, x, 1)[0] > 128;
+    assert!(lit(&build(landing, true)), "refracted ray lands on the Snell-predicted spot");
+    assert!(!lit(&build(landing + 0.03, true)) && !lit(&build(landing - 0.03, true)));
+    assert!(!lit(&build(straight, true)), "not where an unrefracted ray would land");
+    assert!(lit(&build(straight, false)), "without the slab the ray goes straight");
+    assert!(lit(&build(landing, true)) && pixel::<f32>(&build(landing, true), x, 1)[0] > 128);
+}
+
+#[test]
+fn shadow_behind_a_half_transmitting_sheet_is_lit_at_half() {
+    // A floor at y = 0 under parallel light at 45°; a sheet of tc = 0.5 hangs above x < 0.
+    let (w, h, fov) = (41, 41, 60.0);
+    let floor = Shape::Box { min: [-20.0, -1.0, -30.0], max: [20.0, 0.0, 0.0], material: 1 };
+    let sheet = |y: f64| Shape::Triangle {
+        v: [[-10.0, y, -2.0], [-10.0, y, -30.0], [0.0, y, -30.0]],
+        normals: None,
+        uv: None,
+        material: 2,
+    };
+    let sheet2 = |y: f64| Shape::Triangle {
+        v: [[-10.0, y, -2.0], [0.0, y, -30.0], [0.0, y, -2.0]],
+        normals: None,
+        uv: None,
+        material: 2,
+    };
+    let mut s = scene(w, h, fov, vec![floor, sheet(3.0), sheet2(3.0)]);
+    s.camera = Camera { eye: [0.0, 10.0, 5.0], look_at: [0.0, 0.0, -10.0], up: [0.0, 1.0, 0.0], fov_y_deg: fov };
+    s.materials.push(matte("floor", [0.8, 0.8, 0.8]));
+    s.materials.push(Material { name: "sheet".into(), diffuse: [0.0; 3], transmit: [0.5; 3], ..Material::default() });
+    // Light travels toward +x and down: the sheet's shadow is shifted 3 units to +x.
+    s.lights = vec![Light::Directional { dir: [1.0, -1.0, 0.0], color: [1.0; 3] }];
+    s.transparency = TransparencyMode::NonRefractive;
+    let img = image_of(&s);
+    let full = q8(0.8 * std::f64::consts::FRAC_1_SQRT_2);
+    let half = q8(0.4 * std::f64::consts::FRAC_1_SQRT_2);
+    // Find floor pixels seen without crossing the sheet (right half of the screen), and
+    // classify them by where the shadow must fall: x in (0, 3) is behind the sheet.
+    let view = links_core::image::SceneView::new(&img).unwrap();
+    let mut tracer = links_core::render::Tracer::<f64>::new(view);
+    let fl = (100.0f64 + 225.0).sqrt();
+    let fwd = [0.0, -10.0 / fl, -15.0 / fl];
+    // up = right x forward with right = +x.
+    let up = [0.0, -fwd[2], fwd[1]];
+    let (mut n_full, mut n_half) = (0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let ray = tracer.primary_ray(x, y);
+            let Some((_, surf)) = tracer.first_surface(&ray) else { continue };
+            // View -> world: p = eye + right x + up y + forward z.
+            let [vx, vy, vz] = surf.p.to_f64();
+            let (wx, wy) = (vx, 10.0 + up[1] * vy + fwd[1] * vz);
+            let wz = 5.0 + up[2] * vy + fwd[2] * vz;
+            if surf.material != 1 || wy.abs() > 1e-6 {
+                continue;
+            }
+            let px = pixel::<f64>(&img, x, y)[0] as i32;
+            if wx > 0.2 && wx < 2.8 && wz < -2.2 && wz > -29.0 {
+                assert!((px - half).abs() <= 1, "({x},{y}) wx={wx}: {px} vs half {half}");
+                n_half += 1;
+            } else if wx > 3.2 || wz > -1.8 {
+                assert!((px - full).abs() <= 1, "({x},{y}) wx={wx}: {px} vs full {full}");
+                n_full += 1;
+            }
+        }
+    }
+    assert!(n_half > 10 && n_full > 10, "half {n_half}, full {n_full}");
+}
