@@ -1,0 +1,161 @@
+//! Watertightness of the triangle test and re-intersection of spawned rays.
+
+use links_core::desc::*;
+use links_core::geom::{offset_ray_origin, Ray, Vec3};
+use links_core::image::{SceneView, Section};
+use links_core::num::Real;
+use links_core::render::Tracer;
+use links_tests::*;
+
+fn closed_mesh_image() -> Vec<u8> {
+    let mesh = icosphere(2, 3.0, [0.3, -0.2, -12.0]);
+    assert_eq!(mesh.faces.len(), 320);
+    image_of(&scene(8, 8, 40.0, vec![Shape::Mesh { mesh, material: 0, smooth: false }]))
+}
+
+/// Count the triangles a ray crosses (all of them, not just the nearest).
+fn crossings<T: Real>(view: &SceneView<'_>, ray: &Ray<T>) -> usize {
+    (0..view.count(Section::Triangles))
+        .filter(|&i| view.triangle::<T>(i).tri.intersect(ray, T::MAX).is_some())
+        .count()
+}
+
+fn edge_and_vertex_rays<T: Real>(n: usize, seed: u64) -> (usize, usize) {
+    let img = closed_mesh_image();
+    let view = SceneView::new(&img).unwrap();
+    let ntri = view.count(Section::Triangles);
+    let center = [0.3, -0.2, 12.0]; // view coordinates of the sphere centre
+    let mut rng = Rng(seed);
+    let mut tracer = Tracer::<T>::new(view);
+    let (mut edge_rays, mut vertex_rays) = (0, 0);
+    for k in 0..n {
+        let tri = view.triangle::<f64>((rng.next_u64() % ntri as u64) as u32).tri;
+        let a = (rng.next_u64() % 3) as usize;
+        let target = if k % 4 == 0 {
+            vertex_rays += 1;
+            tri.p[a]
+        } else {
+            edge_rays += 1;
+            let s = rng.f64();
+            tri.p[a] * (1.0 - s) + tri.p[(a + 1) % 3] * s
+        };
+        // Come in from outside, within ~60° of the outward direction.
+        let out = (target - Vec3::new(center[0], center[1], center[2])).normalize();
+        let jitter = Vec3::from_f32(rng.unit().map(|v| v as f32)) * 0.8;
+        let from = target + (out + jitter).normalize() * 7.0;
+        let o = Vec3::new(T::from_f64(from.x), T::from_f64(from.y), T::from_f64(from.z));
+        let t = Vec3::new(T::from_f64(target.x), T::from_f64(target.y), T::from_f64(target.z));
+        let ray = Ray::new(o, (t - o).normalize());
+        let c = crossings(&view, &ray);
+        assert_eq!(c, 2, "{} ray {k} at {target:?} crossed {c} triangles (must be 2: in and out)", T::NAME);
+        assert!(tracer.first_surface(&ray).is_some(), "{} ray {k}: crack", T::NAME);
+    }
+    (edge_rays, vertex_rays)
+}
+
+#[test]
+fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_f32() {
+    let (e, v) = edge_and_vertex_rays::<f32>(4000, 0x9e3779b97f4a7c15);
+    assert!(e > 2500 && v > 800);
+}
+
+#[test]
+fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_f64() {
+    edge_and_vertex_rays::<f64>(4000, 0x2545f4914f6cdd1d);
+}
+
+/// Convex test objects, each alone in a scene, with a size for distance checks.
+fn convex_shapes() -> Vec<(&'static str, Shape, Transform)> {
+    let rot = Transform { translate: [0.5, 0.2, -12.0], rotate_deg: [20.0, 35.0, -10.0], scale: [1.0; 3] };
+    vec![
+        ("sphere", Shape::Ellipsoid { center: [0.0; 3], radii: [2.5; 3], rotate_deg: [0.0; 3], cut: None, material: 0 }, rot.clone()),
+        (
+            "ellipsoid",
+            Shape::Ellipsoid { center: [0.0; 3], radii: [3.0, 1.0, 2.0], rotate_deg: [10.0, 0.0, 30.0], cut: None, material: 0 },
+            rot.clone(),
+        ),
+        (
+            "cut ellipsoid",
+            Shape::Ellipsoid {
+                center: [0.0; 3],
+                radii: [2.0, 3.0, 2.0],
+                rotate_deg: [0.0; 3],
+                cut: Some(CutPlane { normal: [0.0, 1.0, 0.0], offset: 1.0, capped: true }),
+                material: 0,
+            },
+            rot.clone(),
+        ),
+        ("box", Shape::Box { min: [-2.0, -1.0, -3.0], max: [2.0, 1.5, 1.0], material: 0 }, rot.clone()),
+        ("mesh", Shape::Mesh { mesh: icosphere(2, 2.5, [0.0; 3]), material: 0, smooth: true }, rot.clone()),
+        (
+            "blob",
+            Shape::Blobs {
+                balls: vec![Ball { center: [0.0; 3], radius: 4.0, strength: 1.0 }],
+                threshold: 0.5,
+                kernel: BlobKernel::Links,
+                material: 0,
+            },
+            rot,
+        ),
+    ]
+}
+
+fn respawned_rays_never_rehit<T: Real>(seed: u64) {
+    let mut rng = Rng(seed);
+    for (name, shape, transform) in convex_shapes() {
+        let mut s = scene(8, 8, 40.0, vec![]);
+        s.root.children = vec![Node::Cluster(Cluster { name: name.into(), transform, children: vec![Node::Shape(shape)] })];
+        let img = image_of(&s);
+        let view = SceneView::new(&img).unwrap();
+        let mut tracer = Tracer::<T>::new(view);
+        let center = Vec3::new(T::from_f64(0.5), T::from_f64(0.2), T::from_f64(12.0));
+        let (mut hits, mut outward, mut inward) = (0, 0, 0);
+        for k in 0..1500 {
+            let from = center + Vec3::from_f32(rng.unit().map(|v| v as f32)) * T::from_i32(20);
+            let aim = center + Vec3::from_f32(rng.unit().map(|v| v as f32 * 1.5));
+            let ray = Ray::new(from, (aim - from).normalize());
+            let Some((_, surf)) = tracer.first_surface(&ray) else { continue };
+            hits += 1;
+            // A random direction, sent to the outside and to the inside of the surface.
+            let mut d = Vec3::from_f32(rng.unit().map(|v| v as f32));
+            if d.dot(surf.ng).abs() < T::from_f32(1e-3) {
+                continue;
+            }
+            if d.dot(surf.ng) < T::ZERO {
+                d = -d;
+            }
+            let out = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, d), d);
+            let re = tracer.first_surface(&out);
+            assert!(re.is_none(), "{} {name} ray {k}: outward ray re-hit its surface at t = {:?}", T::NAME, re.map(|r| r.0));
+            outward += 1;
+            let inn = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, -d), -d);
+            match tracer.first_surface(&inn) {
+                Some((t, s2)) => {
+                    // A flat face (triangle, box side) can never be crossed twice; a curved
+                    // surface can, but only a chord away, never within rounding distance.
+                    let same_flat_face = s2.shape == surf.shape
+                        && matches!(name, "box" | "mesh")
+                        && (s2.ng - surf.ng).length() < T::from_f32(1e-4);
+                    assert!(
+                        !same_flat_face && t > T::from_f32(1e-4),
+                        "{} {name} ray {k}: inward ray hit its own surface at t = {t:?}",
+                        T::NAME
+                    );
+                }
+                None => panic!("{} {name} ray {k}: inward ray escaped a closed solid", T::NAME),
+            }
+            inward += 1;
+        }
+        assert!(hits > 300 && outward > 300 && inward > 300, "{name}: {hits} hits");
+    }
+}
+
+#[test]
+fn spawned_rays_never_hit_their_own_surface_f32() {
+    respawned_rays_never_rehit::<f32>(7);
+}
+
+#[test]
+fn spawned_rays_never_hit_their_own_surface_f64() {
+    respawned_rays_never_rehit::<f64>(11);
+}
