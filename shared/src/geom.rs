@@ -275,7 +275,7 @@ impl<T: Real> Aabb<T> {
     pub fn hit(&self, ray: &Ray<T>, inv: &RayInv<T>, t_max: T) -> bool {
         let mut t0 = T::ZERO;
         let mut t1 = t_max;
-        let widen = T::ONE + T::TWO * T::gamma(3);
+        let widen = T::ONE + T::TWO * T::err_gamma(3);
         let mut axis = 0;
         while axis < 3 {
             let o = ray.origin[axis];
@@ -285,7 +285,7 @@ impl<T: Real> Aabb<T> {
             if tn > tf {
                 core::mem::swap(&mut tn, &mut tf);
             }
-            tf = tf * widen;
+            tf *= widen;
             // `x > t0` is false for NaN, so NaN leaves the interval unchanged.
             if tn > t0 {
                 t0 = tn;

@@ -362,7 +362,7 @@ impl<'a> SceneView<'a> {
             if count > 0 && ((off as u64) < HEADER_SIZE as u64 || off as u64 + size > total as u64) {
                 return Err(ImageError::SectionOutOfBounds { section: i as u8 });
             }
-            if off % 4 != 0 {
+            if !off.is_multiple_of(4) {
                 return Err(ImageError::Misaligned { section: i as u8 });
             }
             table[i] = (off, count);

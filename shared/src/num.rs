@@ -94,7 +94,7 @@ pub trait Real:
     }
     /// pbrt's gamma(n) = n*eps / (1 - n*eps): the bound on relative error after n roundings.
     #[inline]
-    fn gamma(n: i32) -> Self {
+    fn err_gamma(n: i32) -> Self {
         let ne = Self::from_i32(n) * Self::epsilon();
         ne / (Self::ONE - ne)
     }
@@ -193,7 +193,7 @@ mod tests {
 
     #[test]
     fn gamma_matches_pbrt() {
-        let g = f32::gamma(3);
+        let g = f32::err_gamma(3);
         let e = f32::EPSILON as f64 * 0.5;
         assert!((g as f64 - 3.0 * e / (1.0 - 3.0 * e)).abs() < 1e-12);
     }

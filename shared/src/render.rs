@@ -304,7 +304,7 @@ impl<'a, T: Real> Tracer<'a, T> {
                 };
                 let p = ray.at(hit.t);
                 let n = (-group.gradient(p)).normalize();
-                let p_error = ray.dir.abs() * t_error + p.abs() * T::gamma(4);
+                let p_error = ray.dir.abs() * t_error + p.abs() * T::err_gamma(4);
                 Surface { p, p_error, ng: n, ns: n, uv: [T::ZERO, T::ZERO], material: g.material, shape }
             }
         }

@@ -47,7 +47,7 @@ impl<T: Real> BoxShape<T> {
                     core::mem::swap(&mut tn, &mut tf);
                     core::mem::swap(&mut fnear, &mut ffar);
                 }
-                let err = T::gamma(4) * (oi.abs() + T::ONE) * inv.abs();
+                let err = T::err_gamma(4) * (oi.abs() + T::ONE) * inv.abs();
                 if tn > t0 {
                     t0 = tn;
                     f0 = fnear;
@@ -99,7 +99,7 @@ impl<T: Real> BoxShape<T> {
             }
         }
         let p = self.center + self.l.mul_vec(q);
-        let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::gamma(6)
+        let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
             + storage_error(&self.m, &self.l, q, storage_eps);
         let n = self.m.mul_transpose_vec(n_local).normalize();
         LocalSurface { p, p_error, n, local: q }

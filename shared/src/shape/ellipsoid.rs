@@ -80,7 +80,7 @@ impl<T: Real> Ellipsoid<T> {
         }
         // Rounding bound of a root: the origin's distance to the surface is known to about
         // gamma(7)(|o|² + 1) in unit-frame units; dividing by the speed |d| gives t.
-        let t_err = T::gamma(7) * (o.length_sq() + T::ONE) / a.sqrt();
+        let t_err = T::err_gamma(7) * (o.length_sq() + T::ONE) / a.sqrt();
         let valid = |t: T| t > t_err && t < t_max;
 
         match self.cut {
@@ -129,7 +129,7 @@ impl<T: Real> Ellipsoid<T> {
                     return None;
                 }
                 // The plane root's error bound, in the same unit-frame terms.
-                let tp_err = T::gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon());
+                let tp_err = T::err_gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon());
                 let valid_part = |t: T, part: EllipsoidPart| {
                     let e = if part == EllipsoidPart::Cap { tp_err.max(t_err) } else { t_err };
                     t > e && t < t_max
@@ -167,7 +167,7 @@ impl<T: Real> Ellipsoid<T> {
         };
         let lq = self.l.mul_vec(q);
         let p = self.center + lq;
-        let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::gamma(6)
+        let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
             + storage_error(&self.m, &self.l, q, storage_eps);
         let n = self.m.mul_transpose_vec(n_local).normalize();
         LocalSurface { p, p_error, n, local: q }

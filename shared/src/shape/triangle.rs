@@ -99,16 +99,16 @@ impl<T: Real> Triangle<T> {
 
         // Conservative t > 0: reject hits within the rounding error of t (pbrt 6.5.5).
         let max_zt = p0.z.abs().max(p1.z.abs()).max(p2.z.abs());
-        let delta_z = T::gamma(3) * max_zt;
+        let delta_z = T::err_gamma(3) * max_zt;
         let max_xt = p0.x.abs().max(p1.x.abs()).max(p2.x.abs());
         let max_yt = p0.y.abs().max(p1.y.abs()).max(p2.y.abs());
-        let delta_x = T::gamma(5) * (max_xt + max_zt);
-        let delta_y = T::gamma(5) * (max_yt + max_zt);
+        let delta_x = T::err_gamma(5) * (max_xt + max_zt);
+        let delta_y = T::err_gamma(5) * (max_yt + max_zt);
         let delta_e =
-            T::TWO * (T::gamma(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
+            T::TWO * (T::err_gamma(2) * max_xt * max_yt + delta_y * max_xt + delta_x * max_yt);
         let max_e = e0.abs().max(e1.abs()).max(e2.abs());
         let delta_t = T::from_i32(3)
-            * (T::gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
+            * (T::err_gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
             * inv_det.abs();
         if t <= delta_t {
             return None;
@@ -123,7 +123,7 @@ impl<T: Real> Triangle<T> {
     pub fn point(&self, b: [T; 3]) -> (Vec3<T>, Vec3<T>) {
         let p = self.p[0] * b[0] + self.p[1] * b[1] + self.p[2] * b[2];
         let err = ((self.p[0] * b[0]).abs() + (self.p[1] * b[1]).abs() + (self.p[2] * b[2]).abs())
-            * T::gamma(7);
+            * T::err_gamma(7);
         (p, err)
     }
 }
