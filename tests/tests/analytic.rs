@@ -211,3 +211,66 @@ fn shadow_behind_a_half_transmitting_sheet_is_lit_at_half() {
     }
     assert!(n_half > 10 && n_full > 10, "half {n_half}, full {n_full}");
 }
+
+/// LINKS-1's density kernel, written out independently of the renderer.
+fn links_kernel(r: f64, d: f64, b: f64) -> f64 {
+    if r <= d / 3.0 {
+        b * (1.0 - 3.0 * r * r / (d * d))
+    } else if r <= d {
+        1.5 * b * (1.0 - r / d).powi(2)
+    } else {
+        0.0
+    }
+}
+
+#[test]
+fn metaball_surface_points_satisfy_the_iso_equation() {
+    // Three balls in view space (world z negated); every hit pixel's point must satisfy
+    // sum f = T to within the root finder's stated tolerance: |F - T| <= L * tol with
+    // L = sum 2b/d and tol ~ 1.2e-4 d (f32) -- we allow 1e-3 absolute in f32, 1e-8 in f64.
+    let balls = [([-1.2, 0.0, -10.0], 2.5, 1.0), ([1.0, 0.4, -10.5], 2.0, 1.0), ([0.0, -1.5, -9.5], 1.8, 0.8)];
+    let mut s = scene(48, 40, 40.0, vec![Shape::Blobs {
+        balls: balls.iter().map(|&(c, d, b)| Ball { center: c, radius: d, strength: b }).collect(),
+        threshold: 0.4,
+        kernel: BlobKernel::Links,
+        material: 0,
+    }]);
+    s.ambient = [1.0; 3];
+    let img = image_of(&s);
+    let view = links_core::image::SceneView::new(&img).unwrap();
+    // The balls as the image stores them (f32), so only the root finder's error is measured.
+    let stored: Vec<([f64; 3], f64, f64)> = (0..3)
+        .map(|i| {
+            let b = view.ball::<f64>(i);
+            (b.center.to_f64(), b.radius, b.strength)
+        })
+        .collect();
+    let field = |p: [f64; 3]| -> f64 {
+        stored
+            .iter()
+            .map(|&(c, d, b)| {
+                let v = [p[0] - c[0], p[1] - c[1], p[2] - c[2]];
+                links_kernel(dot(v, v).sqrt(), d, b)
+            })
+            .sum()
+    };
+    let mut t64 = links_core::render::Tracer::<f64>::new(view);
+    let mut t32 = links_core::render::Tracer::<f32>::new(view);
+    let (mut hits, mut worst64, mut worst32) = (0, 0.0f64, 0.0f64);
+    for y in 0..40 {
+        for x in 0..48 {
+            let r = t64.primary_ray(x, y);
+            if let Some((_, s)) = t64.first_surface(&r) {
+                hits += 1;
+                worst64 = worst64.max((field(s.p.to_f64()) - 0.4).abs());
+            }
+            let r = t32.primary_ray(x, y);
+            if let Some((_, s)) = t32.first_surface(&r) {
+                worst32 = worst32.max((field(s.p.to_f64()) - 0.4).abs());
+            }
+        }
+    }
+    assert!(hits > 300, "the blob covers a good part of the frame ({hits} hits)");
+    assert!(worst64 <= 1e-8, "f64: |F - T| up to {worst64:e}");
+    assert!(worst32 <= 1e-3, "f32: |F - T| up to {worst32:e}");
+}

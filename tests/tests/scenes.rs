@@ -1,0 +1,89 @@
+//! Every bundled scene: loads, compiles, renders; golden images; f32 vs f64 agreement.
+//!
+//! Golden images live in `tests/golden/<scene>.png`, rendered in f64 at [`GOLDEN_W`] x
+//! [`GOLDEN_H`]. Tolerance: every channel within 2/255 of the golden value on at least
+//! 99.5% of pixels, and PSNR >= 45 dB (renders are deterministic on one platform; the slack
+//! covers libm and compiler differences elsewhere). Regenerate with
+//! `UPDATE_GOLDEN=1 cargo test -p links-tests --test scenes` after a deliberate change.
+
+use links_core::dm::{compile, CompileOptions};
+use links_host::frame::{decode_png_rgb, encode_png, psnr};
+use links_host::scene_file::load_scene;
+use links_tests::render_all;
+use std::path::{Path, PathBuf};
+
+const GOLDEN_W: u32 = 96;
+const GOLDEN_H: u32 = 90;
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn bundled_scenes() -> Vec<PathBuf> {
+    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("scenes"))
+        .expect("scenes/ exists")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "ron"))
+        .collect();
+    v.sort();
+    v
+}
+
+fn small_image(path: &Path) -> Vec<u8> {
+    let desc = load_scene(path).unwrap_or_else(|e| panic!("{e}"));
+    let opts = CompileOptions { width: Some(GOLDEN_W), height: Some(GOLDEN_H), ..Default::default() };
+    compile(&desc, &opts).unwrap_or_else(|e| panic!("{}: {e}", path.display())).bytes
+}
+
+#[test]
+fn the_bundled_scene_set_is_complete() {
+    let names: Vec<String> =
+        bundled_scenes().iter().map(|p| p.file_stem().unwrap().to_string_lossy().into_owned()).collect();
+    for required in ["photo1", "photo2", "metaballs", "glass", "ellipsoids", "reflections"] {
+        assert!(names.iter().any(|n| n == required), "scenes/{required}.ron missing (have {names:?})");
+    }
+}
+
+#[test]
+fn golden_images_match() {
+    let update = std::env::var_os("UPDATE_GOLDEN").is_some();
+    let dir = root().join("tests/golden");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut failures = Vec::new();
+    for scene in bundled_scenes() {
+        let name = scene.file_stem().unwrap().to_string_lossy().into_owned();
+        let rgb = render_all::<f64>(&small_image(&scene));
+        let golden = dir.join(format!("{name}.png"));
+        if update {
+            std::fs::write(&golden, encode_png(GOLDEN_W, GOLDEN_H, &rgb).unwrap()).unwrap();
+            continue;
+        }
+        let bytes = std::fs::read(&golden)
+            .unwrap_or_else(|_| panic!("{} missing: run with UPDATE_GOLDEN=1", golden.display()));
+        let (w, h, want) = decode_png_rgb(&bytes).unwrap();
+        assert_eq!((w, h), (GOLDEN_W, GOLDEN_H), "{name}: golden size");
+        let off = rgb.chunks(3).zip(want.chunks(3)).filter(|(a, b)| a.iter().zip(*b).any(|(x, y)| x.abs_diff(*y) > 2)).count();
+        let frac = off as f64 / (w * h) as f64;
+        let p = psnr(&rgb, &want);
+        println!("{name:<12} golden: {:.2}% pixels off by > 2/255, PSNR {p:.1} dB", frac * 100.0);
+        if frac > 0.005 || p < 45.0 {
+            failures.push(format!("{name}: {:.2}% pixels off, PSNR {p:.1} dB", frac * 100.0));
+        }
+    }
+    assert!(failures.is_empty(), "golden mismatches: {failures:?}");
+}
+
+#[test]
+fn f32_and_f64_renders_agree_to_50_db() {
+    println!("{:<12} {:>10} {:>14}", "scene", "PSNR (dB)", "max channel Δ");
+    for scene in bundled_scenes() {
+        let name = scene.file_stem().unwrap().to_string_lossy().into_owned();
+        let img = small_image(&scene);
+        let a = render_all::<f64>(&img);
+        let b = render_all::<f32>(&img);
+        let p = psnr(&a, &b);
+        let max = a.iter().zip(&b).map(|(x, y)| x.abs_diff(*y)).max().unwrap_or(0);
+        println!("{name:<12} {p:>10.1} {max:>14}");
+        assert!(p >= 50.0, "{name}: f32 vs f64 PSNR {p:.1} dB < 50 dB");
+    }
+}
