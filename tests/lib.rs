@@ -8,14 +8,25 @@ use links_core::render::{render_run, Rgb8, Tracer};
 
 /// A material with only the given diffuse colour.
 pub fn matte(name: &str, diffuse: [f32; 3]) -> Material {
-    Material { name: name.into(), diffuse, specular: 0.0, specular_edge: 0.0, ..Material::default() }
+    Material {
+        name: name.into(),
+        diffuse,
+        specular: 0.0,
+        specular_edge: 0.0,
+        ..Material::default()
+    }
 }
 
 /// A scene whose camera sits at the world origin looking down -Z with Y up, so view
 /// coordinates are world (x, y, -z).
 pub fn scene(width: u32, height: u32, fov_y_deg: f64, shapes: Vec<Shape>) -> SceneDesc {
     SceneDesc {
-        camera: Camera { eye: [0.0; 3], look_at: [0.0, 0.0, -1.0], up: [0.0, 1.0, 0.0], fov_y_deg },
+        camera: Camera {
+            eye: [0.0; 3],
+            look_at: [0.0, 0.0, -1.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg,
+        },
         width,
         height,
         background: [0.0; 3],
@@ -34,7 +45,9 @@ pub fn scene(width: u32, height: u32, fov_y_deg: f64, shapes: Vec<Shape>) -> Sce
 }
 
 pub fn image_of(desc: &SceneDesc) -> Vec<u8> {
-    compile(desc, &CompileOptions::default()).expect("scene compiles").bytes
+    compile(desc, &CompileOptions::default())
+        .expect("scene compiles")
+        .bytes
 }
 
 /// Render one pixel of a compiled scene.
@@ -82,7 +95,11 @@ impl Rng {
     /// Uniform direction on the unit sphere.
     pub fn unit(&mut self) -> [f64; 3] {
         loop {
-            let v = [self.range(-1.0, 1.0), self.range(-1.0, 1.0), self.range(-1.0, 1.0)];
+            let v = [
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+                self.range(-1.0, 1.0),
+            ];
             let l2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
             if l2 > 1e-4 && l2 <= 1.0 {
                 let l = l2.sqrt();
@@ -110,10 +127,26 @@ pub fn icosphere(subdivisions: u32, radius: f64, center: [f64; 3]) -> Mesh {
         [-t, 0.0, 1.0],
     ];
     let mut faces: Vec<[u32; 3]> = vec![
-        [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-        [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-        [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-        [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
     ];
     let norm = |p: [f64; 3]| {
         let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
@@ -143,12 +176,21 @@ pub fn icosphere(subdivisions: u32, radius: f64, center: [f64; 3]) -> Mesh {
     }
     Mesh {
         source: "icosphere".into(),
-        positions: pos.iter().map(|p| [0, 1, 2].map(|k| center[k] + radius * p[k])).collect(),
+        positions: pos
+            .iter()
+            .map(|p| [0, 1, 2].map(|k| center[k] + radius * p[k]))
+            .collect(),
         normals: vec![],
         uvs: vec![],
         faces: faces
             .iter()
-            .map(|f| f.map(|i| FaceVertex { position: i, normal: None, uv: None }))
+            .map(|f| {
+                f.map(|i| FaceVertex {
+                    position: i,
+                    normal: None,
+                    uv: None,
+                })
+            })
             .collect(),
     }
 }

@@ -83,7 +83,13 @@ pub fn render_frame(
         Precision::F64 => rows::<f64>(view, progress),
     });
     let f = view.frame::<f32>();
-    Ok(FrameImage { width: f.width, height: f.height, rgb, stats, elapsed: start.elapsed() })
+    Ok(FrameImage {
+        width: f.width,
+        height: f.height,
+        rgb,
+        stats,
+        elapsed: start.elapsed(),
+    })
 }
 
 fn rows<T: Real>(view: SceneView<'_>, progress: &(dyn Fn() + Sync)) -> (Vec<u8>, Stats) {
@@ -134,7 +140,10 @@ pub fn decode_png_rgb(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
     let mut buf = vec![0; reader.output_buffer_size().ok_or("PNG too large")?];
     let info = reader.next_frame(&mut buf).map_err(|e| e.to_string())?;
     if info.color_type != png::ColorType::Rgb || info.bit_depth != png::BitDepth::Eight {
-        return Err(format!("expected 8-bit RGB, found {:?} {:?}", info.color_type, info.bit_depth));
+        return Err(format!(
+            "expected 8-bit RGB, found {:?} {:?}",
+            info.color_type, info.bit_depth
+        ));
     }
     buf.truncate(info.buffer_size());
     Ok((info.width, info.height, buf))
@@ -143,7 +152,11 @@ pub fn decode_png_rgb(bytes: &[u8]) -> Result<(u32, u32, Vec<u8>), String> {
 /// Peak signal-to-noise ratio of two RGB8 images in dB (infinite when identical).
 pub fn psnr(a: &[u8], b: &[u8]) -> f64 {
     assert_eq!(a.len(), b.len(), "images differ in size");
-    let se: f64 = a.iter().zip(b).map(|(x, y)| (*x as f64 - *y as f64).powi(2)).sum();
+    let se: f64 = a
+        .iter()
+        .zip(b)
+        .map(|(x, y)| (*x as f64 - *y as f64).powi(2))
+        .sum();
     if se == 0.0 {
         return f64::INFINITY;
     }

@@ -4,7 +4,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use links_core::desc::TransparencyMode;
 use links_core::dm::{compile, CompileOptions};
-use links_core::image::{Section, SceneView};
+use links_core::image::{SceneView, Section};
 use links_host::frame::{encode_png, render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::io::IsTerminal;
@@ -12,7 +12,11 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Parser)]
-#[command(name = "links", version, about = "LINKS-1 ray tracer: render scenes, inspect scene images")]
+#[command(
+    name = "links",
+    version,
+    about = "LINKS-1 ray tracer: render scenes, inspect scene images"
+)]
 struct Cli {
     #[command(subcommand)]
     cmd: Cmd,
@@ -101,17 +105,28 @@ fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
-        Cmd::Render { scene, output, threads, precision, quiet } => {
+        Cmd::Render {
+            scene,
+            output,
+            threads,
+            precision,
+            quiet,
+        } => {
             let image = compile_scene(&scene)?;
             let view = SceneView::new(&image).map_err(|e| e.to_string())?;
             let f = view.frame::<f32>();
             let bar = if quiet || !std::io::stderr().is_terminal() {
                 ProgressBar::hidden()
             } else {
-                let b = ProgressBar::with_draw_target(Some(f.height as u64), ProgressDrawTarget::stderr());
+                let b = ProgressBar::with_draw_target(
+                    Some(f.height as u64),
+                    ProgressDrawTarget::stderr(),
+                );
                 b.set_style(
-                    ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} rows, {elapsed} (eta {eta})")
-                        .map_err(|e| e.to_string())?,
+                    ProgressStyle::with_template(
+                        "{spinner} {bar:40} {pos}/{len} rows, {elapsed} (eta {eta})",
+                    )
+                    .map_err(|e| e.to_string())?,
                 );
                 b
             };
@@ -119,9 +134,11 @@ fn run(cli: Cli) -> Result<(), String> {
                 PrecisionArg::F32 => Precision::F32,
                 PrecisionArg::F64 => Precision::F64,
             };
-            let frame = render_frame(&image, precision, threads, &|| bar.inc(1)).map_err(|e| e.to_string())?;
+            let frame = render_frame(&image, precision, threads, &|| bar.inc(1))
+                .map_err(|e| e.to_string())?;
             bar.finish_and_clear();
-            let png = encode_png(frame.width, frame.height, &frame.rgb).map_err(|e| e.to_string())?;
+            let png =
+                encode_png(frame.width, frame.height, &frame.rgb).map_err(|e| e.to_string())?;
             std::fs::write(&output, png).map_err(|e| format!("{}: {e}", output.display()))?;
             if !quiet {
                 let s = &frame.stats;
@@ -155,11 +172,22 @@ fn run(cli: Cli) -> Result<(), String> {
             let bytes = compile_scene(&scene)?;
             let view = SceneView::new(&bytes).map_err(|e| e.to_string())?;
             let f = view.frame::<f32>();
-            println!("{}: SceneImage {} bytes ({}x{})", scene.scene.display(), bytes.len(), f.width, f.height);
+            println!(
+                "{}: SceneImage {} bytes ({}x{})",
+                scene.scene.display(),
+                bytes.len(),
+                f.width,
+                f.height
+            );
             println!("  {:<12} {:>8} {:>10}", "section", "records", "bytes");
             for s in Section::ALL {
                 if view.count(s) > 0 {
-                    println!("  {:<12} {:>8} {:>10}", s.name(), view.count(s), view.section_bytes(s));
+                    println!(
+                        "  {:<12} {:>8} {:>10}",
+                        s.name(),
+                        view.count(s),
+                        view.section_bytes(s)
+                    );
                 }
             }
             if let Some(path) = image {
@@ -169,7 +197,8 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Cmd::GenAssets { dir } => {
             std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-            let written = links_host::gen::write_bundled_assets(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+            let written = links_host::gen::write_bundled_assets(&dir)
+                .map_err(|e| format!("{}: {e}", dir.display()))?;
             for p in written {
                 println!("wrote {}", p.display());
             }

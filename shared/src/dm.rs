@@ -38,14 +38,25 @@ pub enum DmError {
     /// The eye, look-at and up vectors do not define a view.
     DegenerateCamera(String),
     /// A transform collapses space (zero scale) or is not finite.
-    DegenerateTransform { cluster: String },
+    DegenerateTransform {
+        cluster: String,
+    },
     /// A shape becomes degenerate in view coordinates (after f32 rounding).
-    DegenerateShape { cluster: String, what: String },
+    DegenerateShape {
+        cluster: String,
+        what: String,
+    },
     /// Density spheres can only be moved, rotated and scaled uniformly.
-    NonUniformBlobScale { cluster: String },
-    BadIndex { what: String },
+    NonUniformBlobScale {
+        cluster: String,
+    },
+    BadIndex {
+        what: String,
+    },
     BadSetting(String),
-    TooLarge { what: String },
+    TooLarge {
+        what: String,
+    },
 }
 
 impl fmt::Display for DmError {
@@ -53,10 +64,16 @@ impl fmt::Display for DmError {
         match self {
             DmError::DegenerateCamera(s) => write!(f, "camera: {s}"),
             DmError::DegenerateTransform { cluster } => {
-                write!(f, "cluster '{cluster}': transform is degenerate (zero scale or not finite)")
+                write!(
+                    f,
+                    "cluster '{cluster}': transform is degenerate (zero scale or not finite)"
+                )
             }
             DmError::DegenerateShape { cluster, what } => {
-                write!(f, "cluster '{cluster}': {what} is degenerate in view coordinates")
+                write!(
+                    f,
+                    "cluster '{cluster}': {what} is degenerate in view coordinates"
+                )
             }
             DmError::NonUniformBlobScale { cluster } => write!(
                 f,
@@ -96,7 +113,8 @@ fn transpose(x: &M3) -> M3 {
     [0, 1, 2].map(|i| [x[0][i], x[1][i], x[2][i]])
 }
 fn det(m: &M3) -> f64 {
-    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 fn inverse(m: &M3) -> Option<M3> {
@@ -105,7 +123,8 @@ fn inverse(m: &M3) -> Option<M3> {
     if !d.is_finite() || d.abs() <= 1e-12 * scale * scale * scale || scale == 0.0 {
         return None;
     }
-    let c = |r0: usize, c0: usize, r1: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
+    let c =
+        |r0: usize, c0: usize, r1: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
     let adj = [
         [c(1, 1, 2, 2), -c(0, 1, 2, 2), c(0, 1, 1, 2)],
         [-c(1, 0, 2, 2), c(0, 0, 2, 2), -c(0, 0, 1, 2)],
@@ -123,7 +142,11 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 fn normalize(a: [f64; 3]) -> Option<[f64; 3]> {
     let l = dot(a, a).sqrt();
@@ -136,25 +159,47 @@ fn diag(s: [f64; 3]) -> M3 {
 /// Rz · Ry · Rx for angles in degrees.
 fn rotation(deg: [f64; 3]) -> M3 {
     let [x, y, z] = deg.map(f64::to_radians);
-    let rx = [[1.0, 0.0, 0.0], [0.0, x.cos(), -x.sin()], [0.0, x.sin(), x.cos()]];
-    let ry = [[y.cos(), 0.0, y.sin()], [0.0, 1.0, 0.0], [-y.sin(), 0.0, y.cos()]];
-    let rz = [[z.cos(), -z.sin(), 0.0], [z.sin(), z.cos(), 0.0], [0.0, 0.0, 1.0]];
+    let rx = [
+        [1.0, 0.0, 0.0],
+        [0.0, x.cos(), -x.sin()],
+        [0.0, x.sin(), x.cos()],
+    ];
+    let ry = [
+        [y.cos(), 0.0, y.sin()],
+        [0.0, 1.0, 0.0],
+        [-y.sin(), 0.0, y.cos()],
+    ];
+    let rz = [
+        [z.cos(), -z.sin(), 0.0],
+        [z.sin(), z.cos(), 0.0],
+        [0.0, 0.0, 1.0],
+    ];
     mat_mul(&rz, &mat_mul(&ry, &rx))
 }
 
 impl Affine {
     fn from_trs(t: [f64; 3], rot_deg: [f64; 3], s: [f64; 3]) -> Self {
-        Self { a: mat_mul(&rotation(rot_deg), &diag(s)), t }
+        Self {
+            a: mat_mul(&rotation(rot_deg), &diag(s)),
+            t,
+        }
     }
     /// `self ∘ o` (apply `o` first).
     fn then(&self, o: &Affine) -> Affine {
-        Affine { a: mat_mul(&self.a, &o.a), t: add(mat_vec(&self.a, o.t), self.t) }
+        Affine {
+            a: mat_mul(&self.a, &o.a),
+            t: add(mat_vec(&self.a, o.t), self.t),
+        }
     }
     fn point(&self, p: [f64; 3]) -> [f64; 3] {
         add(mat_vec(&self.a, p), self.t)
     }
     fn is_finite(&self) -> bool {
-        self.a.iter().flatten().chain(self.t.iter()).all(|v| v.is_finite())
+        self.a
+            .iter()
+            .flatten()
+            .chain(self.t.iter())
+            .all(|v| v.is_finite())
     }
 }
 
@@ -162,7 +207,10 @@ fn f32s(v: [f64; 3]) -> [f32; 3] {
     v.map(|x| x as f32)
 }
 fn mat_f32(m: &M3) -> [f32; 9] {
-    [m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2]].map(|v| v as f32)
+    [
+        m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+    ]
+    .map(|v| v as f32)
 }
 
 /// An f32 box that contains an f64 box.
@@ -174,7 +222,10 @@ struct Bounds {
 
 impl Bounds {
     fn empty() -> Self {
-        Self { min: [f32::MAX; 3], max: [f32::MIN; 3] }
+        Self {
+            min: [f32::MAX; 3],
+            max: [f32::MIN; 3],
+        }
     }
     fn from_f64(min: [f64; 3], max: [f64; 3]) -> Self {
         let lo = min.map(|v| (v as f32).next_down());
@@ -241,9 +292,15 @@ impl TriData {
 
 /// Compile a scene for one frame.
 pub fn compile(desc: &SceneDesc, opts: &CompileOptions) -> Result<Compiled, DmError> {
-    let mut dm = Dm { desc, w: ImageWriter::new(), opts };
+    let mut dm = Dm {
+        desc,
+        w: ImageWriter::new(),
+        opts,
+    };
     dm.run()?;
-    Ok(Compiled { bytes: dm.w.finish() })
+    Ok(Compiled {
+        bytes: dm.w.finish(),
+    })
 }
 
 impl Dm<'_> {
@@ -252,7 +309,9 @@ impl Dm<'_> {
         let width = self.opts.width.unwrap_or(d.width);
         let height = self.opts.height.unwrap_or(d.height);
         if width == 0 || height == 0 || width > 65535 || height > 65535 {
-            return Err(DmError::BadSetting(format!("image size {width}x{height} out of range 1..65535")));
+            return Err(DmError::BadSetting(format!(
+                "image size {width}x{height} out of range 1..65535"
+            )));
         }
         let max_depth = self.opts.max_depth.unwrap_or(d.max_depth);
         if max_depth > MAX_DEPTH_LIMIT {
@@ -266,13 +325,20 @@ impl Dm<'_> {
         let cam = &d.camera;
         let fwd = normalize(sub(cam.look_at, cam.eye))
             .ok_or_else(|| DmError::DegenerateCamera("eye and look_at coincide".into()))?;
-        let right = normalize(cross(fwd, cam.up))
-            .ok_or_else(|| DmError::DegenerateCamera("up is parallel to the view direction".into()))?;
+        let right = normalize(cross(fwd, cam.up)).ok_or_else(|| {
+            DmError::DegenerateCamera("up is parallel to the view direction".into())
+        })?;
         let up = cross(right, fwd);
         let rot = [right, up, fwd];
-        let view = Affine { a: rot, t: mat_vec(&rot, cam.eye).map(|v| -v) };
+        let view = Affine {
+            a: rot,
+            t: mat_vec(&rot, cam.eye).map(|v| -v),
+        };
         if !(cam.fov_y_deg > 0.0 && cam.fov_y_deg < 180.0) {
-            return Err(DmError::DegenerateCamera(format!("fov_y {} not in (0, 180)", cam.fov_y_deg)));
+            return Err(DmError::DegenerateCamera(format!(
+                "fov_y {} not in (0, 180)",
+                cam.fov_y_deg
+            )));
         }
 
         // Frame record: pixel centres on the z = 1 plane.
@@ -294,10 +360,17 @@ impl Dm<'_> {
 
         for (i, t) in d.textures.iter().enumerate() {
             if t.width == 0 || t.height == 0 || t.rgb.len() != (t.width * t.height * 3) as usize {
-                return Err(DmError::BadIndex { what: format!("texture {i} ('{}') has a bad size", t.name) });
+                return Err(DmError::BadIndex {
+                    what: format!("texture {i} ('{}') has a bad size", t.name),
+                });
             }
             let off = self.w.push_texels(&t.rgb);
-            self.w.push(Section::Textures).1.u(t.width).u(t.height).u(off);
+            self.w
+                .push(Section::Textures)
+                .1
+                .u(t.width)
+                .u(t.height)
+                .u(off);
         }
         // The texel section must keep later sections aligned: the writer pads.
         for m in &d.materials {
@@ -308,7 +381,9 @@ impl Dm<'_> {
         }
         self.cluster(&d.root, &view, d.root.name.as_str())?;
         if self.w.count(Section::Nodes) >= (1 << ShapeRef::INDEX_BITS) {
-            return Err(DmError::TooLarge { what: "too many nodes".into() });
+            return Err(DmError::TooLarge {
+                what: "too many nodes".into(),
+            });
         }
         Ok(())
     }
@@ -329,7 +404,13 @@ impl Dm<'_> {
             .push(Section::Materials)
             .1
             .fs(&m.diffuse)
-            .fs(&[m.specular, m.specular_edge, m.shininess, m.reflect, m.reflect_edge])
+            .fs(&[
+                m.specular,
+                m.specular_edge,
+                m.shininess,
+                m.reflect,
+                m.reflect_edge,
+            ])
             .fs(&m.transmit)
             .f(m.ior)
             .u(tex)
@@ -340,12 +421,35 @@ impl Dm<'_> {
 
     fn light(&mut self, l: &Light, view: &Affine) -> Result<(), DmError> {
         let dir_of = |d: [f64; 3]| {
-            normalize(mat_vec(&view.a, d)).ok_or_else(|| DmError::BadSetting("light direction is zero".into()))
+            normalize(mat_vec(&view.a, d))
+                .ok_or_else(|| DmError::BadSetting("light direction is zero".into()))
         };
         let (kind, color, pos, dir, ci, co, e, fall) = match l {
-            Light::Directional { dir, color } => (0, color, [0.0; 3], dir_of(*dir)?, 1.0, 1.0, 0.0, false),
-            Light::Point { pos, color, falloff } => (1, color, view.point(*pos), [0.0; 3], 1.0, 1.0, 0.0, *falloff),
-            Light::Spot { pos, dir, color, inner_deg, outer_deg, exponent } => (
+            Light::Directional { dir, color } => {
+                (0, color, [0.0; 3], dir_of(*dir)?, 1.0, 1.0, 0.0, false)
+            }
+            Light::Point {
+                pos,
+                color,
+                falloff,
+            } => (
+                1,
+                color,
+                view.point(*pos),
+                [0.0; 3],
+                1.0,
+                1.0,
+                0.0,
+                *falloff,
+            ),
+            Light::Spot {
+                pos,
+                dir,
+                color,
+                inner_deg,
+                outer_deg,
+                exponent,
+            } => (
                 2,
                 color,
                 view.point(*pos),
@@ -379,8 +483,10 @@ impl Dm<'_> {
         let skip = self.w.count(Section::Nodes);
         self.w.patch_u32(Section::Nodes, i, 24, skip);
         for k in 0..3 {
-            self.w.patch_u32(Section::Nodes, i, 4 * k, b.min[k].to_bits());
-            self.w.patch_u32(Section::Nodes, i, 12 + 4 * k, b.max[k].to_bits());
+            self.w
+                .patch_u32(Section::Nodes, i, 4 * k, b.min[k].to_bits());
+            self.w
+                .patch_u32(Section::Nodes, i, 12 + 4 * k, b.max[k].to_bits());
         }
     }
 
@@ -394,7 +500,9 @@ impl Dm<'_> {
         let local = Affine::from_trs(t.translate, t.rotate_deg, t.scale);
         let full = parent.then(&local);
         if !full.is_finite() || inverse(&full.a).is_none() {
-            return Err(DmError::DegenerateTransform { cluster: path.to_string() });
+            return Err(DmError::DegenerateTransform {
+                cluster: path.to_string(),
+            });
         }
         let node = self.open_node();
         let mut b = Bounds::empty();
@@ -416,17 +524,27 @@ impl Dm<'_> {
         if (m as usize) < self.desc.materials.len() {
             Ok(m)
         } else {
-            Err(DmError::BadIndex { what: format!("shape uses missing material {m}") })
+            Err(DmError::BadIndex {
+                what: format!("shape uses missing material {m}"),
+            })
         }
     }
 
     fn shape(&mut self, s: &Shape, full: &Affine, path: &str) -> Result<Bounds, DmError> {
-        let normal_m = transpose(&inverse(&full.a).ok_or_else(|| DmError::DegenerateTransform {
-            cluster: path.to_string(),
-        })?);
+        let normal_m =
+            transpose(
+                &inverse(&full.a).ok_or_else(|| DmError::DegenerateTransform {
+                    cluster: path.to_string(),
+                })?,
+            );
         let xn = |n: [f64; 3]| normalize(mat_vec(&normal_m, n)).map(f32s);
         match s {
-            Shape::Triangle { v, normals, uv, material } => {
+            Shape::Triangle {
+                v,
+                normals,
+                uv,
+                material,
+            } => {
                 let material = self.check_material(*material)?;
                 let p = v.map(|p| f32s(full.point(p)));
                 let n = match normals {
@@ -442,12 +560,21 @@ impl Dm<'_> {
                     }
                     None => None,
                 };
-                let mut tri = TriData { p, n, uv: uv.map(|u| u.map(|q| q.map(|x| x as f32))), material };
+                let mut tri = TriData {
+                    p,
+                    n,
+                    uv: uv.map(|u| u.map(|q| q.map(|x| x as f32))),
+                    material,
+                };
                 tri.keep_winding(full);
                 self.check_triangle(&tri, path)?;
                 Ok(self.triangles(vec![tri]))
             }
-            Shape::Mesh { mesh, material, smooth } => {
+            Shape::Mesh {
+                mesh,
+                material,
+                smooth,
+            } => {
                 let material = self.check_material(*material)?;
                 let tris = self.mesh_triangles(mesh, *smooth, material, full, &normal_m, path)?;
                 let node = self.open_node();
@@ -455,7 +582,13 @@ impl Dm<'_> {
                 self.close_node(node, b);
                 Ok(b)
             }
-            Shape::Ellipsoid { center, radii, rotate_deg, cut, material } => {
+            Shape::Ellipsoid {
+                center,
+                radii,
+                rotate_deg,
+                cut,
+                material,
+            } => {
                 let material = self.check_material(*material)?;
                 let obj = Affine::from_trs(*center, *rotate_deg, *radii);
                 let m = full.then(&obj);
@@ -465,7 +598,11 @@ impl Dm<'_> {
                 })?;
                 let (flags, cn, cd) = match cut {
                     Some(c) => {
-                        let sn = [c.normal[0] * radii[0], c.normal[1] * radii[1], c.normal[2] * radii[2]];
+                        let sn = [
+                            c.normal[0] * radii[0],
+                            c.normal[1] * radii[1],
+                            c.normal[2] * radii[2],
+                        ];
                         let len = dot(sn, sn).sqrt();
                         if len == 0.0 || !len.is_finite() {
                             return Err(DmError::DegenerateShape {
@@ -473,16 +610,32 @@ impl Dm<'_> {
                                 what: "an ellipsoid's cut plane".into(),
                             });
                         }
-                        (1 | (u32::from(c.capped) << 1), sn.map(|v| v / len), c.offset / len)
+                        (
+                            1 | (u32::from(c.capped) << 1),
+                            sn.map(|v| v / len),
+                            c.offset / len,
+                        )
                     }
                     None => (0, [0.0; 3], 0.0),
                 };
                 let (i, r) = self.w.push(Section::Ellipsoids);
-                r.fs(&f32s(m.t)).fs(&mat_f32(&inv)).fs(&mat_f32(&m.a)).u(material).u(flags).fs(&f32s(cn)).f(cd as f32);
+                r.fs(&f32s(m.t))
+                    .fs(&mat_f32(&inv))
+                    .fs(&mat_f32(&m.a))
+                    .u(material)
+                    .u(flags)
+                    .fs(&f32s(cn))
+                    .f(cd as f32);
                 // Half-extent of a transformed unit sphere along axis i: |row i of L|.
                 let half = [0, 1, 2].map(|k| dot(m.a[k], m.a[k]).sqrt());
                 let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
-                self.leaf(ShapeRef { kind: ShapeKind::Ellipsoid, index: i }, b);
+                self.leaf(
+                    ShapeRef {
+                        kind: ShapeKind::Ellipsoid,
+                        index: i,
+                    },
+                    b,
+                );
                 Ok(b)
             }
             Shape::Box { min, max, material } => {
@@ -495,24 +648,45 @@ impl Dm<'_> {
                     what: "a box".into(),
                 })?;
                 let (i, r) = self.w.push(Section::Boxes);
-                r.fs(&f32s(m.t)).fs(&mat_f32(&inv)).fs(&mat_f32(&m.a)).u(material);
+                r.fs(&f32s(m.t))
+                    .fs(&mat_f32(&inv))
+                    .fs(&mat_f32(&m.a))
+                    .u(material);
                 let half = [0, 1, 2].map(|k| m.a[k].iter().map(|v| v.abs()).sum::<f64>());
                 let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
-                self.leaf(ShapeRef { kind: ShapeKind::Box, index: i }, b);
+                self.leaf(
+                    ShapeRef {
+                        kind: ShapeKind::Box,
+                        index: i,
+                    },
+                    b,
+                );
                 Ok(b)
             }
-            Shape::Blobs { balls, threshold, kernel, material } => {
+            Shape::Blobs {
+                balls,
+                threshold,
+                kernel,
+                material,
+            } => {
                 let material = self.check_material(*material)?;
                 // Uniform scale s: columns of the linear part are orthogonal with equal length.
                 let ata = mat_mul(&transpose(&full.a), &full.a);
                 let s2 = ata[0][0];
                 let tol = 1e-9 * s2;
-                let uniform = (0..3).all(|i| (0..3).all(|j| (ata[i][j] - if i == j { s2 } else { 0.0 }).abs() <= tol));
+                let uniform = (0..3).all(|i| {
+                    (0..3).all(|j| (ata[i][j] - if i == j { s2 } else { 0.0 }).abs() <= tol)
+                });
                 if !uniform || s2 <= 0.0 {
-                    return Err(DmError::NonUniformBlobScale { cluster: path.to_string() });
+                    return Err(DmError::NonUniformBlobScale {
+                        cluster: path.to_string(),
+                    });
                 }
                 if balls.is_empty() {
-                    return Err(DmError::DegenerateShape { cluster: path.to_string(), what: "an empty blob group".into() });
+                    return Err(DmError::DegenerateShape {
+                        cluster: path.to_string(),
+                        what: "an empty blob group".into(),
+                    });
                 }
                 let s = s2.sqrt();
                 let first = self.w.count(Section::Balls);
@@ -521,7 +695,12 @@ impl Dm<'_> {
                 for ball in balls {
                     let c = full.point(ball.center);
                     let r = ball.radius * s;
-                    self.w.push(Section::Balls).1.fs(&f32s(c)).f(r as f32).f(ball.strength as f32);
+                    self.w
+                        .push(Section::Balls)
+                        .1
+                        .fs(&f32s(c))
+                        .f(r as f32)
+                        .f(ball.strength as f32);
                     if ball.strength > 0.0 {
                         for k in 0..3 {
                             lo[k] = lo[k].min(c[k] - r);
@@ -534,11 +713,25 @@ impl Dm<'_> {
                     desc::BlobKernel::Links => 0,
                     desc::BlobKernel::Wyvill => 1,
                 };
-                r.u(material).u(k).f(*threshold as f32).u(first).u(balls.len() as u32);
+                r.u(material)
+                    .u(k)
+                    .f(*threshold as f32)
+                    .u(first)
+                    .u(balls.len() as u32);
                 // Grow by a relative margin: the root finder may stop a tolerance outside.
                 let pad = [0, 1, 2].map(|k| 1e-4 * (hi[k] - lo[k]).abs());
-                let b = if lo[0] > hi[0] { Bounds::empty() } else { Bounds::from_f64(sub(lo, pad), add(hi, pad)) };
-                self.leaf(ShapeRef { kind: ShapeKind::Blob, index: i }, b);
+                let b = if lo[0] > hi[0] {
+                    Bounds::empty()
+                } else {
+                    Bounds::from_f64(sub(lo, pad), add(hi, pad))
+                };
+                self.leaf(
+                    ShapeRef {
+                        kind: ShapeKind::Blob,
+                        index: i,
+                    },
+                    b,
+                );
                 Ok(b)
             }
         }
@@ -548,7 +741,10 @@ impl Dm<'_> {
         let v = t.p.map(|p| p.map(f64::from));
         let area2 = cross(sub(v[1], v[0]), sub(v[2], v[0]));
         if dot(area2, area2) == 0.0 || !t.p.iter().flatten().all(|x| x.is_finite()) {
-            return Err(DmError::DegenerateShape { cluster: path.to_string(), what: "a triangle".into() });
+            return Err(DmError::DegenerateShape {
+                cluster: path.to_string(),
+                what: "a triangle".into(),
+            });
         }
         Ok(())
     }
@@ -562,13 +758,23 @@ impl Dm<'_> {
         normal_m: &M3,
         path: &str,
     ) -> Result<Vec<TriData>, DmError> {
-        let bad = |what: String| DmError::BadIndex { what: format!("mesh '{}': {what}", mesh.source) };
-        let pos = |i: u32| mesh.positions.get(i as usize).copied().ok_or_else(|| bad(format!("position {i} missing")));
+        let bad = |what: String| DmError::BadIndex {
+            what: format!("mesh '{}': {what}", mesh.source),
+        };
+        let pos = |i: u32| {
+            mesh.positions
+                .get(i as usize)
+                .copied()
+                .ok_or_else(|| bad(format!("position {i} missing")))
+        };
         // Area-weighted vertex normals for smooth meshes without their own.
         let computed: Option<Vec<[f64; 3]>> = (smooth && mesh.normals.is_empty()).then(|| {
             let mut acc = vec![[0.0; 3]; mesh.positions.len()];
             for f in &mesh.faces {
-                let p: Vec<[f64; 3]> = f.iter().filter_map(|v| mesh.positions.get(v.position as usize).copied()).collect();
+                let p: Vec<[f64; 3]> = f
+                    .iter()
+                    .filter_map(|v| mesh.positions.get(v.position as usize).copied())
+                    .collect();
                 if p.len() == 3 {
                     let n = cross(sub(p[1], p[0]), sub(p[2], p[0]));
                     for v in f {
@@ -592,9 +798,12 @@ impl Dm<'_> {
                 p[k] = f32s(full.point(pos(v.position)?));
                 let world_n = match (&computed, v.normal) {
                     (Some(c), _) => c.get(v.position as usize).copied(),
-                    (None, Some(ni)) => {
-                        Some(mesh.normals.get(ni as usize).copied().ok_or_else(|| bad(format!("normal {ni} missing")))?)
-                    }
+                    (None, Some(ni)) => Some(
+                        mesh.normals
+                            .get(ni as usize)
+                            .copied()
+                            .ok_or_else(|| bad(format!("normal {ni} missing")))?,
+                    ),
                     (None, None) => None,
                 };
                 match world_n.and_then(|wn| normalize(mat_vec(normal_m, wn))) {
@@ -603,15 +812,27 @@ impl Dm<'_> {
                 }
                 match v.uv {
                     Some(ti) => {
-                        let t = mesh.uvs.get(ti as usize).copied().ok_or_else(|| bad(format!("uv {ti} missing")))?;
+                        let t = mesh
+                            .uvs
+                            .get(ti as usize)
+                            .copied()
+                            .ok_or_else(|| bad(format!("uv {ti} missing")))?;
                         uv[k] = [t[0] as f32, t[1] as f32];
                     }
                     None => has_uv = false,
                 }
             }
-            let mut tri = TriData { p, n: has_n.then_some(n), uv: has_uv.then_some(uv), material };
+            let mut tri = TriData {
+                p,
+                n: has_n.then_some(n),
+                uv: has_uv.then_some(uv),
+                material,
+            };
             tri.keep_winding(full);
-            self.check_triangle(&tri, &format!("{path} (mesh '{}', face {})", mesh.source, fi + 1))?;
+            self.check_triangle(
+                &tri,
+                &format!("{path} (mesh '{}', face {})", mesh.source, fi + 1),
+            )?;
             out.push(tri);
         }
         Ok(out)
@@ -624,14 +845,28 @@ impl Dm<'_> {
             for t in tris {
                 let tb = t.bounds();
                 let idx = self.write_triangle(t);
-                self.leaf(ShapeRef { kind: ShapeKind::Triangle, index: idx }, tb);
+                self.leaf(
+                    ShapeRef {
+                        kind: ShapeKind::Triangle,
+                        index: idx,
+                    },
+                    tb,
+                );
                 b = b.union(tb);
             }
             return b;
         }
-        let all = tris.iter().fold(Bounds::empty(), |b, t| b.union(t.bounds()));
+        let all = tris
+            .iter()
+            .fold(Bounds::empty(), |b, t| b.union(t.bounds()));
         let ext = [0, 1, 2].map(|k| all.max[k] - all.min[k]);
-        let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] { 0 } else if ext[1] >= ext[2] { 1 } else { 2 };
+        let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
+            0
+        } else if ext[1] >= ext[2] {
+            1
+        } else {
+            2
+        };
         tris.sort_by(|a, b| a.centroid(axis).total_cmp(&b.centroid(axis)));
         let right = tris.split_off(tris.len() / 2);
         let mut b = Bounds::empty();
@@ -663,7 +898,12 @@ impl Dm<'_> {
             None => NONE,
         };
         let (i, r) = self.w.push(Section::Triangles);
-        r.fs(&t.p[0]).fs(&t.p[1]).fs(&t.p[2]).u(t.material).u(ni).u(ui);
+        r.fs(&t.p[0])
+            .fs(&t.p[1])
+            .fs(&t.p[2])
+            .u(t.material)
+            .u(ni)
+            .u(ui);
         i
     }
 }

@@ -306,7 +306,12 @@ impl<T: Real> Aabb<T> {
 /// OffsetRayOrigin): move along the geometric normal far enough that the rounding error of
 /// the hit point can't put the origin on the wrong side, to the side `dir` leaves through.
 #[inline]
-pub fn offset_ray_origin<T: Real>(p: Vec3<T>, p_error: Vec3<T>, n: Vec3<T>, dir: Vec3<T>) -> Vec3<T> {
+pub fn offset_ray_origin<T: Real>(
+    p: Vec3<T>,
+    p_error: Vec3<T>,
+    n: Vec3<T>,
+    dir: Vec3<T>,
+) -> Vec3<T> {
     let d = n.abs().dot(p_error);
     let mut offset = n * d;
     if dir.dot(n) < T::ZERO {
@@ -351,7 +356,10 @@ mod tests {
         let r = Ray::new(Vec3::new(0.0, 2.0, -5.0), Vec3::new(0.0, 0.0, 1.0));
         assert!(!b.hit(&r, &RayInv::new(r.dir), f64::MAX));
         let r = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::new(0.0, 0.0, 1.0));
-        assert!(!b.hit(&r, &RayInv::new(r.dir), f64::MAX), "box is behind the ray");
+        assert!(
+            !b.hit(&r, &RayInv::new(r.dir), f64::MAX),
+            "box is behind the ray"
+        );
     }
 
     #[test]

@@ -165,7 +165,10 @@ impl ShapeRef {
             3 => ShapeKind::Blob,
             _ => return None,
         };
-        Some(Self { kind, index: w & ((1 << Self::INDEX_BITS) - 1) })
+        Some(Self {
+            kind,
+            index: w & ((1 << Self::INDEX_BITS) - 1),
+        })
     }
 }
 
@@ -192,7 +195,10 @@ impl fmt::Display for ImageError {
             ImageError::TooShort { len } => write!(f, "scene image too short ({len} bytes)"),
             ImageError::BadMagic => write!(f, "not a scene image (bad magic)"),
             ImageError::UnsupportedVersion { found } => {
-                write!(f, "scene image version {found} not supported (expected {VERSION})")
+                write!(
+                    f,
+                    "scene image version {found} not supported (expected {VERSION})"
+                )
             }
             ImageError::UnsupportedFormat { found } => {
                 write!(f, "scene image number format {found} not supported")
@@ -208,10 +214,18 @@ impl fmt::Display for ImageError {
             }
             ImageError::MissingFrame => write!(f, "scene image has no frame record"),
             ImageError::BadReference { section, record } => {
-                write!(f, "{} record {record} refers to a missing record", name(section))
+                write!(
+                    f,
+                    "{} record {record} refers to a missing record",
+                    name(section)
+                )
             }
             ImageError::BadValue { section, record } => {
-                write!(f, "{} record {record} holds an invalid value", name(section))
+                write!(
+                    f,
+                    "{} record {record} holds an invalid value",
+                    name(section)
+                )
             }
         }
     }
@@ -338,7 +352,9 @@ impl<'a> SceneView<'a> {
     /// accessors below can never index out of range.
     pub fn new(bytes: &'a [u8]) -> Result<Self, ImageError> {
         if bytes.len() < HEADER_SIZE {
-            return Err(ImageError::TooShort { len: bytes.len() as u32 });
+            return Err(ImageError::TooShort {
+                len: bytes.len() as u32,
+            });
         }
         if bytes[0..4] != MAGIC {
             return Err(ImageError::BadMagic);
@@ -352,14 +368,18 @@ impl<'a> SceneView<'a> {
         }
         let total = rd_u32(bytes, 8);
         if total as usize != bytes.len() {
-            return Err(ImageError::LengthMismatch { header: total, actual: bytes.len() as u32 });
+            return Err(ImageError::LengthMismatch {
+                header: total,
+                actual: bytes.len() as u32,
+            });
         }
         let mut table = [(0u32, 0u32); SECTION_COUNT];
         for (i, s) in Section::ALL.iter().enumerate() {
             let off = rd_u32(bytes, 16 + 8 * i);
             let count = rd_u32(bytes, 20 + 8 * i);
             let size = (count as u64) * (s.record_size() as u64);
-            if count > 0 && ((off as u64) < HEADER_SIZE as u64 || off as u64 + size > total as u64) {
+            if count > 0 && ((off as u64) < HEADER_SIZE as u64 || off as u64 + size > total as u64)
+            {
                 return Err(ImageError::SectionOutOfBounds { section: i as u8 });
             }
             if !off.is_multiple_of(4) {
@@ -394,8 +414,14 @@ impl<'a> SceneView<'a> {
     }
 
     fn check_references(&self) -> Result<(), ImageError> {
-        let bad = |s: Section, i: u32| ImageError::BadReference { section: s as u8, record: i };
-        let badv = |s: Section, i: u32| ImageError::BadValue { section: s as u8, record: i };
+        let bad = |s: Section, i: u32| ImageError::BadReference {
+            section: s as u8,
+            record: i,
+        };
+        let badv = |s: Section, i: u32| ImageError::BadValue {
+            section: s as u8,
+            record: i,
+        };
         if self.count(Section::Frame) != 1 {
             return Err(ImageError::MissingFrame);
         }
@@ -421,7 +447,11 @@ impl<'a> SceneView<'a> {
         let ntexels = self.count(Section::Texels) as u64;
         for i in 0..ntex {
             let at = self.rec(Section::Textures, i);
-            let (w, h, off) = (self.u(at) as u64, self.u(at + 4) as u64, self.u(at + 8) as u64);
+            let (w, h, off) = (
+                self.u(at) as u64,
+                self.u(at + 4) as u64,
+                self.u(at + 8) as u64,
+            );
             if w == 0 || h == 0 || off + w * h * 3 > ntexels {
                 return Err(bad(Section::Textures, i));
             }
@@ -468,8 +498,12 @@ impl<'a> SceneView<'a> {
         let nballs = self.count(Section::Balls) as u64;
         for i in 0..self.count(Section::BlobGroups) {
             let at = self.rec(Section::BlobGroups, i);
-            let (m, k, first, count) =
-                (self.u(at), self.u(at + 4), self.u(at + 12) as u64, self.u(at + 16) as u64);
+            let (m, k, first, count) = (
+                self.u(at),
+                self.u(at + 4),
+                self.u(at + 12) as u64,
+                self.u(at + 16) as u64,
+            );
             if m >= nmat || k > 1 || count == 0 || first + count > nballs {
                 return Err(bad(Section::BlobGroups, i));
             }
@@ -495,7 +529,9 @@ impl<'a> SceneView<'a> {
     }
     #[inline]
     fn m3<T: Real>(&self, at: usize) -> Mat3<T> {
-        Mat3 { r: [self.v3(at), self.v3(at + 12), self.v3(at + 24)] }
+        Mat3 {
+            r: [self.v3(at), self.v3(at + 12), self.v3(at + 24)],
+        }
     }
 
     pub fn frame<T: Real>(&self) -> Frame<T> {
@@ -563,7 +599,11 @@ impl<'a> SceneView<'a> {
         let at = self.rec(Section::Textures, i);
         let (w, h, off) = (self.u(at), self.u(at + 4), self.u(at + 8) as usize);
         let base = self.table[Section::Texels as usize].0 as usize + off;
-        TextureView { width: w, height: h, rgb: &self.bytes[base..base + (w * h * 3) as usize] }
+        TextureView {
+            width: w,
+            height: h,
+            rgb: &self.bytes[base..base + (w * h * 3) as usize],
+        }
     }
 
     pub fn node_count(&self) -> u32 {
@@ -575,9 +615,16 @@ impl<'a> SceneView<'a> {
         let at = self.rec(Section::Nodes, i);
         let shape = self.u(at + 28);
         Node {
-            bounds: Aabb { min: self.v3(at), max: self.v3(at + 12) },
+            bounds: Aabb {
+                min: self.v3(at),
+                max: self.v3(at + 12),
+            },
             skip: self.u(at + 24),
-            shape: if shape == NONE { None } else { ShapeRef::decode(shape) },
+            shape: if shape == NONE {
+                None
+            } else {
+                ShapeRef::decode(shape)
+            },
         }
     }
 
@@ -585,7 +632,9 @@ impl<'a> SceneView<'a> {
     pub fn triangle<T: Real>(&self, i: u32) -> TriangleRec<T> {
         let at = self.rec(Section::Triangles, i);
         TriangleRec {
-            tri: Triangle { p: [self.v3(at), self.v3(at + 12), self.v3(at + 24)] },
+            tri: Triangle {
+                p: [self.v3(at), self.v3(at + 12), self.v3(at + 24)],
+            },
             material: self.u(at + 36),
             normals: self.u(at + 40),
             uvs: self.u(at + 44),
@@ -611,12 +660,21 @@ impl<'a> SceneView<'a> {
         let at = self.rec(Section::Ellipsoids, i);
         let flags = self.u(at + 4 * 22);
         let cut = if flags & 1 != 0 {
-            Some(CutPlane { n: self.v3(at + 4 * 23), d: self.f(at + 4 * 26), capped: flags & 2 != 0 })
+            Some(CutPlane {
+                n: self.v3(at + 4 * 23),
+                d: self.f(at + 4 * 26),
+                capped: flags & 2 != 0,
+            })
         } else {
             None
         };
         EllipsoidRec {
-            shape: Ellipsoid { center: self.v3(at), m: self.m3(at + 12), l: self.m3(at + 48), cut },
+            shape: Ellipsoid {
+                center: self.v3(at),
+                m: self.m3(at + 12),
+                l: self.m3(at + 48),
+                cut,
+            },
             material: self.u(at + 4 * 21),
         }
     }
@@ -625,7 +683,11 @@ impl<'a> SceneView<'a> {
     pub fn boxshape<T: Real>(&self, i: u32) -> BoxRec<T> {
         let at = self.rec(Section::Boxes, i);
         BoxRec {
-            shape: BoxShape { center: self.v3(at), m: self.m3(at + 12), l: self.m3(at + 48) },
+            shape: BoxShape {
+                center: self.v3(at),
+                m: self.m3(at + 12),
+                l: self.m3(at + 48),
+            },
             material: self.u(at + 4 * 21),
         }
     }
@@ -648,7 +710,11 @@ impl<'a> SceneView<'a> {
     #[inline]
     pub fn ball<T: Real>(&self, i: u32) -> crate::shape::blob::Ball<T> {
         let at = self.rec(Section::Balls, i);
-        crate::shape::blob::Ball { center: self.v3(at), radius: self.f(at + 12), strength: self.f(at + 16) }
+        crate::shape::blob::Ball {
+            center: self.v3(at),
+            radius: self.f(at + 12),
+            strength: self.f(at + 16),
+        }
     }
 }
 

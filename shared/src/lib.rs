@@ -13,10 +13,10 @@
 
 #[cfg(feature = "std")]
 pub mod desc;
-pub mod geom;
-pub mod num;
-pub mod image;
-pub mod render;
-pub mod shape;
 #[cfg(feature = "std")]
 pub mod dm;
+pub mod geom;
+pub mod image;
+pub mod num;
+pub mod render;
+pub mod shape;

@@ -176,8 +176,26 @@ macro_rules! impl_float_real {
     };
 }
 
-impl_float_real!(f32, "f32", u32, libm::sqrtf, libm::floorf, libm::powf, libm::atan2f, libm::acosf);
-impl_float_real!(f64, "f64", u64, libm::sqrt, libm::floor, libm::pow, libm::atan2, libm::acos);
+impl_float_real!(
+    f32,
+    "f32",
+    u32,
+    libm::sqrtf,
+    libm::floorf,
+    libm::powf,
+    libm::atan2f,
+    libm::acosf
+);
+impl_float_real!(
+    f64,
+    "f64",
+    u64,
+    libm::sqrt,
+    libm::floor,
+    libm::pow,
+    libm::atan2,
+    libm::acos
+);
 
 #[cfg(test)]
 mod tests {

@@ -47,7 +47,11 @@ pub struct Stats {
 
 impl Stats {
     pub fn rays(&self) -> u64 {
-        self.primary_rays + self.shadow_rays + self.reflect_rays + self.refract_rays + self.straight_rays
+        self.primary_rays
+            + self.shadow_rays
+            + self.reflect_rays
+            + self.refract_rays
+            + self.straight_rays
     }
     pub fn add(&mut self, o: &Stats) {
         self.primary_rays += o.primary_rays;
@@ -144,7 +148,11 @@ pub struct Tracer<'a, T: Real> {
 impl<'a, T: Real> Tracer<'a, T> {
     pub fn new(scene: SceneView<'a>) -> Self {
         let frame = scene.frame::<T>();
-        Self { scene, frame, stats: Stats::default() }
+        Self {
+            scene,
+            frame,
+            stats: Stats::default(),
+        }
     }
 
     pub fn frame(&self) -> &Frame<T> {
@@ -200,21 +208,29 @@ impl<'a, T: Real> Tracer<'a, T> {
             ShapeKind::Triangle => {
                 self.stats.triangle_tests += 1;
                 let rec = s.triangle::<T>(shape.index);
-                rec.tri
-                    .intersect(ray, t_max)
-                    .map(|h| Hit { t: h.t, shape, detail: HitDetail::Triangle(h.b) })
+                rec.tri.intersect(ray, t_max).map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Triangle(h.b),
+                })
             }
             ShapeKind::Ellipsoid => {
                 self.stats.ellipsoid_tests += 1;
                 let rec = s.ellipsoid::<T>(shape.index);
-                rec.shape
-                    .intersect(ray, t_max)
-                    .map(|h| Hit { t: h.t, shape, detail: HitDetail::Ellipsoid(h) })
+                rec.shape.intersect(ray, t_max).map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Ellipsoid(h),
+                })
             }
             ShapeKind::Box => {
                 self.stats.box_shape_tests += 1;
                 let rec = s.boxshape::<T>(shape.index);
-                rec.shape.intersect(ray, t_max).map(|h| Hit { t: h.t, shape, detail: HitDetail::Box(h) })
+                rec.shape.intersect(ray, t_max).map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Box(h),
+                })
             }
             ShapeKind::Blob => {
                 self.stats.blob_tests += 1;
@@ -230,7 +246,11 @@ impl<'a, T: Real> Tracer<'a, T> {
                 let mut bs = BlobStats::default();
                 let h = group.intersect(ray, T::ZERO, t_max, &mut bs);
                 self.stats.blob_field_evals += bs.field_evals as u64;
-                h.map(|h| Hit { t: h.t, shape, detail: HitDetail::Blob { t_error: h.t_error } })
+                h.map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Blob { t_error: h.t_error },
+                })
             }
         }
     }
@@ -264,20 +284,40 @@ impl<'a, T: Real> Tracer<'a, T> {
                 } else {
                     [b[1], b[2]]
                 };
-                Surface { p, p_error, ng, ns, uv, material: rec.material, shape }
+                Surface {
+                    p,
+                    p_error,
+                    ng,
+                    ns,
+                    uv,
+                    material: rec.material,
+                    shape,
+                }
             }
             HitDetail::Ellipsoid(h) => {
                 let rec = s.ellipsoid::<T>(shape.index);
                 let ls = rec.shape.surface(ray, &h, s.storage_epsilon());
                 let q = ls.local;
-                // Spherical mapping in the unit frame; the cap maps planar.
+                // Spherical mapping in the unit frame (v = 1 at the +Y pole, the image's top
+                // row); the cap maps planar.
                 let uv = if h.part == crate::shape::ellipsoid::EllipsoidPart::Cap {
                     [(q.x + T::ONE) * T::HALF, (q.z + T::ONE) * T::HALF]
                 } else {
                     let two_pi = T::TWO * T::PI;
-                    [T::HALF + q.z.atan2(q.x) / two_pi, q.y.max(-T::ONE).min(T::ONE).acos() / T::PI]
+                    [
+                        T::HALF + q.z.atan2(q.x) / two_pi,
+                        T::ONE - q.y.max(-T::ONE).min(T::ONE).acos() / T::PI,
+                    ]
                 };
-                Surface { p: ls.p, p_error: ls.p_error, ng: ls.n, ns: ls.n, uv, material: rec.material, shape }
+                Surface {
+                    p: ls.p,
+                    p_error: ls.p_error,
+                    ng: ls.n,
+                    ns: ls.n,
+                    uv,
+                    material: rec.material,
+                    shape,
+                }
             }
             HitDetail::Box(h) => {
                 let rec = s.boxshape::<T>(shape.index);
@@ -290,7 +330,15 @@ impl<'a, T: Real> Tracer<'a, T> {
                     _ => (q.x, q.y),
                 };
                 let uv = [(a + T::ONE) * T::HALF, (b + T::ONE) * T::HALF];
-                Surface { p: ls.p, p_error: ls.p_error, ng: ls.n, ns: ls.n, uv, material: rec.material, shape }
+                Surface {
+                    p: ls.p,
+                    p_error: ls.p_error,
+                    ng: ls.n,
+                    ns: ls.n,
+                    uv,
+                    material: rec.material,
+                    shape,
+                }
             }
             HitDetail::Blob { t_error } => {
                 let g = s.blob_group::<T>(shape.index);
@@ -305,7 +353,15 @@ impl<'a, T: Real> Tracer<'a, T> {
                 let p = ray.at(hit.t);
                 let n = (-group.gradient(p)).normalize();
                 let p_error = ray.dir.abs() * t_error + p.abs() * T::err_gamma(4);
-                Surface { p, p_error, ng: n, ns: n, uv: [T::ZERO, T::ZERO], material: g.material, shape }
+                Surface {
+                    p,
+                    p_error,
+                    ng: n,
+                    ns: n,
+                    uv: [T::ZERO, T::ZERO],
+                    material: g.material,
+                    shape,
+                }
             }
         }
     }
@@ -324,8 +380,11 @@ impl<'a, T: Real> Tracer<'a, T> {
             ior: m.ior,
         };
         if m.texture != NONE {
-            let texel = self.texture_lookup(m.texture, surf.uv[0] * m.scale[0], surf.uv[1] * m.scale[1]);
-            let lum = texel.x * T::from_f32(0.299) + texel.y * T::from_f32(0.587) + texel.z * T::from_f32(0.114);
+            let texel =
+                self.texture_lookup(m.texture, surf.uv[0] * m.scale[0], surf.uv[1] * m.scale[1]);
+            let lum = texel.x * T::from_f32(0.299)
+                + texel.y * T::from_f32(0.587)
+                + texel.z * T::from_f32(0.114);
             match m.target {
                 MapTarget::Diffuse => out.diffuse = out.diffuse.mul_elem(texel),
                 MapTarget::Specular => {
@@ -398,7 +457,11 @@ impl<'a, T: Real> Tracer<'a, T> {
                         let s = (cos_axis - l.cos_outer) / (l.cos_inner - l.cos_outer);
                         s * s * (T::from_i32(3) - T::TWO * s)
                     };
-                    let shape = if l.exponent > T::ZERO { cos_axis.powf(l.exponent) } else { T::ONE };
+                    let shape = if l.exponent > T::ZERO {
+                        cos_axis.powf(l.exponent)
+                    } else {
+                        T::ONE
+                    };
                     c = c * (edge * shape);
                 }
                 Some((dir, d, c))
@@ -417,7 +480,11 @@ impl<'a, T: Real> Tracer<'a, T> {
         let light_pos = surf.p + dir * dist;
         let mut k = 0;
         while k < MAX_CROSSINGS {
-            let t_max = if far { (light_pos - origin).dot(dir) } else { T::MAX };
+            let t_max = if far {
+                (light_pos - origin).dot(dir)
+            } else {
+                T::MAX
+            };
             if t_max <= T::ZERO {
                 return atten;
             }
@@ -440,7 +507,11 @@ impl<'a, T: Real> Tracer<'a, T> {
     /// Eq. 2.1 at a surface point seen along `view` (unit, towards the eye).
     fn local_shade(&mut self, surf: &Surface<T>, m: &Mat<T>, view: Vec3<T>) -> Vec3<T> {
         self.stats.shadings += 1;
-        let n = if surf.ns.dot(view) < T::ZERO { -surf.ns } else { surf.ns };
+        let n = if surf.ns.dot(view) < T::ZERO {
+            -surf.ns
+        } else {
+            surf.ns
+        };
         let mut c = m.diffuse.mul_elem(self.frame.ambient);
         for i in 0..self.scene.light_count() {
             let Some((ldir, dist, ls)) = self.light_at(i, surf.p) else {
@@ -498,7 +569,10 @@ impl<'a, T: Real> Tracer<'a, T> {
                 self.straight_through(&surf, ray.dir)
             } else if self.frame.non_refractive {
                 self.stats.straight_rays += 1;
-                let r = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, ray.dir), ray.dir);
+                let r = Ray::new(
+                    offset_ray_origin(surf.p, surf.p_error, surf.ng, ray.dir),
+                    ray.dir,
+                );
                 self.trace(&r, depth + 1)
             } else {
                 // Snell's law; the outside is air.

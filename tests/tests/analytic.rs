@@ -7,7 +7,11 @@ use links_tests::*;
 fn pixel_dir(w: u32, h: u32, fov_y_deg: f64, x: u32, y: u32) -> [f64; 3] {
     let tan_half = (fov_y_deg.to_radians() / 2.0).tan();
     let d = 2.0 * tan_half / h as f64;
-    let v = [-d * w as f64 / 2.0 + (x as f64 + 0.5) * d, tan_half - (y as f64 + 0.5) * d, 1.0];
+    let v = [
+        -d * w as f64 / 2.0 + (x as f64 + 0.5) * d,
+        tan_half - (y as f64 + 0.5) * d,
+        1.0,
+    ];
     let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     v.map(|c| c / l)
 }
@@ -23,13 +27,18 @@ fn q8(v: f64) -> i32 {
 #[test]
 fn sphere_under_parallel_light_matches_eq_2_1() {
     let (w, h, fov) = (64, 48, 40.0);
-    let mut s = scene(w, h, fov, vec![Shape::Ellipsoid {
-        center: [0.0, 0.0, -10.0],
-        radii: [3.0; 3],
-        rotate_deg: [0.0; 3],
-        cut: None,
-        material: 0,
-    }]);
+    let mut s = scene(
+        w,
+        h,
+        fov,
+        vec![Shape::Ellipsoid {
+            center: [0.0, 0.0, -10.0],
+            radii: [3.0; 3],
+            rotate_deg: [0.0; 3],
+            cut: None,
+            material: 0,
+        }],
+    );
     s.ambient = [0.2, 0.2, 0.2];
     s.materials[0] = Material {
         diffuse: [0.7, 0.5, 0.3],
@@ -40,7 +49,10 @@ fn sphere_under_parallel_light_matches_eq_2_1() {
     };
     // World direction the light travels; in view coordinates z flips.
     let lw = [-1.0f64, -2.0, -1.5];
-    s.lights = vec![Light::Directional { dir: lw, color: [0.9, 0.9, 0.8] }];
+    s.lights = vec![Light::Directional {
+        dir: lw,
+        color: [0.9, 0.9, 0.8],
+    }];
     let img = image_of(&s);
 
     let ll = dot(lw, lw).sqrt();
@@ -65,7 +77,11 @@ fn sphere_under_parallel_light_matches_eq_2_1() {
         let ls = [0.9, 0.9, 0.8];
         let expect: Vec<i32> = (0..3)
             .map(|k| {
-                let spec = if cos_t > 0.0 { src * ls[k] * cos_p.powf(12.0) } else { 0.0 };
+                let spec = if cos_t > 0.0 {
+                    src * ls[k] * cos_p.powf(12.0)
+                } else {
+                    0.0
+                };
                 q8(diffuse[k] * 0.2 + diffuse[k] * ls[k] * cos_t + spec)
             })
             .collect();
@@ -86,11 +102,28 @@ fn sphere_under_parallel_light_matches_eq_2_1() {
 fn mirror_reflects_a_known_colour() {
     // A mirror square facing the eye, tilted 45° about Y, reflects a red box to the side.
     let (w, h, fov) = (33, 33, 20.0);
-    let mirror = Shape::Box { min: [-2.0, -2.0, -0.05], max: [2.0, 2.0, 0.05], material: 1 };
-    let mut s = scene(w, h, fov, vec![Shape::Box { min: [8.0, -3.0, -14.0], max: [9.0, 3.0, -6.0], material: 2 }]);
+    let mirror = Shape::Box {
+        min: [-2.0, -2.0, -0.05],
+        max: [2.0, 2.0, 0.05],
+        material: 1,
+    };
+    let mut s = scene(
+        w,
+        h,
+        fov,
+        vec![Shape::Box {
+            min: [8.0, -3.0, -14.0],
+            max: [9.0, 3.0, -6.0],
+            material: 2,
+        }],
+    );
     s.root.children.push(Node::Cluster(Cluster {
         name: "mirror".into(),
-        transform: Transform { translate: [0.0, 0.0, -10.0], rotate_deg: [0.0, 45.0, 0.0], scale: [1.0; 3] },
+        transform: Transform {
+            translate: [0.0, 0.0, -10.0],
+            rotate_deg: [0.0, 45.0, 0.0],
+            scale: [1.0; 3],
+        },
         children: vec![Node::Shape(mirror)],
     }));
     s.ambient = [1.0, 1.0, 1.0];
@@ -104,8 +137,14 @@ fn mirror_reflects_a_known_colour() {
     s.materials.push(matte("red", [0.9, 0.1, 0.0]));
     let img = image_of(&s);
     // The centre ray meets the mirror at 45° and leaves along +X in view space: the box.
-    assert_eq!(pixel::<f64>(&img, 16, 16), [q8(0.9) as u8, q8(0.1) as u8, 0]);
-    assert_eq!(pixel::<f32>(&img, 16, 16), [q8(0.9) as u8, q8(0.1) as u8, 0]);
+    assert_eq!(
+        pixel::<f64>(&img, 16, 16),
+        [q8(0.9) as u8, q8(0.1) as u8, 0]
+    );
+    assert_eq!(
+        pixel::<f32>(&img, 16, 16),
+        [q8(0.9) as u8, q8(0.1) as u8, 0]
+    );
     // Without the reflection the mirror itself is black.
     let mut dull = s.clone();
     dull.materials[1].reflect = 0.0;
@@ -131,24 +170,51 @@ fn glass_slab_shifts_a_ray_by_the_snell_offset() {
     assert!(shift > 0.1, "the test needs a visible shift, got {shift}");
     let build = |stripe_x: f64, slab: bool| {
         let mut shapes = vec![
-            Shape::Box { min: [-50.0, -50.0, -10.5], max: [50.0, 50.0, -10.0], material: 1 },
-            Shape::Box { min: [stripe_x - 0.01, -5.0, -10.0], max: [stripe_x + 0.01, 5.0, -9.999], material: 2 },
+            Shape::Box {
+                min: [-50.0, -50.0, -10.5],
+                max: [50.0, 50.0, -10.0],
+                material: 1,
+            },
+            Shape::Box {
+                min: [stripe_x - 0.01, -5.0, -10.0],
+                max: [stripe_x + 0.01, 5.0, -9.999],
+                material: 2,
+            },
         ];
         if slab {
-            shapes.push(Shape::Box { min: [-50.0, -50.0, -6.0], max: [50.0, 50.0, -4.0], material: 3 });
+            shapes.push(Shape::Box {
+                min: [-50.0, -50.0, -6.0],
+                max: [50.0, 50.0, -4.0],
+                material: 3,
+            });
         }
         let mut s = scene(w, h, fov, shapes);
         s.ambient = [1.0; 3];
         s.materials.push(matte("wall", [0.0; 3]));
         s.materials.push(matte("stripe", [1.0; 3]));
-        s.materials.push(Material { name: "glass".into(), diffuse: [0.0; 3], transmit: [1.0; 3], ior: 1.5, ..Material::default() });
+        s.materials.push(Material {
+            name: "glass".into(),
+            diffuse: [0.0; 3],
+            transmit: [1.0; 3],
+            ior: 1.5,
+            ..Material::default()
+        });
         image_of(&s)
     };
     let lit = |img: &[u8]| pixel::<f64>(img, x, 1)[0] > 128;
-    assert!(lit(&build(landing, true)), "refracted ray lands on the Snell-predicted spot");
+    assert!(
+        lit(&build(landing, true)),
+        "refracted ray lands on the Snell-predicted spot"
+    );
     assert!(!lit(&build(landing + 0.03, true)) && !lit(&build(landing - 0.03, true)));
-    assert!(!lit(&build(straight, true)), "not where an unrefracted ray would land");
-    assert!(lit(&build(straight, false)), "without the slab the ray goes straight");
+    assert!(
+        !lit(&build(straight, true)),
+        "not where an unrefracted ray would land"
+    );
+    assert!(
+        lit(&build(straight, false)),
+        "without the slab the ray goes straight"
+    );
     assert!(lit(&build(landing, true)) && pixel::<f32>(&build(landing, true), x, 1)[0] > 128);
 }
 
@@ -156,7 +222,11 @@ fn glass_slab_shifts_a_ray_by_the_snell_offset() {
 fn shadow_behind_a_half_transmitting_sheet_is_lit_at_half() {
     // A floor at y = 0 under parallel light at 45°; a sheet of tc = 0.5 hangs above x < 0.
     let (w, h, fov) = (41, 41, 60.0);
-    let floor = Shape::Box { min: [-20.0, -1.0, -30.0], max: [20.0, 0.0, 0.0], material: 1 };
+    let floor = Shape::Box {
+        min: [-20.0, -1.0, -30.0],
+        max: [20.0, 0.0, 0.0],
+        material: 1,
+    };
     let sheet = |y: f64| Shape::Triangle {
         v: [[-10.0, y, -2.0], [-10.0, y, -30.0], [0.0, y, -30.0]],
         normals: None,
@@ -170,11 +240,24 @@ fn shadow_behind_a_half_transmitting_sheet_is_lit_at_half() {
         material: 2,
     };
     let mut s = scene(w, h, fov, vec![floor, sheet(3.0), sheet2(3.0)]);
-    s.camera = Camera { eye: [0.0, 10.0, 5.0], look_at: [0.0, 0.0, -10.0], up: [0.0, 1.0, 0.0], fov_y_deg: fov };
+    s.camera = Camera {
+        eye: [0.0, 10.0, 5.0],
+        look_at: [0.0, 0.0, -10.0],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: fov,
+    };
     s.materials.push(matte("floor", [0.8, 0.8, 0.8]));
-    s.materials.push(Material { name: "sheet".into(), diffuse: [0.0; 3], transmit: [0.5; 3], ..Material::default() });
+    s.materials.push(Material {
+        name: "sheet".into(),
+        diffuse: [0.0; 3],
+        transmit: [0.5; 3],
+        ..Material::default()
+    });
     // Light travels toward +x and down: the sheet's shadow is shifted 3 units to +x.
-    s.lights = vec![Light::Directional { dir: [1.0, -1.0, 0.0], color: [1.0; 3] }];
+    s.lights = vec![Light::Directional {
+        dir: [1.0, -1.0, 0.0],
+        color: [1.0; 3],
+    }];
     s.transparency = TransparencyMode::NonRefractive;
     let img = image_of(&s);
     let full = q8(0.8 * std::f64::consts::FRAC_1_SQRT_2);
@@ -191,7 +274,9 @@ fn shadow_behind_a_half_transmitting_sheet_is_lit_at_half() {
     for y in 0..h {
         for x in 0..w {
             let ray = tracer.primary_ray(x, y);
-            let Some((_, surf)) = tracer.first_surface(&ray) else { continue };
+            let Some((_, surf)) = tracer.first_surface(&ray) else {
+                continue;
+            };
             // View -> world: p = eye + right x + up y + forward z.
             let [vx, vy, vz] = surf.p.to_f64();
             let (wx, wy) = (vx, 10.0 + up[1] * vy + fwd[1] * vz);
@@ -201,10 +286,16 @@ fn shadow_behind_a_half_transmitting_sheet_is_lit_at_half() {
             }
             let px = pixel::<f64>(&img, x, y)[0] as i32;
             if wx > 0.2 && wx < 2.8 && wz < -2.2 && wz > -29.0 {
-                assert!((px - half).abs() <= 1, "({x},{y}) wx={wx}: {px} vs half {half}");
+                assert!(
+                    (px - half).abs() <= 1,
+                    "({x},{y}) wx={wx}: {px} vs half {half}"
+                );
                 n_half += 1;
             } else if wx > 3.2 || wz > -1.8 {
-                assert!((px - full).abs() <= 1, "({x},{y}) wx={wx}: {px} vs full {full}");
+                assert!(
+                    (px - full).abs() <= 1,
+                    "({x},{y}) wx={wx}: {px} vs full {full}"
+                );
                 n_full += 1;
             }
         }
@@ -228,13 +319,29 @@ fn metaball_surface_points_satisfy_the_iso_equation() {
     // Three balls in view space (world z negated); every hit pixel's point must satisfy
     // sum f = T to within the root finder's stated tolerance: |F - T| <= L * tol with
     // L = sum 2b/d and tol ~ 1.2e-4 d (f32) -- we allow 1e-3 absolute in f32, 1e-8 in f64.
-    let balls = [([-1.2, 0.0, -10.0], 2.5, 1.0), ([1.0, 0.4, -10.5], 2.0, 1.0), ([0.0, -1.5, -9.5], 1.8, 0.8)];
-    let mut s = scene(48, 40, 40.0, vec![Shape::Blobs {
-        balls: balls.iter().map(|&(c, d, b)| Ball { center: c, radius: d, strength: b }).collect(),
-        threshold: 0.4,
-        kernel: BlobKernel::Links,
-        material: 0,
-    }]);
+    let balls = [
+        ([-1.2, 0.0, -10.0], 2.5, 1.0),
+        ([1.0, 0.4, -10.5], 2.0, 1.0),
+        ([0.0, -1.5, -9.5], 1.8, 0.8),
+    ];
+    let mut s = scene(
+        48,
+        40,
+        40.0,
+        vec![Shape::Blobs {
+            balls: balls
+                .iter()
+                .map(|&(c, d, b)| Ball {
+                    center: c,
+                    radius: d,
+                    strength: b,
+                })
+                .collect(),
+            threshold: 0.4,
+            kernel: BlobKernel::Links,
+            material: 0,
+        }],
+    );
     s.ambient = [1.0; 3];
     let img = image_of(&s);
     let view = links_core::image::SceneView::new(&img).unwrap();
@@ -270,7 +377,10 @@ fn metaball_surface_points_satisfy_the_iso_equation() {
             }
         }
     }
-    assert!(hits > 300, "the blob covers a good part of the frame ({hits} hits)");
+    assert!(
+        hits > 300,
+        "the blob covers a good part of the frame ({hits} hits)"
+    );
     assert!(worst64 <= 1e-8, "f64: |F - T| up to {worst64:e}");
     assert!(worst32 <= 1e-3, "f32: |F - T| up to {worst32:e}");
 }

@@ -10,7 +10,16 @@ use links_tests::*;
 fn closed_mesh_image() -> Vec<u8> {
     let mesh = icosphere(2, 3.0, [0.3, -0.2, -12.0]);
     assert_eq!(mesh.faces.len(), 320);
-    image_of(&scene(8, 8, 40.0, vec![Shape::Mesh { mesh, material: 0, smooth: false }]))
+    image_of(&scene(
+        8,
+        8,
+        40.0,
+        vec![Shape::Mesh {
+            mesh,
+            material: 0,
+            smooth: false,
+        }],
+    ))
 }
 
 /// Count the triangles a ray crosses (all of them, not just the nearest).
@@ -29,7 +38,9 @@ fn edge_and_vertex_rays<T: Real>(n: usize, seed: u64) -> (usize, usize) {
     let mut tracer = Tracer::<T>::new(view);
     let (mut edge_rays, mut vertex_rays) = (0, 0);
     for k in 0..n {
-        let tri = view.triangle::<f64>((rng.next_u64() % ntri as u64) as u32).tri;
+        let tri = view
+            .triangle::<f64>((rng.next_u64() % ntri as u64) as u32)
+            .tri;
         let a = (rng.next_u64() % 3) as usize;
         let target = if k % 4 == 0 {
             vertex_rays += 1;
@@ -43,12 +54,29 @@ fn edge_and_vertex_rays<T: Real>(n: usize, seed: u64) -> (usize, usize) {
         let out = (target - Vec3::new(center[0], center[1], center[2])).normalize();
         let jitter = Vec3::from_f32(rng.unit().map(|v| v as f32)) * 0.8;
         let from = target + (out + jitter).normalize() * 7.0;
-        let o = Vec3::new(T::from_f64(from.x), T::from_f64(from.y), T::from_f64(from.z));
-        let t = Vec3::new(T::from_f64(target.x), T::from_f64(target.y), T::from_f64(target.z));
+        let o = Vec3::new(
+            T::from_f64(from.x),
+            T::from_f64(from.y),
+            T::from_f64(from.z),
+        );
+        let t = Vec3::new(
+            T::from_f64(target.x),
+            T::from_f64(target.y),
+            T::from_f64(target.z),
+        );
         let ray = Ray::new(o, (t - o).normalize());
         let c = crossings(&view, &ray);
-        assert_eq!(c, 2, "{} ray {k} at {target:?} crossed {c} triangles (must be 2: in and out)", T::NAME);
-        assert!(tracer.first_surface(&ray).is_some(), "{} ray {k}: crack", T::NAME);
+        assert_eq!(
+            c,
+            2,
+            "{} ray {k} at {target:?} crossed {c} triangles (must be 2: in and out)",
+            T::NAME
+        );
+        assert!(
+            tracer.first_surface(&ray).is_some(),
+            "{} ray {k}: crack",
+            T::NAME
+        );
     }
     (edge_rays, vertex_rays)
 }
@@ -66,12 +94,32 @@ fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_f64(
 
 /// Convex test objects, each alone in a scene, with a size for distance checks.
 fn convex_shapes() -> Vec<(&'static str, Shape, Transform)> {
-    let rot = Transform { translate: [0.5, 0.2, -12.0], rotate_deg: [20.0, 35.0, -10.0], scale: [1.0; 3] };
+    let rot = Transform {
+        translate: [0.5, 0.2, -12.0],
+        rotate_deg: [20.0, 35.0, -10.0],
+        scale: [1.0; 3],
+    };
     vec![
-        ("sphere", Shape::Ellipsoid { center: [0.0; 3], radii: [2.5; 3], rotate_deg: [0.0; 3], cut: None, material: 0 }, rot.clone()),
+        (
+            "sphere",
+            Shape::Ellipsoid {
+                center: [0.0; 3],
+                radii: [2.5; 3],
+                rotate_deg: [0.0; 3],
+                cut: None,
+                material: 0,
+            },
+            rot.clone(),
+        ),
         (
             "ellipsoid",
-            Shape::Ellipsoid { center: [0.0; 3], radii: [3.0, 1.0, 2.0], rotate_deg: [10.0, 0.0, 30.0], cut: None, material: 0 },
+            Shape::Ellipsoid {
+                center: [0.0; 3],
+                radii: [3.0, 1.0, 2.0],
+                rotate_deg: [10.0, 0.0, 30.0],
+                cut: None,
+                material: 0,
+            },
             rot.clone(),
         ),
         (
@@ -80,17 +128,41 @@ fn convex_shapes() -> Vec<(&'static str, Shape, Transform)> {
                 center: [0.0; 3],
                 radii: [2.0, 3.0, 2.0],
                 rotate_deg: [0.0; 3],
-                cut: Some(CutPlane { normal: [0.0, 1.0, 0.0], offset: 1.0, capped: true }),
+                cut: Some(CutPlane {
+                    normal: [0.0, 1.0, 0.0],
+                    offset: 1.0,
+                    capped: true,
+                }),
                 material: 0,
             },
             rot.clone(),
         ),
-        ("box", Shape::Box { min: [-2.0, -1.0, -3.0], max: [2.0, 1.5, 1.0], material: 0 }, rot.clone()),
-        ("mesh", Shape::Mesh { mesh: icosphere(2, 2.5, [0.0; 3]), material: 0, smooth: true }, rot.clone()),
+        (
+            "box",
+            Shape::Box {
+                min: [-2.0, -1.0, -3.0],
+                max: [2.0, 1.5, 1.0],
+                material: 0,
+            },
+            rot.clone(),
+        ),
+        (
+            "mesh",
+            Shape::Mesh {
+                mesh: icosphere(2, 2.5, [0.0; 3]),
+                material: 0,
+                smooth: true,
+            },
+            rot.clone(),
+        ),
         (
             "blob",
             Shape::Blobs {
-                balls: vec![Ball { center: [0.0; 3], radius: 4.0, strength: 1.0 }],
+                balls: vec![Ball {
+                    center: [0.0; 3],
+                    radius: 4.0,
+                    strength: 1.0,
+                }],
                 threshold: 0.5,
                 kernel: BlobKernel::Links,
                 material: 0,
@@ -104,7 +176,11 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
     let mut rng = Rng(seed);
     for (name, shape, transform) in convex_shapes() {
         let mut s = scene(8, 8, 40.0, vec![]);
-        s.root.children = vec![Node::Cluster(Cluster { name: name.into(), transform, children: vec![Node::Shape(shape)] })];
+        s.root.children = vec![Node::Cluster(Cluster {
+            name: name.into(),
+            transform,
+            children: vec![Node::Shape(shape)],
+        })];
         let img = image_of(&s);
         let view = SceneView::new(&img).unwrap();
         let mut tracer = Tracer::<T>::new(view);
@@ -114,7 +190,9 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
             let from = center + Vec3::from_f32(rng.unit().map(|v| v as f32)) * T::from_i32(20);
             let aim = center + Vec3::from_f32(rng.unit().map(|v| v as f32 * 1.5));
             let ray = Ray::new(from, (aim - from).normalize());
-            let Some((_, surf)) = tracer.first_surface(&ray) else { continue };
+            let Some((_, surf)) = tracer.first_surface(&ray) else {
+                continue;
+            };
             hits += 1;
             // A random direction, sent to the outside and to the inside of the surface.
             let mut d = Vec3::from_f32(rng.unit().map(|v| v as f32));
@@ -126,7 +204,12 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
             }
             let out = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, d), d);
             let re = tracer.first_surface(&out);
-            assert!(re.is_none(), "{} {name} ray {k}: outward ray re-hit its surface at t = {:?}", T::NAME, re.map(|r| r.0));
+            assert!(
+                re.is_none(),
+                "{} {name} ray {k}: outward ray re-hit its surface at t = {:?}",
+                T::NAME,
+                re.map(|r| r.0)
+            );
             outward += 1;
             let inn = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, -d), -d);
             match tracer.first_surface(&inn) {
@@ -142,11 +225,17 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
                         T::NAME
                     );
                 }
-                None => panic!("{} {name} ray {k}: inward ray escaped a closed solid", T::NAME),
+                None => panic!(
+                    "{} {name} ray {k}: inward ray escaped a closed solid",
+                    T::NAME
+                ),
             }
             inward += 1;
         }
-        assert!(hits > 300 && outward > 300 && inward > 300, "{name}: {hits} hits");
+        assert!(
+            hits > 300 && outward > 300 && inward > 300,
+            "{name}: {hits} hits"
+        );
     }
 }
 

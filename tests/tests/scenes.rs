@@ -31,16 +31,34 @@ fn bundled_scenes() -> Vec<PathBuf> {
 
 fn small_image(path: &Path) -> Vec<u8> {
     let desc = load_scene(path).unwrap_or_else(|e| panic!("{e}"));
-    let opts = CompileOptions { width: Some(GOLDEN_W), height: Some(GOLDEN_H), ..Default::default() };
-    compile(&desc, &opts).unwrap_or_else(|e| panic!("{}: {e}", path.display())).bytes
+    let opts = CompileOptions {
+        width: Some(GOLDEN_W),
+        height: Some(GOLDEN_H),
+        ..Default::default()
+    };
+    compile(&desc, &opts)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .bytes
 }
 
 #[test]
 fn the_bundled_scene_set_is_complete() {
-    let names: Vec<String> =
-        bundled_scenes().iter().map(|p| p.file_stem().unwrap().to_string_lossy().into_owned()).collect();
-    for required in ["photo1", "photo2", "metaballs", "glass", "ellipsoids", "reflections"] {
-        assert!(names.iter().any(|n| n == required), "scenes/{required}.ron missing (have {names:?})");
+    let names: Vec<String> = bundled_scenes()
+        .iter()
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .collect();
+    for required in [
+        "photo1",
+        "photo2",
+        "metaballs",
+        "glass",
+        "ellipsoids",
+        "reflections",
+    ] {
+        assert!(
+            names.iter().any(|n| n == required),
+            "scenes/{required}.ron missing (have {names:?})"
+        );
     }
 }
 
@@ -62,12 +80,22 @@ fn golden_images_match() {
             .unwrap_or_else(|_| panic!("{} missing: run with UPDATE_GOLDEN=1", golden.display()));
         let (w, h, want) = decode_png_rgb(&bytes).unwrap();
         assert_eq!((w, h), (GOLDEN_W, GOLDEN_H), "{name}: golden size");
-        let off = rgb.chunks(3).zip(want.chunks(3)).filter(|(a, b)| a.iter().zip(*b).any(|(x, y)| x.abs_diff(*y) > 2)).count();
+        let off = rgb
+            .chunks(3)
+            .zip(want.chunks(3))
+            .filter(|(a, b)| a.iter().zip(*b).any(|(x, y)| x.abs_diff(*y) > 2))
+            .count();
         let frac = off as f64 / (w * h) as f64;
         let p = psnr(&rgb, &want);
-        println!("{name:<12} golden: {:.2}% pixels off by > 2/255, PSNR {p:.1} dB", frac * 100.0);
+        println!(
+            "{name:<12} golden: {:.2}% pixels off by > 2/255, PSNR {p:.1} dB",
+            frac * 100.0
+        );
         if frac > 0.005 || p < 45.0 {
-            failures.push(format!("{name}: {:.2}% pixels off, PSNR {p:.1} dB", frac * 100.0));
+            failures.push(format!(
+                "{name}: {:.2}% pixels off, PSNR {p:.1} dB",
+                frac * 100.0
+            ));
         }
     }
     assert!(failures.is_empty(), "golden mismatches: {failures:?}");
@@ -75,14 +103,22 @@ fn golden_images_match() {
 
 #[test]
 fn f32_and_f64_renders_agree_to_50_db() {
-    println!("{:<12} {:>10} {:>14}", "scene", "PSNR (dB)", "max channel Δ");
+    println!(
+        "{:<12} {:>10} {:>14}",
+        "scene", "PSNR (dB)", "max channel Δ"
+    );
     for scene in bundled_scenes() {
         let name = scene.file_stem().unwrap().to_string_lossy().into_owned();
         let img = small_image(&scene);
         let a = render_all::<f64>(&img);
         let b = render_all::<f32>(&img);
         let p = psnr(&a, &b);
-        let max = a.iter().zip(&b).map(|(x, y)| x.abs_diff(*y)).max().unwrap_or(0);
+        let max = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| x.abs_diff(*y))
+            .max()
+            .unwrap_or(0);
         println!("{name:<12} {p:>10.1} {max:>14}");
         assert!(p >= 50.0, "{name}: f32 vs f64 PSNR {p:.1} dB < 50 dB");
     }

@@ -102,7 +102,12 @@ impl<T: Real> BoxShape<T> {
         let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
             + storage_error(&self.m, &self.l, q, storage_eps);
         let n = self.m.mul_transpose_vec(n_local).normalize();
-        LocalSurface { p, p_error, n, local: q }
+        LocalSurface {
+            p,
+            p_error,
+            n,
+            local: q,
+        }
     }
 }
 
@@ -112,9 +117,17 @@ mod tests {
 
     fn unit_box_at(z: f64, half: f64) -> BoxShape<f64> {
         let s = |v: f64| Mat3 {
-            r: [Vec3::new(v, 0.0, 0.0), Vec3::new(0.0, v, 0.0), Vec3::new(0.0, 0.0, v)],
+            r: [
+                Vec3::new(v, 0.0, 0.0),
+                Vec3::new(0.0, v, 0.0),
+                Vec3::new(0.0, 0.0, v),
+            ],
         };
-        BoxShape { center: Vec3::new(0.0, 0.0, z), m: s(1.0 / half), l: s(half) }
+        BoxShape {
+            center: Vec3::new(0.0, 0.0, z),
+            m: s(1.0 / half),
+            l: s(half),
+        }
     }
 
     #[test]
@@ -132,7 +145,10 @@ mod tests {
     fn ray_parallel_to_a_slab() {
         let b = unit_box_at(10.0, 2.0);
         let r = Ray::new(Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0));
-        assert!(b.intersect(&r, f64::MAX).is_some(), "on the face plane: touching counts");
+        assert!(
+            b.intersect(&r, f64::MAX).is_some(),
+            "on the face plane: touching counts"
+        );
         let r = Ray::new(Vec3::new(2.0 + 1e-9, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0));
         assert!(b.intersect(&r, f64::MAX).is_none());
     }
@@ -142,13 +158,30 @@ mod tests {
         // Regression: the slab of an axis the ray almost parallels has a huge root error;
         // it must not reject an entry through another face (a mirror's reflection missed).
         let b = unit_box_at(10.0, 2.0);
-        let r = Ray::new(Vec3::new(-8.0, 0.0, 9.0), Vec3::new(1.0, 0.0, 6e-8).normalize());
-        let h = b.intersect(&r, f64::MAX).expect("enters through the x = -2 face");
+        let r = Ray::new(
+            Vec3::new(-8.0, 0.0, 9.0),
+            Vec3::new(1.0, 0.0, 6e-8).normalize(),
+        );
+        let h = b
+            .intersect(&r, f64::MAX)
+            .expect("enters through the x = -2 face");
         assert!((h.t - 6.0).abs() < 1e-9);
         let bf = BoxShape::<f32> {
             center: Vec3::new(0.0, 0.0, 10.0),
-            m: Mat3 { r: [Vec3::new(0.5, 0.0, 0.0), Vec3::new(0.0, 0.5, 0.0), Vec3::new(0.0, 0.0, 0.5)] },
-            l: Mat3 { r: [Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 2.0, 0.0), Vec3::new(0.0, 0.0, 2.0)] },
+            m: Mat3 {
+                r: [
+                    Vec3::new(0.5, 0.0, 0.0),
+                    Vec3::new(0.0, 0.5, 0.0),
+                    Vec3::new(0.0, 0.0, 0.5),
+                ],
+            },
+            l: Mat3 {
+                r: [
+                    Vec3::new(2.0, 0.0, 0.0),
+                    Vec3::new(0.0, 2.0, 0.0),
+                    Vec3::new(0.0, 0.0, 2.0),
+                ],
+            },
         };
         let r = Ray::new(Vec3::new(-8.0f32, 0.0, 9.0), Vec3::new(1.0f32, 0.0, 6e-8));
         assert!(bf.intersect(&r, f32::MAX).is_some());

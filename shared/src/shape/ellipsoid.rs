@@ -86,9 +86,15 @@ impl<T: Real> Ellipsoid<T> {
         match self.cut {
             None => {
                 if valid(t0) {
-                    Some(EllipsoidHit { t: t0, part: EllipsoidPart::Shell })
+                    Some(EllipsoidHit {
+                        t: t0,
+                        part: EllipsoidPart::Shell,
+                    })
                 } else if valid(t1) {
-                    Some(EllipsoidHit { t: t1, part: EllipsoidPart::Shell })
+                    Some(EllipsoidHit {
+                        t: t1,
+                        part: EllipsoidPart::Shell,
+                    })
                 } else {
                     None
                 }
@@ -97,10 +103,16 @@ impl<T: Real> Ellipsoid<T> {
                 let kept = |t: T| cut.n.dot(o + d * t) <= cut.d;
                 if !cut.capped {
                     if valid(t0) && kept(t0) {
-                        return Some(EllipsoidHit { t: t0, part: EllipsoidPart::Shell });
+                        return Some(EllipsoidHit {
+                            t: t0,
+                            part: EllipsoidPart::Shell,
+                        });
                     }
                     if valid(t1) && kept(t1) {
-                        return Some(EllipsoidHit { t: t1, part: EllipsoidPart::Shell });
+                        return Some(EllipsoidHit {
+                            t: t1,
+                            part: EllipsoidPart::Shell,
+                        });
                     }
                     return None;
                 }
@@ -129,15 +141,26 @@ impl<T: Real> Ellipsoid<T> {
                     return None;
                 }
                 // The plane root's error bound, in the same unit-frame terms.
-                let tp_err = T::err_gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon());
+                let tp_err =
+                    T::err_gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon());
                 let valid_part = |t: T, part: EllipsoidPart| {
-                    let e = if part == EllipsoidPart::Cap { tp_err.max(t_err) } else { t_err };
+                    let e = if part == EllipsoidPart::Cap {
+                        tp_err.max(t_err)
+                    } else {
+                        t_err
+                    };
                     t > e && t < t_max
                 };
                 if valid_part(lo, lo_part) {
-                    Some(EllipsoidHit { t: lo, part: lo_part })
+                    Some(EllipsoidHit {
+                        t: lo,
+                        part: lo_part,
+                    })
                 } else if valid_part(hi, hi_part) {
-                    Some(EllipsoidHit { t: hi, part: hi_part })
+                    Some(EllipsoidHit {
+                        t: hi,
+                        part: hi_part,
+                    })
                 } else {
                     None
                 }
@@ -170,7 +193,12 @@ impl<T: Real> Ellipsoid<T> {
         let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
             + storage_error(&self.m, &self.l, q, storage_eps);
         let n = self.m.mul_transpose_vec(n_local).normalize();
-        LocalSurface { p, p_error, n, local: q }
+        LocalSurface {
+            p,
+            p_error,
+            n,
+            local: q,
+        }
     }
 }
 
@@ -184,7 +212,11 @@ pub(crate) fn storage_error<T: Real>(m: &Mat3<T>, l: &Mat3<T>, q: Vec3<T>, eps: 
 
 /// `|L| v` with `|L|` the element-wise absolute matrix: bounds `L v`'s rounding error.
 pub(crate) fn abs_mat_vec<T: Real>(l: &Mat3<T>, v: Vec3<T>) -> Vec3<T> {
-    Vec3::new(l.r[0].abs().dot(v), l.r[1].abs().dot(v), l.r[2].abs().dot(v))
+    Vec3::new(
+        l.r[0].abs().dot(v),
+        l.r[1].abs().dot(v),
+        l.r[2].abs().dot(v),
+    )
 }
 
 #[cfg(test)]
@@ -193,7 +225,11 @@ mod tests {
 
     fn diag(x: f64, y: f64, z: f64) -> Mat3<f64> {
         Mat3 {
-            r: [Vec3::new(x, 0.0, 0.0), Vec3::new(0.0, y, 0.0), Vec3::new(0.0, 0.0, z)],
+            r: [
+                Vec3::new(x, 0.0, 0.0),
+                Vec3::new(0.0, y, 0.0),
+                Vec3::new(0.0, 0.0, z),
+            ],
         }
     }
 
@@ -238,7 +274,11 @@ mod tests {
     #[test]
     fn capped_cut_is_a_solid_with_a_flat_lid() {
         // Keep y <= 0.5 (unit frame, sphere radius 1): a ray from above hits the lid.
-        let cut = CutPlane { n: Vec3::new(0.0, 1.0, 0.0), d: 0.5, capped: true };
+        let cut = CutPlane {
+            n: Vec3::new(0.0, 1.0, 0.0),
+            d: 0.5,
+            capped: true,
+        };
         let e = ellipsoid([1.0, 1.0, 1.0], Some(cut));
         let r = Ray::new(Vec3::new(0.0, 5.0, 10.0), Vec3::new(0.0, -1.0, 0.0));
         let h = e.intersect(&r, f64::MAX).unwrap();
@@ -247,7 +287,13 @@ mod tests {
         let s = e.surface(&r, &h, 0.0);
         assert!((s.n.y - 1.0).abs() < 1e-12);
         // Open cut: the same ray passes the missing lid and hits the inside of the bowl.
-        let open = ellipsoid([1.0, 1.0, 1.0], Some(CutPlane { capped: false, ..cut }));
+        let open = ellipsoid(
+            [1.0, 1.0, 1.0],
+            Some(CutPlane {
+                capped: false,
+                ..cut
+            }),
+        );
         let h = open.intersect(&r, f64::MAX).unwrap();
         assert_eq!(h.part, EllipsoidPart::Shell);
         assert!((h.t - 6.0).abs() < 1e-12);

@@ -150,7 +150,10 @@ mod tests {
         let (p, _) = tri().point(h.b);
         assert!((p.x).abs() < 1e-12 && (p.y).abs() < 1e-12);
         assert!((h.b[0] + h.b[1] + h.b[2] - 1.0).abs() < 1e-12);
-        assert!((h.b[2] - 0.5).abs() < 1e-12, "centre (0,0) is halfway up to p2");
+        assert!(
+            (h.b[2] - 0.5).abs() < 1e-12,
+            "centre (0,0) is halfway up to p2"
+        );
     }
 
     #[test]
