@@ -277,6 +277,25 @@ impl TriData {
             }
         }
     }
+    /// Drop vertex normals that all equal the face normal: a flat face shades the same
+    /// without them, and the image carries only what the scene needs.
+    fn drop_flat_normals(&mut self) {
+        let Some(n) = self.n else { return };
+        let v = self.p.map(|p| p.map(f64::from));
+        let Some(face) = normalize(cross(sub(v[1], v[0]), sub(v[2], v[0]))) else {
+            return;
+        };
+        let flat = n.iter().all(|vn| {
+            let vn = vn.map(f64::from);
+            // Same direction and orientation: without vertex normals the renderer takes the
+            // outside from the winding, so only normals that agree with it may go.
+            dot(vn, face) > 1.0 - 1e-6
+        });
+        if flat {
+            self.n = None;
+        }
+    }
+
     fn centroid(&self, axis: usize) -> f32 {
         (self.p[0][axis] + self.p[1][axis] + self.p[2][axis]) / 3.0
     }
@@ -567,6 +586,7 @@ impl Dm<'_> {
                     material,
                 };
                 tri.keep_winding(full);
+                tri.drop_flat_normals();
                 self.check_triangle(&tri, path)?;
                 Ok(self.triangles(vec![tri]))
             }
@@ -829,6 +849,7 @@ impl Dm<'_> {
                 material,
             };
             tri.keep_winding(full);
+            tri.drop_flat_normals();
             self.check_triangle(
                 &tri,
                 &format!("{path} (mesh '{}', face {})", mesh.source, fi + 1),
@@ -905,5 +926,222 @@ impl Dm<'_> {
             .u(ni)
             .u(ui);
         i
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::desc::*;
+    use crate::image::SceneView;
+
+    fn scene(children: Vec<Node>) -> SceneDesc {
+        SceneDesc {
+            camera: Camera {
+                eye: [0.0, 0.0, 5.0],
+                look_at: [0.0; 3],
+                up: [0.0, 1.0, 0.0],
+                fov_y_deg: 40.0,
+            },
+            width: 16,
+            height: 16,
+            background: [0.0; 3],
+            ambient: [0.1; 3],
+            max_depth: 3,
+            transparency: TransparencyMode::Refractive,
+            materials: vec![Material::default()],
+            textures: vec![],
+            lights: vec![],
+            root: Cluster {
+                name: "root".into(),
+                transform: Transform::default(),
+                children,
+            },
+        }
+    }
+
+    fn quad_mesh(normal: [f64; 3]) -> Mesh {
+        let fv = |p, n| FaceVertex {
+            position: p,
+            normal: Some(n),
+            uv: None,
+        };
+        Mesh {
+            source: "quad".into(),
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [0.0, 1.0, 0.0],
+            ],
+            normals: vec![normal, [0.3, 0.0, 0.954]],
+            uvs: vec![],
+            faces: vec![
+                [fv(0, 0), fv(1, 0), fv(2, 0)],
+                [fv(0, 0), fv(2, 0), fv(3, 1)],
+            ],
+        }
+    }
+
+    #[test]
+    fn flat_vertex_normals_are_dropped_and_smooth_ones_kept() {
+        let s = scene(vec![Node::Shape(Shape::Mesh {
+            mesh: quad_mesh([0.0, 0.0, 1.0]),
+            material: 0,
+            smooth: false,
+        })]);
+        let img = compile(&s, &CompileOptions::default()).unwrap().bytes;
+        let v = SceneView::new(&img).unwrap();
+        assert_eq!(v.count(Section::Triangles), 2);
+        assert_eq!(
+            v.count(Section::Normals),
+            1,
+            "the face whose corners all carry the face normal needs none"
+        );
+        // Normals that disagree with the winding are kept: they say which side is outside.
+        let s = scene(vec![Node::Shape(Shape::Mesh {
+            mesh: quad_mesh([0.0, 0.0, -1.0]),
+            material: 0,
+            smooth: false,
+        })]);
+        let img = compile(&s, &CompileOptions::default()).unwrap().bytes;
+        assert_eq!(SceneView::new(&img).unwrap().count(Section::Normals), 2);
+    }
+
+    #[test]
+    fn boxes_contain_their_shapes_after_transforms() {
+        let t = Transform {
+            translate: [1.0, -2.0, 0.5],
+            rotate_deg: [30.0, 45.0, 10.0],
+            scale: [2.0, 0.5, 1.5],
+        };
+        let shapes = vec![
+            Node::Shape(Shape::Ellipsoid {
+                center: [0.5, 0.0, 0.0],
+                radii: [1.0, 2.0, 0.5],
+                rotate_deg: [10.0, 0.0, 70.0],
+                cut: None,
+                material: 0,
+            }),
+            Node::Shape(Shape::Box {
+                min: [-1.0, -1.0, -1.0],
+                max: [1.0, 0.5, 2.0],
+                material: 0,
+            }),
+            Node::Shape(Shape::Triangle {
+                v: [[0.0, 0.0, 0.0], [3.0, 0.0, 1.0], [0.0, 2.0, -1.0]],
+                normals: None,
+                uv: None,
+                material: 0,
+            }),
+        ];
+        let s = scene(vec![Node::Cluster(Cluster {
+            name: "c".into(),
+            transform: t,
+            children: shapes,
+        })]);
+        let img = compile(&s, &CompileOptions::default()).unwrap().bytes;
+        let v = SceneView::new(&img).unwrap();
+        // Sample each shape's surface densely (through its own local frame) and check the leaf
+        // box and every enclosing cluster box contain the samples.
+        let contains_all = |pts: &[crate::geom::Vec3<f64>], leaf: u32| {
+            for i in 0..v.node_count() {
+                let n = v.node::<f64>(i);
+                if i <= leaf && n.skip > leaf {
+                    for p in pts {
+                        assert!(
+                            n.bounds.contains(*p),
+                            "node {i} box {:?} misses {p:?}",
+                            n.bounds
+                        );
+                    }
+                }
+            }
+        };
+        for leaf in 0..v.node_count() {
+            let Some(r) = v.node::<f64>(leaf).shape else {
+                continue;
+            };
+            let mut pts = Vec::new();
+            for a in 0..24 {
+                for b in 0..12 {
+                    let (th, ph) = (a as f64 * 0.2618, b as f64 * 0.2618 + 0.1);
+                    let q =
+                        crate::geom::Vec3::new(ph.sin() * th.cos(), ph.cos(), ph.sin() * th.sin());
+                    match r.kind {
+                        ShapeKind::Ellipsoid => {
+                            let e = v.ellipsoid::<f64>(r.index).shape;
+                            pts.push(e.center + e.l.mul_vec(q));
+                        }
+                        ShapeKind::Box => {
+                            let bx = v.boxshape::<f64>(r.index).shape;
+                            let c = q * (1.0 / q.abs().max_component());
+                            pts.push(bx.center + bx.l.mul_vec(c));
+                        }
+                        _ => {}
+                    }
+                }
+            }
+            if r.kind == ShapeKind::Triangle {
+                pts.extend(v.triangle::<f64>(r.index).tri.p);
+            }
+            assert!(!pts.is_empty());
+            contains_all(&pts, leaf);
+        }
+    }
+
+    #[test]
+    fn degenerate_inputs_are_rejected() {
+        let zero_scale = Transform {
+            scale: [1.0, 0.0, 1.0],
+            ..Transform::default()
+        };
+        let s = scene(vec![Node::Cluster(Cluster {
+            name: "flat".into(),
+            transform: zero_scale,
+            children: vec![],
+        })]);
+        assert!(matches!(
+            compile(&s, &CompileOptions::default()),
+            Err(DmError::DegenerateTransform { .. })
+        ));
+        let stretch = Transform {
+            scale: [1.0, 2.0, 1.0],
+            ..Transform::default()
+        };
+        let blobs = Shape::Blobs {
+            balls: vec![Ball {
+                center: [0.0; 3],
+                radius: 1.0,
+                strength: 1.0,
+            }],
+            threshold: 0.5,
+            kernel: BlobKernel::Links,
+            material: 0,
+        };
+        let s = scene(vec![Node::Cluster(Cluster {
+            name: "s".into(),
+            transform: stretch,
+            children: vec![Node::Shape(blobs)],
+        })]);
+        let e = compile(&s, &CompileOptions::default()).unwrap_err();
+        assert_eq!(
+            e,
+            DmError::NonUniformBlobScale {
+                cluster: "root/s".into()
+            }
+        );
+        let mut s = scene(vec![]);
+        s.camera.up = [0.0, 0.0, 1.0];
+        assert!(matches!(
+            compile(&s, &CompileOptions::default()),
+            Err(DmError::DegenerateCamera(_))
+        ));
+        let s = scene(vec![]);
+        let opts = CompileOptions {
+            max_depth: Some(99),
+            ..Default::default()
+        };
+        assert!(matches!(compile(&s, &opts), Err(DmError::BadSetting(_))));
     }
 }

@@ -1,0 +1,122 @@
+//! The `links` command as a user runs it.
+
+use links_host::frame::decode_png_rgb;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn links() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_links"))
+}
+
+fn scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(name)
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("links-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+#[test]
+fn render_writes_a_png_of_the_requested_size_and_a_stats_line() {
+    let out = tmp("photo1.png");
+    let o = links()
+        .args([
+            "render",
+            scene("photo1.ron").to_str().unwrap(),
+            "--width",
+            "64",
+            "--height",
+            "60",
+            "-o",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (w, h, rgb) = decode_png_rgb(&std::fs::read(&out).unwrap()).unwrap();
+    assert_eq!((w, h), (64, 60));
+    assert!(rgb.iter().any(|&c| c > 0));
+    let err = String::from_utf8_lossy(&o.stderr);
+    for word in [
+        "primary",
+        "shadow",
+        "box",
+        "triangle",
+        "Mrays/s",
+        "scene image",
+    ] {
+        assert!(err.contains(word), "stats line lacks '{word}': {err}");
+    }
+}
+
+#[test]
+fn the_image_does_not_depend_on_the_thread_count() {
+    let mut pngs = Vec::new();
+    for threads in ["1", "2", "3"] {
+        let out = tmp(&format!("glass-{threads}.png"));
+        let o = links()
+            .args([
+                "render",
+                scene("glass.ron").to_str().unwrap(),
+                "--width",
+                "48",
+                "--height",
+                "40",
+                "--quiet",
+            ])
+            .args(["--threads", threads, "-o"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success());
+        pngs.push(std::fs::read(&out).unwrap());
+    }
+    assert_eq!(pngs[0], pngs[1]);
+    assert_eq!(pngs[0], pngs[2]);
+}
+
+#[test]
+fn bad_input_gives_one_line_naming_file_line_and_column_and_fails() {
+    let bad = tmp("bad.ron");
+    std::fs::write(
+        &bad,
+        "Scene(\n    camera: (eye: (0, 0, -5), look_at: (0, 0, 0)),\n    root: (children: [\n        Sphere(center: (0, 0, 0), radius: 0),\n    ]),\n)\n",
+    )
+    .unwrap();
+    let o = links()
+        .args(["render", bad.to_str().unwrap(), "-o"])
+        .arg(tmp("never.png"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(err.trim_end().lines().count(), 1, "one line: {err}");
+    assert!(err.contains("bad.ron:4:"), "names file and line: {err}");
+    assert!(err.contains("radius"), "says what was wrong: {err}");
+    assert!(!tmp("never.png").exists());
+
+    let o = links()
+        .args(["render", "no/such/scene.ron"])
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("no/such/scene.ron"));
+}
+
+#[test]
+fn info_reports_the_scene_image_size_by_section() {
+    let o = links()
+        .args(["info", scene("photo1.ron").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("SceneImage") && text.contains("triangles") && text.contains("738"),
+        "{text}"
+    );
+}
