@@ -384,3 +384,318 @@ fn metaball_surface_points_satisfy_the_iso_equation() {
     assert!(worst64 <= 1e-8, "f64: |F - T| up to {worst64:e}");
     assert!(worst32 <= 1e-3, "f32: |F - T| up to {worst32:e}");
 }
+
+#[test]
+fn box_face_texture_is_mapped_planar_and_sampled_bilinearly() {
+    // A 2x2 texture (red, green / blue, white) on the front face of a box facing the eye.
+    let (w, h, fov) = (40, 40, 30.0);
+    let mut s = scene(
+        w,
+        h,
+        fov,
+        vec![Shape::Box {
+            min: [-2.0, -2.0, -12.0],
+            max: [2.0, 2.0, -10.0],
+            material: 1,
+        }],
+    );
+    s.ambient = [1.0; 3];
+    let texels = vec![255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255];
+    s.textures.push(Texture {
+        name: "quad".into(),
+        width: 2,
+        height: 2,
+        rgb: texels.clone(),
+    });
+    s.materials.push(Material {
+        name: "tex".into(),
+        diffuse: [1.0; 3],
+        map: Some(TextureMap {
+            texture: 0,
+            target: MapTarget::Diffuse,
+            scale: [1.0, 1.0],
+        }),
+        ..Material::default()
+    });
+    let img = image_of(&s);
+    let view = links_core::image::SceneView::new(&img).unwrap();
+    let mut tracer = links_core::render::Tracer::<f64>::new(view);
+    // Bilinear lookup written out: v = 0 is the bottom row, texel centres at half steps.
+    let lookup = |u: f64, v: f64| -> [f64; 3] {
+        let x = u * 2.0 - 0.5;
+        let y = (1.0 - v) * 2.0 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let t = |xx: f64, yy: f64, k: usize| {
+            let xi = (xx as i64).rem_euclid(2) as usize;
+            let yi = (yy as i64).rem_euclid(2) as usize;
+            texels[(yi * 2 + xi) * 3 + k] as f64 / 255.0
+        };
+        [0, 1, 2].map(|k| {
+            let top = t(x0, y0, k) * (1.0 - fx) + t(x0 + 1.0, y0, k) * fx;
+            let bot = t(x0, y0 + 1.0, k) * (1.0 - fx) + t(x0 + 1.0, y0 + 1.0, k) * fx;
+            top * (1.0 - fy) + bot * fy
+        })
+    };
+    let mut checked = 0;
+    for (x, y) in [(20, 20), (12, 12), (27, 13), (14, 26), (25, 25), (17, 22)] {
+        let ray = tracer.primary_ray(x, y);
+        let (_, surf) = tracer
+            .first_surface(&ray)
+            .expect("the face fills the centre");
+        // Planar mapping: u runs with view x, v with view y, across the 4-unit face.
+        let p = surf.p.to_f64();
+        let (u, v) = ((p[0] + 2.0) / 4.0, (p[1] + 2.0) / 4.0);
+        assert!((surf.uv[0] - u).abs() < 1e-9 && (surf.uv[1] - v).abs() < 1e-9);
+        let want = lookup(u, v).map(q8);
+        let got = pixel::<f64>(&img, x, y);
+        for k in 0..3 {
+            assert!(
+                (got[k] as i32 - want[k]).abs() <= 1,
+                "({x},{y}) uv ({u:.3},{v:.3}): {got:?} vs {want:?}"
+            );
+        }
+        checked += 1;
+    }
+    assert_eq!(checked, 6);
+    // The centre of the face samples all four texels equally.
+    assert_eq!(lookup(0.5, 0.5).map(q8), [128, 128, 128]);
+}
+
+#[test]
+fn point_light_falls_off_with_distance_squared_and_spot_cone_cuts_off() {
+    // Floor y = 0 seen from above; a point light 4 units over it with falloff.
+    let (w, h, fov) = (21, 21, 50.0);
+    let floor = Shape::Box {
+        min: [-30.0, -1.0, -30.0],
+        max: [30.0, 0.0, 30.0],
+        material: 1,
+    };
+    let mut s = scene(w, h, fov, vec![floor]);
+    s.camera = Camera {
+        eye: [0.0, 10.0, 0.0],
+        look_at: [0.0, 0.0, 0.0],
+        up: [0.0, 0.0, -1.0],
+        fov_y_deg: fov,
+    };
+    s.materials.push(matte("floor", [0.5; 3]));
+    s.lights = vec![Light::Point {
+        pos: [0.0, 4.0, 0.0],
+        color: [8.0; 3],
+        falloff: true,
+    }];
+    let img = image_of(&s);
+    // Straight below the light: 0.5 * 8 / 16 = 0.25.
+    assert_eq!(pixel::<f64>(&img, 10, 10), [q8(0.25) as u8; 3]);
+    let view = links_core::image::SceneView::new(&img).unwrap();
+    let mut tracer = links_core::render::Tracer::<f64>::new(view);
+    for (x, y) in [(3, 10), (15, 4), (18, 18)] {
+        let (_, surf) = tracer.first_surface(&tracer.primary_ray(x, y)).unwrap();
+        // View -> world for this camera: world x = view x, world z = view y (up = -z world).
+        let p = surf.p.to_f64();
+        let r2 = p[0] * p[0] + p[1] * p[1];
+        let d2 = r2 + 16.0;
+        let want = q8(0.5 * 8.0 / d2 * (4.0 / d2.sqrt()));
+        let got = pixel::<f64>(&img, x, y)[0] as i32;
+        assert!(
+            (got - want).abs() <= 1,
+            "({x},{y}) r²={r2:.2}: {got} vs {want}"
+        );
+    }
+
+    // A spot 4 units up, pointing down, full within 20°, dark beyond 30°.
+    s.lights = vec![Light::Spot {
+        pos: [0.0, 4.0, 0.0],
+        dir: [0.0, -1.0, 0.0],
+        color: [1.0; 3],
+        inner_deg: 20.0,
+        outer_deg: 30.0,
+        exponent: 0.0,
+    }];
+    let img = image_of(&s);
+    let view = links_core::image::SceneView::new(&img).unwrap();
+    let mut tracer = links_core::render::Tracer::<f64>::new(view);
+    let (mut inside, mut outside, mut between) = (0, 0, 0);
+    for y in 0..h {
+        for x in 0..w {
+            let (_, surf) = tracer.first_surface(&tracer.primary_ray(x, y)).unwrap();
+            let p = surf.p.to_f64();
+            let r = (p[0] * p[0] + p[1] * p[1]).sqrt();
+            let angle = r.atan2(4.0).to_degrees();
+            let cos = 4.0 / (r * r + 16.0).sqrt();
+            let got = pixel::<f64>(&img, x, y)[0] as i32;
+            if angle < 19.5 {
+                assert!(
+                    (got - q8(0.5 * cos)).abs() <= 1,
+                    "inside the cone at {angle:.1}°: {got}"
+                );
+                inside += 1;
+            } else if angle > 30.5 {
+                assert_eq!(got, 0, "outside the cone at {angle:.1}°");
+                outside += 1;
+            } else {
+                assert!(got < q8(0.5 * cos) + 1, "between the cones falls off");
+                between += 1;
+            }
+        }
+    }
+    assert!(
+        inside > 5 && outside > 5 && between > 5,
+        "{inside} {outside} {between}"
+    );
+}
+
+/// Two triangles of a quad with an explicit outward normal (which sets the outside).
+fn quad(
+    a: [f64; 3],
+    b: [f64; 3],
+    c: [f64; 3],
+    d: [f64; 3],
+    n: [f64; 3],
+    material: u32,
+) -> [Shape; 2] {
+    [
+        Shape::Triangle {
+            v: [a, b, c],
+            normals: Some([n; 3]),
+            uv: None,
+            material,
+        },
+        Shape::Triangle {
+            v: [a, c, d],
+            normals: Some([n; 3]),
+            uv: None,
+            material,
+        },
+    ]
+}
+
+#[test]
+fn right_angle_prism_totally_reflects_at_its_hypotenuse() {
+    // Cross-section in x-z: front face z = -9 (x in [-1, 1]), side face x = 1 (z in [-11, -9]),
+    // hypotenuse from (-1, -9) to (1, -11). The centre ray enters the front face head-on, meets
+    // the hypotenuse at 45° (> the 41.8° critical angle of ior 1.5), turns to +x and leaves
+    // through the side face towards a red wall. Without bending (ior 1) it would pass the
+    // hypotenuse and hit the blue wall behind.
+    let (w, h, fov) = (21, 21, 10.0);
+    let s2 = std::f64::consts::FRAC_1_SQRT_2;
+    let mut shapes = Vec::new();
+    shapes.extend(quad(
+        [-1.0, -1.0, -9.0],
+        [1.0, -1.0, -9.0],
+        [1.0, 1.0, -9.0],
+        [-1.0, 1.0, -9.0],
+        [0.0, 0.0, 1.0],
+        1,
+    ));
+    shapes.extend(quad(
+        [1.0, -1.0, -9.0],
+        [1.0, -1.0, -11.0],
+        [1.0, 1.0, -11.0],
+        [1.0, 1.0, -9.0],
+        [1.0, 0.0, 0.0],
+        1,
+    ));
+    shapes.extend(quad(
+        [-1.0, -1.0, -9.0],
+        [-1.0, 1.0, -9.0],
+        [1.0, 1.0, -11.0],
+        [1.0, -1.0, -11.0],
+        [-s2, 0.0, -s2],
+        1,
+    ));
+    shapes.push(Shape::Box {
+        min: [5.0, -20.0, -30.0],
+        max: [6.0, 20.0, 0.0],
+        material: 2,
+    });
+    shapes.push(Shape::Box {
+        min: [-20.0, -20.0, -31.0],
+        max: [4.0, 20.0, -30.0],
+        material: 3,
+    });
+    let mut s = scene(w, h, fov, shapes);
+    s.ambient = [1.0; 3];
+    s.materials.push(Material {
+        name: "glass".into(),
+        diffuse: [0.0; 3],
+        transmit: [1.0; 3],
+        ior: 1.5,
+        ..Material::default()
+    });
+    s.materials.push(matte("red", [1.0, 0.0, 0.0]));
+    s.materials.push(matte("blue", [0.0, 0.0, 1.0]));
+    let img = image_of(&s);
+    assert_eq!(
+        pixel::<f64>(&img, 10, 10),
+        [255, 0, 0],
+        "f64: total internal reflection"
+    );
+    assert_eq!(
+        pixel::<f32>(&img, 10, 10),
+        [255, 0, 0],
+        "f32: total internal reflection"
+    );
+    s.materials[1].ior = 1.0;
+    assert_eq!(
+        pixel::<f64>(&image_of(&s), 10, 10),
+        [0, 0, 255],
+        "no bending: straight through"
+    );
+}
+
+#[test]
+fn nesting_deeper_than_the_depth_cap_stays_bright_and_bounded() {
+    // Twelve nested clear spheres (24 surfaces) in front of a white wall, max_depth 3: the
+    // refractive recursion stops at depth 3 and the rest is crossed straight through, so
+    // the wall still shows through (attenuated by 0.98 per surface), with no stack growth.
+    let (w, h, fov) = (11, 11, 10.0);
+    let mut shapes: Vec<Shape> = (0..12)
+        .map(|i| Shape::Ellipsoid {
+            center: [0.0, 0.0, -20.0],
+            radii: [6.0 - 0.45 * i as f64; 3],
+            rotate_deg: [0.0; 3],
+            cut: None,
+            material: 1,
+        })
+        .collect();
+    shapes.push(Shape::Box {
+        min: [-50.0, -50.0, -41.0],
+        max: [50.0, 50.0, -40.0],
+        material: 2,
+    });
+    let mut s = scene(w, h, fov, shapes);
+    s.ambient = [1.0; 3];
+    s.max_depth = 3;
+    s.materials.push(Material {
+        name: "clear".into(),
+        diffuse: [0.0; 3],
+        transmit: [0.98; 3],
+        ior: 1.0,
+        ..Material::default()
+    });
+    s.materials.push(matte("wall", [1.0; 3]));
+    let img = image_of(&s);
+    let want = q8(0.98f64.powi(24));
+    for (mode, t) in [
+        ("refractive", TransparencyMode::Refractive),
+        ("non-refractive", TransparencyMode::NonRefractive),
+    ] {
+        s.transparency = t;
+        let img = image_of(&s);
+        for got in [pixel::<f64>(&img, 5, 5), pixel::<f32>(&img, 5, 5)] {
+            assert!(
+                (got[0] as i32 - want).abs() <= 1,
+                "{mode}: {got:?} vs 0.98^24 = {want}"
+            );
+        }
+    }
+    // With ior 1 the path is the same either way: the cut-off causes no brightness jump.
+    let deep = {
+        let mut d = s.clone();
+        d.max_depth = 16;
+        d.transparency = TransparencyMode::Refractive;
+        pixel::<f64>(&image_of(&d), 5, 5)
+    };
+    assert_eq!(deep, pixel::<f64>(&img, 5, 5));
+}
