@@ -5,7 +5,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use links_core::desc::TransparencyMode;
 use links_core::dm::{compile, CompileOptions};
 use links_core::image::{SceneView, Section};
-use links_host::frame::{encode_png, render_frame, Precision};
+use links_host::frame::{encode_png, psnr, render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -78,6 +78,14 @@ enum Cmd {
         /// Also write the SceneImage bytes to this file
         #[arg(long)]
         image: Option<PathBuf>,
+    },
+    /// Render a scene in f32 and f64 and report how far apart they are
+    Compare {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Host threads (0 = all cores)
+        #[arg(long, default_value_t = 0)]
+        threads: usize,
     },
     /// Regenerate the procedural meshes and textures of the bundled scenes
     GenAssets {
@@ -193,6 +201,30 @@ fn run(cli: Cli) -> Result<(), String> {
             if let Some(path) = image {
                 std::fs::write(&path, &bytes).map_err(|e| format!("{}: {e}", path.display()))?;
             }
+            Ok(())
+        }
+        Cmd::Compare { scene, threads } => {
+            let image = compile_scene(&scene)?;
+            let f64_frame =
+                render_frame(&image, Precision::F64, threads, &|| {}).map_err(|e| e.to_string())?;
+            let f32_frame =
+                render_frame(&image, Precision::F32, threads, &|| {}).map_err(|e| e.to_string())?;
+            let (a, b) = (&f64_frame.rgb, &f32_frame.rgb);
+            let max = a
+                .iter()
+                .zip(b)
+                .map(|(x, y)| x.abs_diff(*y))
+                .max()
+                .unwrap_or(0);
+            let off = a.chunks(3).zip(b.chunks(3)).filter(|(p, q)| p != q).count();
+            println!(
+                "{}: {}x{} f32 vs f64: PSNR {:.1} dB, max channel difference {max}/255, {:.3}% pixels differ",
+                scene.scene.display(),
+                f64_frame.width,
+                f64_frame.height,
+                psnr(a, b),
+                100.0 * off as f64 / (f64_frame.width * f64_frame.height) as f64
+            );
             Ok(())
         }
         Cmd::GenAssets { dir } => {
