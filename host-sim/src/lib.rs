@@ -1,5 +1,6 @@
 //! The host side of LINKS-1: scene files, procedural scene generators, and the `links` CLI.
 
+pub mod cost;
 pub mod frame;
 pub mod gen;
 pub mod scene_file;
