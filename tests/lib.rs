@@ -4,7 +4,7 @@ use links_core::desc::*;
 use links_core::dm::{compile, CompileOptions};
 use links_core::image::SceneView;
 use links_core::num::Real;
-use links_core::render::{render_run, Rgb8, Tracer};
+use links_core::render::{render_run, Rgb8, Stats, Techniques, Tracer};
 
 /// A material with only the given diffuse colour.
 pub fn matte(name: &str, diffuse: [f32; 3]) -> Material {
@@ -61,16 +61,21 @@ pub fn pixel<T: Real>(image: &[u8], x: u32, y: u32) -> Rgb8 {
 
 /// Render a whole compiled scene, RGB8 rows.
 pub fn render_all<T: Real>(image: &[u8]) -> Vec<u8> {
+    render_all_with::<T>(image, Techniques::ALL).0
+}
+
+/// Render a whole compiled scene with chosen techniques: RGB8 rows and the counts.
+pub fn render_all_with<T: Real>(image: &[u8], techniques: Techniques) -> (Vec<u8>, Stats) {
     let view = SceneView::new(image).expect("valid image");
     let f = view.frame::<f32>();
-    let mut tracer = Tracer::<T>::new(view);
+    let mut tracer = Tracer::<T>::with_techniques(view, techniques);
     let mut row = vec![[0u8; 3]; f.width as usize];
     let mut out = Vec::with_capacity((f.width * f.height * 3) as usize);
     for y in 0..f.height {
         render_run(&mut tracer, y, 0, &mut row).expect("row inside frame");
         out.extend(row.iter().flatten());
     }
-    out
+    (out, tracer.stats)
 }
 
 /// A deterministic xorshift generator for property tests.

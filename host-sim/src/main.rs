@@ -105,7 +105,7 @@ fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
             TransparencyArg::Refractive => TransparencyMode::Refractive,
             TransparencyArg::NonRefractive => TransparencyMode::NonRefractive,
         }),
-        flat_meshes: false,
+        mesh_hierarchy: Default::default(),
     };
     let compiled = compile(&desc, &opts).map_err(|e| format!("{}: {e}", a.scene.display()))?;
     Ok(compiled.bytes)

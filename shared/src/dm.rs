@@ -7,12 +7,13 @@
 //! contains its shape after rounding.
 //!
 //! Large meshes are split by the DM into sub-clusters of at most [`MESH_LEAF_SIZE`]
-//! triangles (median split on the longest axis), so a ray that touches a mesh's box only
-//! tests the triangles near it.
+//! triangles (a binned-SAH BVH by default, see [`MeshHierarchy`]), so a ray that touches a
+//! mesh's box only tests the triangles near it. Each node also gets its screen rectangle
+//! (LINKS-1 4.4) for the renderer's Y/X clipping of primary rays.
 
 use crate::desc::{self, Cluster, Light, Node, SceneDesc, Shape, TransparencyMode};
 use crate::image::writer::ImageWriter;
-use crate::image::{Section, ShapeKind, ShapeRef, MAX_DEPTH_LIMIT, NONE};
+use crate::image::{Rect, Section, ShapeKind, ShapeRef, MAX_DEPTH_LIMIT, NONE};
 use core::fmt;
 use std::string::{String, ToString};
 use std::vec::Vec;
@@ -28,8 +29,20 @@ pub struct CompileOptions {
     pub height: Option<u32>,
     pub max_depth: Option<u32>,
     pub transparency: Option<TransparencyMode>,
-    /// Keep every mesh as one flat cluster (no DM sub-clusters), for measuring.
-    pub flat_meshes: bool,
+    /// How the DM organises the triangles of a mesh below its cluster.
+    pub mesh_hierarchy: MeshHierarchy,
+}
+
+/// The hierarchy the DM builds inside each mesh cluster.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MeshHierarchy {
+    /// LINKS-1's: the mesh is one cluster, every triangle a shape with its own box.
+    Flat,
+    /// Median split on the longest axis down to [`MESH_LEAF_SIZE`] triangles.
+    Median,
+    /// Binned surface-area-heuristic BVH (beyond the paper).
+    #[default]
+    Sah,
 }
 
 /// Why a scene could not be compiled.
@@ -243,6 +256,107 @@ impl Bounds {
     }
 }
 
+fn longest_axis(b: &Bounds) -> usize {
+    let ext = [0, 1, 2].map(|k| b.max[k] - b.min[k]);
+    if ext[0] >= ext[1] && ext[0] >= ext[2] {
+        0
+    } else if ext[1] >= ext[2] {
+        1
+    } else {
+        2
+    }
+}
+
+/// Sort by centroid along the longest axis and split in the middle.
+fn median_split(tris: &mut [TriData]) -> usize {
+    let all = tris
+        .iter()
+        .fold(Bounds::empty(), |b, t| b.union(t.bounds()));
+    let axis = longest_axis(&all);
+    tris.sort_by(|a, b| a.centroid(axis).total_cmp(&b.centroid(axis)));
+    tris.len() / 2
+}
+
+fn half_area(b: &Bounds) -> f64 {
+    if b.is_empty() {
+        return 0.0;
+    }
+    let e = [0, 1, 2].map(|k| f64::from(b.max[k]) - f64::from(b.min[k]));
+    e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+}
+
+const SAH_BINS: usize = 16;
+
+/// Centroid bin of a triangle along `axis` for centroids spanning `[lo, hi]`.
+fn sah_bin(t: &TriData, axis: usize, lo: f32, hi: f32) -> usize {
+    (((t.centroid(axis) - lo) / (hi - lo) * SAH_BINS as f32) as usize).min(SAH_BINS - 1)
+}
+
+/// Best bin boundary on one axis: (Σ area·count of both sides, first bin of the right side).
+fn sah_best_on_axis(tris: &[TriData], axis: usize, lo: f32, hi: f32) -> Option<(f64, usize)> {
+    let mut counts = [0usize; SAH_BINS];
+    let mut boxes = [Bounds::empty(); SAH_BINS];
+    for t in tris {
+        let k = sah_bin(t, axis, lo, hi);
+        counts[k] += 1;
+        boxes[k] = boxes[k].union(t.bounds());
+    }
+    let mut best: Option<(f64, usize)> = None;
+    for split in 1..SAH_BINS {
+        let side = |r: core::ops::Range<usize>| {
+            r.fold((Bounds::empty(), 0), |(b, n), k| {
+                (b.union(boxes[k]), n + counts[k])
+            })
+        };
+        let ((bl, nl), (br, nr)) = (side(0..split), side(split..SAH_BINS));
+        if nl == 0 || nr == 0 {
+            continue;
+        }
+        let c = half_area(&bl) * nl as f64 + half_area(&br) * nr as f64;
+        if best.is_none_or(|b| c < b.0) {
+            best = Some((c, split));
+        }
+    }
+    best
+}
+
+/// Binned SAH split. Costs in units of one box test: a triangle leaf costs its box test
+/// plus about two more for the triangle test; a cluster node one box test. Returns the
+/// split point after reordering, or `None` to make a leaf run (only when the set is small
+/// enough, <= [`MESH_LEAF_SIZE`], and splitting would not pay).
+fn sah_split(tris: &mut [TriData]) -> Option<usize> {
+    const COST_NODE: f64 = 1.0;
+    const COST_TRI: f64 = 3.0;
+    let n = tris.len();
+    let all = tris
+        .iter()
+        .fold(Bounds::empty(), |b, t| b.union(t.bounds()));
+    let cent = tris.iter().fold(Bounds::empty(), |b, t| {
+        let c = [0, 1, 2].map(|k| t.centroid(k));
+        b.union(Bounds { min: c, max: c })
+    });
+    let best = (0..3)
+        .filter(|&a| cent.max[a] > cent.min[a])
+        .filter_map(|a| sah_best_on_axis(tris, a, cent.min[a], cent.max[a]).map(|(c, k)| (c, a, k)))
+        .min_by(|x, y| x.0.total_cmp(&y.0));
+    let Some((area_cost, axis, edge)) = best else {
+        // All centroids coincide: fall back to a median split for large sets.
+        return (n > MESH_LEAF_SIZE).then(|| median_split(tris));
+    };
+    let cost = 2.0 * COST_NODE + area_cost * COST_TRI / half_area(&all).max(f64::MIN_POSITIVE);
+    if n <= MESH_LEAF_SIZE && cost >= n as f64 * COST_TRI {
+        return None;
+    }
+    let (lo, hi) = (cent.min[axis], cent.max[axis]);
+    // Stable partition: left bins first, original order kept within each side.
+    tris.sort_by_key(|t| sah_bin(t, axis, lo, hi) >= edge);
+    Some(
+        tris.iter()
+            .take_while(|t| sah_bin(t, axis, lo, hi) < edge)
+            .count(),
+    )
+}
+
 /// What the DM produced, with per-section sizes for reports.
 #[derive(Clone, Debug)]
 pub struct Compiled {
@@ -253,6 +367,90 @@ struct Dm<'a> {
     desc: &'a SceneDesc,
     w: ImageWriter,
     opts: &'a CompileOptions,
+    proj: Projection,
+    /// Screen rectangle per node, in node order.
+    rects: Vec<Rect>,
+}
+
+/// The screen projection of view coordinates (pixel centres at integer + ½).
+#[derive(Clone, Copy, Debug, Default)]
+struct Projection {
+    x0: f64,
+    y0: f64,
+    dx: f64,
+    dy: f64,
+    width: u32,
+    height: u32,
+}
+
+/// Slack in pixels added around projected extents, far above the rounding of a primary
+/// ray's direction (~1e-4 px in f32), so clipping never drops a shape a ray can hit.
+const RECT_SLACK_PX: f64 = 0.05;
+
+impl Projection {
+    fn full(&self) -> Rect {
+        Rect {
+            x_lo: 0,
+            x_hi: (self.width - 1) as u16,
+            y_lo: 0,
+            y_hi: (self.height - 1) as u16,
+        }
+    }
+
+    /// Pixels whose primary ray can meet the convex hull of `pts` (view coordinates).
+    fn rect_of(&self, pts: &[[f64; 3]]) -> Rect {
+        // Primary rays have z > 0 everywhere: nothing entirely behind the eye is visible.
+        if pts.iter().all(|p| p[2] <= 0.0) {
+            return Rect::EMPTY;
+        }
+        // A hull that reaches the eye's plane projects without bound.
+        let near = 1e-9
+            * pts
+                .iter()
+                .map(|p| p[0].abs().max(p[1].abs()).max(p[2].abs()))
+                .fold(0.0, f64::max);
+        if pts.iter().any(|p| p[2] <= near) {
+            return self.full();
+        }
+        let (mut sx0, mut sx1, mut sy0, mut sy1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for p in pts {
+            // Continuous screen coordinates: pixel x's centre is at x + ½.
+            let sx = (p[0] / p[2] - self.x0) / self.dx;
+            let sy = (self.y0 - p[1] / p[2]) / self.dy;
+            sx0 = sx0.min(sx);
+            sx1 = sx1.max(sx);
+            sy0 = sy0.min(sy);
+            sy1 = sy1.max(sy);
+        }
+        let lo = |v: f64, n: u32| ((v - 0.5 - RECT_SLACK_PX).ceil().max(0.0)).min(n as f64) as i64;
+        let hi = |v: f64, n: u32| {
+            ((v - 0.5 + RECT_SLACK_PX).floor().min(n as f64 - 1.0)).max(-1.0) as i64
+        };
+        let (xl, xh) = (lo(sx0, self.width), hi(sx1, self.width));
+        let (yl, yh) = (lo(sy0, self.height), hi(sy1, self.height));
+        if xl > xh || yl > yh {
+            return Rect::EMPTY;
+        }
+        Rect {
+            x_lo: xl as u16,
+            x_hi: xh as u16,
+            y_lo: yl as u16,
+            y_hi: yh as u16,
+        }
+    }
+
+    fn rect_of_bounds(&self, b: &Bounds) -> Rect {
+        if b.is_empty() {
+            return Rect::EMPTY;
+        }
+        let mut pts = [[0.0; 3]; 8];
+        for (k, p) in pts.iter_mut().enumerate() {
+            for (a, c) in p.iter_mut().enumerate() {
+                *c = f64::from(if k >> a & 1 == 0 { b.min[a] } else { b.max[a] });
+            }
+        }
+        self.rect_of(&pts)
+    }
 }
 
 /// A triangle ready to write: view-space vertices and optional normals / uvs.
@@ -315,6 +513,8 @@ pub fn compile(desc: &SceneDesc, opts: &CompileOptions) -> Result<Compiled, DmEr
         desc,
         w: ImageWriter::new(),
         opts,
+        proj: Projection::default(),
+        rects: Vec::new(),
     };
     dm.run()?;
     Ok(Compiled {
@@ -365,6 +565,15 @@ impl Dm<'_> {
         let dy = 2.0 * tan_half / height as f64;
         let dx = dy;
         let x0 = -dx * width as f64 * 0.5;
+        // Project with the values the renderer will use (rounded to f32).
+        self.proj = Projection {
+            x0: f64::from(x0 as f32),
+            y0: f64::from(tan_half as f32),
+            dx: f64::from(dx as f32),
+            dy: f64::from(dy as f32),
+            width,
+            height,
+        };
         let flags = u32::from(mode == TransparencyMode::NonRefractive);
         self.w
             .push(Section::Frame)
@@ -399,6 +608,14 @@ impl Dm<'_> {
             self.light(l, &view)?;
         }
         self.cluster(&d.root, &view, d.root.name.as_str())?;
+        for r in std::mem::take(&mut self.rects) {
+            let b = [r.x_lo, r.x_hi, r.y_lo, r.y_hi];
+            let mut bytes = [0u8; 8];
+            for (k, v) in b.iter().enumerate() {
+                bytes[2 * k..2 * k + 2].copy_from_slice(&v.to_le_bytes());
+            }
+            self.w.push(Section::Rects).1.bytes(&bytes);
+        }
         if self.w.count(Section::Nodes) >= (1 << ShapeRef::INDEX_BITS) {
             return Err(DmError::TooLarge {
                 what: "too many nodes".into(),
@@ -495,11 +712,17 @@ impl Dm<'_> {
     fn open_node(&mut self) -> u32 {
         let (i, r) = self.w.push(Section::Nodes);
         r.fs(&[0.0; 6]).u(0).u(NONE);
+        self.rects.push(Rect::EMPTY);
         i
     }
 
     fn close_node(&mut self, i: u32, b: Bounds) {
         let skip = self.w.count(Section::Nodes);
+        // A cluster's rectangle is the union of its children's (tighter than its box's).
+        let r = self.rects[i as usize + 1..skip as usize]
+            .iter()
+            .fold(Rect::EMPTY, |a, r| a.union(*r));
+        self.rects[i as usize] = r;
         self.w.patch_u32(Section::Nodes, i, 24, skip);
         for k in 0..3 {
             self.w
@@ -509,9 +732,16 @@ impl Dm<'_> {
         }
     }
 
+    /// A leaf for one shape; its screen rectangle comes from its box's corners.
     fn leaf(&mut self, shape: ShapeRef, b: Bounds) {
+        let rect = self.proj.rect_of_bounds(&b);
+        self.leaf_with_rect(shape, b, rect);
+    }
+
+    fn leaf_with_rect(&mut self, shape: ShapeRef, b: Bounds, rect: Rect) {
         let (i, r) = self.w.push(Section::Nodes);
         r.fs(&b.min).fs(&b.max).u(i + 1).u(shape.encode());
+        self.rects.push(rect);
     }
 
     fn cluster(&mut self, c: &Cluster, parent: &Affine, path: &str) -> Result<Bounds, DmError> {
@@ -859,37 +1089,35 @@ impl Dm<'_> {
         Ok(out)
     }
 
-    /// Write triangles, splitting into sub-clusters of at most MESH_LEAF_SIZE.
+    /// Write triangles as leaves, splitting into sub-clusters per [`MeshHierarchy`].
     fn triangles(&mut self, mut tris: Vec<TriData>) -> Bounds {
-        if self.opts.flat_meshes || tris.len() <= MESH_LEAF_SIZE {
+        let split = match self.opts.mesh_hierarchy {
+            _ if tris.len() <= 1 => None,
+            MeshHierarchy::Flat => None,
+            MeshHierarchy::Median if tris.len() <= MESH_LEAF_SIZE => None,
+            MeshHierarchy::Median => Some(median_split(&mut tris)),
+            MeshHierarchy::Sah => sah_split(&mut tris),
+        };
+        let Some(mid) = split else {
             let mut b = Bounds::empty();
             for t in tris {
                 let tb = t.bounds();
+                // Triangles are projected directly (LINKS-1 4.4): tighter than their box.
+                let rect = self.proj.rect_of(&t.p.map(|p| p.map(f64::from)));
                 let idx = self.write_triangle(t);
-                self.leaf(
+                self.leaf_with_rect(
                     ShapeRef {
                         kind: ShapeKind::Triangle,
                         index: idx,
                     },
                     tb,
+                    rect,
                 );
                 b = b.union(tb);
             }
             return b;
-        }
-        let all = tris
-            .iter()
-            .fold(Bounds::empty(), |b, t| b.union(t.bounds()));
-        let ext = [0, 1, 2].map(|k| all.max[k] - all.min[k]);
-        let axis = if ext[0] >= ext[1] && ext[0] >= ext[2] {
-            0
-        } else if ext[1] >= ext[2] {
-            1
-        } else {
-            2
         };
-        tris.sort_by(|a, b| a.centroid(axis).total_cmp(&b.centroid(axis)));
-        let right = tris.split_off(tris.len() / 2);
+        let right = tris.split_off(mid);
         let mut b = Bounds::empty();
         for half in [tris, right] {
             let node = self.open_node();
@@ -897,7 +1125,6 @@ impl Dm<'_> {
             self.close_node(node, hb);
             b = b.union(hb);
         }
-        debug_assert!(!b.is_empty());
         b
     }
 

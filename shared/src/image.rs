@@ -4,17 +4,17 @@
 //! from those bytes through [`SceneView`]: nothing is copied or allocated, each record is
 //! decoded into registers when it is used. Only sections the scene uses take space.
 //!
-//! ## Layout (version 1, all little-endian, every section 4-byte aligned)
+//! ## Layout (version 2, all little-endian, every section 4-byte aligned)
 //! ```text
 //! offset size
 //!  0     4    magic "LNK1"
-//!  4     2    version (1)
+//!  4     2    version (2)
 //!  6     1    number format of stored scalars (0 = f32)
 //!  7     1    reserved (0)
 //!  8     4    total length in bytes
 //! 12     4    reserved (0)
-//! 16   8*13   section table: (offset u32, record count u32) for each [`Section`]
-//! 120   ...   sections, in table order
+//! 16   8*14   section table: (offset u32, record count u32) for each [`Section`]
+//! 128   ...   sections, in table order
 //! ```
 //! Record layouts are given on each `*_SIZE` constant below; `f` = stored scalar (f32),
 //! `u` = u32. Indices that may be absent use [`NONE`].
@@ -27,7 +27,7 @@ use crate::shape::triangle::Triangle;
 use core::fmt;
 
 pub const MAGIC: [u8; 4] = *b"LNK1";
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// "No index" marker.
 pub const NONE: u32 = u32::MAX;
 pub const HEADER_SIZE: usize = 16 + 8 * SECTION_COUNT;
@@ -51,8 +51,9 @@ pub enum Section {
     Boxes,
     BlobGroups,
     Balls,
+    Rects,
 }
-pub const SECTION_COUNT: usize = 13;
+pub const SECTION_COUNT: usize = 14;
 
 impl Section {
     pub const ALL: [Section; SECTION_COUNT] = [
@@ -69,6 +70,7 @@ impl Section {
         Section::Boxes,
         Section::BlobGroups,
         Section::Balls,
+        Section::Rects,
     ];
     /// Bytes per record.
     pub const fn record_size(self) -> usize {
@@ -86,6 +88,7 @@ impl Section {
             Section::Boxes => BOX_SIZE,
             Section::BlobGroups => BLOB_GROUP_SIZE,
             Section::Balls => BALL_SIZE,
+            Section::Rects => RECT_SIZE,
         }
     }
     pub const fn name(self) -> &'static str {
@@ -103,6 +106,7 @@ impl Section {
             Section::Boxes => "boxes",
             Section::BlobGroups => "blob groups",
             Section::Balls => "balls",
+            Section::Rects => "screen rects",
         }
     }
 }
@@ -135,6 +139,54 @@ pub const BOX_SIZE: usize = 4 * 22;
 pub const BLOB_GROUP_SIZE: usize = 4 * 5;
 /// center f[3], radius f, strength f.
 pub const BALL_SIZE: usize = 4 * 5;
+/// Screen rectangle of a node (LINKS-1 4.4), parallel to the node list: x_lo u16, x_hi u16,
+/// y_lo u16, y_hi u16 (inclusive pixel ranges; empty when lo > hi). The primary ray of pixel
+/// (x, y) can only hit shapes below a node if the node's rectangle contains (x, y).
+pub const RECT_SIZE: usize = 8;
+
+/// A node's screen rectangle, inclusive pixel ranges.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Rect {
+    pub x_lo: u16,
+    pub x_hi: u16,
+    pub y_lo: u16,
+    pub y_hi: u16,
+}
+
+impl Rect {
+    pub const EMPTY: Rect = Rect {
+        x_lo: 1,
+        x_hi: 0,
+        y_lo: 1,
+        y_hi: 0,
+    };
+    #[inline]
+    pub fn contains_row(&self, y: u16) -> bool {
+        self.y_lo <= y && y <= self.y_hi
+    }
+    #[inline]
+    pub fn contains_column(&self, x: u16) -> bool {
+        self.x_lo <= x && x <= self.x_hi
+    }
+    pub fn is_empty(&self) -> bool {
+        self.x_lo > self.x_hi || self.y_lo > self.y_hi
+    }
+    pub fn union(self, o: Rect) -> Rect {
+        if self.is_empty() {
+            return o;
+        }
+        if o.is_empty() {
+            return self;
+        }
+        Rect {
+            x_lo: self.x_lo.min(o.x_lo),
+            x_hi: self.x_hi.max(o.x_hi),
+            y_lo: self.y_lo.min(o.y_lo),
+            y_hi: self.y_hi.max(o.y_hi),
+        }
+    }
+}
 
 /// Shape kinds as stored in a node's shape word.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -477,6 +529,10 @@ impl<'a> SceneView<'a> {
                 }
             }
         }
+        let nrects = self.count(Section::Rects);
+        if nrects != 0 && nrects != nnodes {
+            return Err(bad(Section::Rects, nrects));
+        }
         let (nn, nuv) = (self.count(Section::Normals), self.count(Section::Uvs));
         for i in 0..self.count(Section::Triangles) {
             let at = self.rec(Section::Triangles, i);
@@ -625,6 +681,36 @@ impl<'a> SceneView<'a> {
             } else {
                 ShapeRef::decode(shape)
             },
+        }
+    }
+
+    /// The skip index of node `i` (first node after its subtree), without decoding its box.
+    #[inline]
+    pub fn node_skip(&self, i: u32) -> u32 {
+        self.u(self.rec(Section::Nodes, i) + 24)
+    }
+
+    /// Whether node `i` is a leaf (holds a shape).
+    #[inline]
+    pub fn node_is_leaf(&self, i: u32) -> bool {
+        self.u(self.rec(Section::Nodes, i) + 28) != NONE
+    }
+
+    /// Whether the DM wrote screen rectangles (needed for Y/X clipping).
+    pub fn has_rects(&self) -> bool {
+        self.count(Section::Rects) != 0
+    }
+
+    /// Screen rectangle of node `i` (requires [`Self::has_rects`]).
+    #[inline]
+    pub fn rect(&self, i: u32) -> Rect {
+        let at = self.rec(Section::Rects, i);
+        let h = |o: usize| u16::from_le_bytes([self.bytes[at + o], self.bytes[at + o + 1]]);
+        Rect {
+            x_lo: h(0),
+            x_hi: h(2),
+            y_lo: h(4),
+            y_hi: h(6),
         }
     }
 

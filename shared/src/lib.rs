@@ -6,11 +6,13 @@
 //! - [`geom`]: vectors, rays, bounding boxes, error-bounded ray origins.
 //! - [`shape`]: the primitives (triangle, ellipsoid + cut plane, box, density spheres).
 //! - [`image`]: the SceneImage byte layout and its zero-copy view.
+//! - [`clip`]: screen-space Y/X clipping of primary rays (LINKS-1 4.4).
 //! - [`render`]: the tracer and shading (eq. 2.1, 2.2), one run of pixels at a time.
 //! - `desc` and `dm` (feature `std`): the scene description and the DM scene compiler.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 #![forbid(unsafe_code)]
 
+pub mod clip;
 #[cfg(feature = "std")]
 pub mod desc;
 #[cfg(feature = "std")]

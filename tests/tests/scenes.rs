@@ -6,10 +6,11 @@
 //! covers libm and compiler differences elsewhere). Regenerate with
 //! `UPDATE_GOLDEN=1 cargo test -p links-tests --test scenes` after a deliberate change.
 
-use links_core::dm::{compile, CompileOptions};
+use links_core::dm::{compile, CompileOptions, MeshHierarchy};
+use links_core::render::Techniques;
 use links_host::frame::{decode_png_rgb, encode_png, psnr};
 use links_host::scene_file::load_scene;
-use links_tests::render_all;
+use links_tests::{render_all, render_all_with};
 use std::path::{Path, PathBuf};
 
 const GOLDEN_W: u32 = 96;
@@ -30,10 +31,15 @@ fn bundled_scenes() -> Vec<PathBuf> {
 }
 
 fn small_image(path: &Path) -> Vec<u8> {
+    small_image_with(path, MeshHierarchy::default())
+}
+
+fn small_image_with(path: &Path, mesh_hierarchy: MeshHierarchy) -> Vec<u8> {
     let desc = load_scene(path).unwrap_or_else(|e| panic!("{e}"));
     let opts = CompileOptions {
         width: Some(GOLDEN_W),
         height: Some(GOLDEN_H),
+        mesh_hierarchy,
         ..Default::default()
     };
     compile(&desc, &opts)
@@ -121,5 +127,63 @@ fn f32_and_f64_renders_agree_to_50_db() {
             .unwrap_or(0);
         println!("{name:<12} {p:>10.1} {max:>14}");
         assert!(p >= 50.0, "{name}: f32 vs f64 PSNR {p:.1} dB < 50 dB");
+    }
+}
+
+#[test]
+fn every_technique_gives_the_plain_algorithms_pixels() {
+    // Plain = LINKS-1's type 4 (no boxes, no clipping) over the paper's flat mesh clusters.
+    let variants = [
+        ("all", Techniques::ALL),
+        ("type 1", Techniques::PAPER_TYPE_1),
+        ("type 2", Techniques::PAPER_TYPE_2),
+        ("type 3", Techniques::PAPER_TYPE_3),
+        (
+            "boxes, no early shadow exit",
+            Techniques {
+                shadow_early_exit: false,
+                ..Techniques::PAPER_TYPE_3
+            },
+        ),
+        (
+            "Y clip only",
+            Techniques {
+                x_clip: false,
+                shadow_early_exit: true,
+                ..Techniques::ALL
+            },
+        ),
+    ];
+    for scene in bundled_scenes() {
+        let name = scene.file_stem().unwrap().to_string_lossy().into_owned();
+        let flat = small_image_with(&scene, MeshHierarchy::Flat);
+        let (plain, plain_stats) = render_all_with::<f32>(&flat, Techniques::PAPER_TYPE_4);
+        assert_eq!(
+            plain_stats.box_tests, 0,
+            "{name}: the plain algorithm tests no boxes"
+        );
+        for hierarchy in [
+            MeshHierarchy::Flat,
+            MeshHierarchy::Median,
+            MeshHierarchy::Sah,
+        ] {
+            let img = small_image_with(&scene, hierarchy);
+            for (label, t) in variants {
+                let (rgb, stats) = render_all_with::<f32>(&img, t);
+                let off = rgb.iter().zip(&plain).filter(|(a, b)| a != b).count();
+                assert_eq!(off, 0, "{name} {hierarchy:?} {label}: {off} channel values differ from the plain algorithm");
+                assert_eq!(
+                    stats.rays(),
+                    plain_stats.rays(),
+                    "{name} {hierarchy:?} {label}: same rays"
+                );
+                if t.y_clip {
+                    assert!(
+                        stats.clip_compares > 0 && stats.clip_overflows == 0,
+                        "{name} {label}: clipping ran"
+                    );
+                }
+            }
+        }
     }
 }
