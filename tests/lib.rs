@@ -197,5 +197,6 @@ pub fn icosphere(subdivisions: u32, radius: f64, center: [f64; 3]) -> Mesh {
                 })
             })
             .collect(),
+        groups: vec![],
     }
 }

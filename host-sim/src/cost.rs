@@ -30,6 +30,8 @@ pub struct CycleModel {
     pub per_shading: f64,
     /// Per primary ray: pixel set-up and the write of the result.
     pub per_pixel: f64,
+    /// One integer compare (and branch) of Y/X screen clipping.
+    pub per_clip_compare: f64,
     /// Average cycles per instruction (wait states, FPU latencies, loads).
     pub cycles_per_instruction: f64,
 }
@@ -47,6 +49,7 @@ impl CycleModel {
         per_blob_field_eval: 70.0,
         per_shading: 400.0,
         per_pixel: 80.0,
+        per_clip_compare: 3.0,
         cycles_per_instruction: 1.3,
     };
 
@@ -61,6 +64,7 @@ impl CycleModel {
             + s.blob_field_evals as f64 * self.per_blob_field_eval
             + s.shadings as f64 * self.per_shading
             + s.primary_rays as f64 * self.per_pixel
+            + s.clip_compares as f64 * self.per_clip_compare
     }
 
     /// Core cycles the counted work takes (rounded up: a node can't finish mid-cycle).

@@ -1,5 +1,7 @@
 //! The host side of LINKS-1: scene files, procedural scene generators, and the `links` CLI.
 
+pub mod ablation;
+pub mod ablation_doc;
 pub mod cost;
 pub mod frame;
 pub mod gen;

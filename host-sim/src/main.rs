@@ -5,6 +5,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use links_core::desc::TransparencyMode;
 use links_core::dm::{compile, CompileOptions};
 use links_core::image::{SceneView, Section};
+use links_host::ablation::{run_ablation, AblationConfig};
 use links_host::frame::{encode_png, psnr, render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::io::IsTerminal;
@@ -87,11 +88,36 @@ enum Cmd {
         #[arg(long, default_value_t = 0)]
         threads: usize,
     },
+    /// Measurement sweeps
+    #[command(subcommand)]
+    Sweep(SweepCmd),
     /// Regenerate the procedural meshes and textures of the bundled scenes
     GenAssets {
         /// Output directory
         #[arg(long, default_value = "scenes/assets")]
         dir: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum SweepCmd {
+    /// LINKS-1 Table 5.2 analog: modelled node time of each speed technique
+    Ablation {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        #[arg(long, default_value_t = 512)]
+        width: u32,
+        #[arg(long, default_value_t = 480)]
+        height: u32,
+        /// Node computers the sub-screens are shared among
+        #[arg(long, default_value_t = 16)]
+        nodes: u32,
+        /// Sub-screen counts (multiples of the height), one table row each
+        #[arg(long, value_delimiter = ',', default_value = "2400,480")]
+        divisions: Vec<u32>,
+        /// Markdown report to write
+        #[arg(short, long, default_value = "docs/techniques.md")]
+        output: PathBuf,
     },
 }
 
@@ -225,6 +251,19 @@ fn run(cli: Cli) -> Result<(), String> {
                 psnr(a, b),
                 100.0 * off as f64 / (f64_frame.width * f64_frame.height) as f64
             );
+            Ok(())
+        }
+        Cmd::Sweep(SweepCmd::Ablation { scene, width, height, nodes, divisions, output }) => {
+            let desc = load_scene(&scene).map_err(|e| e.to_string())?;
+            let cfg = AblationConfig { width, height, nodes, divisions, ..AblationConfig::default() };
+            let report = run_ablation(&desc, &cfg, &|step| eprintln!("rendering {step} ..."))
+                .map_err(|e| format!("{}: {e}", scene.display()))?;
+            let command = std::env::args().skip(1).collect::<Vec<_>>().join(" ");
+            let doc = links_host::ablation_doc::render(&report, &scene.display().to_string(), &command);
+            println!("{}", report.table());
+            println!("refractive / non-refractive (type 1): {:.2}x", report.refractive_ratio());
+            std::fs::write(&output, doc).map_err(|e| format!("{}: {e}", output.display()))?;
+            eprintln!("wrote {}", output.display());
             Ok(())
         }
         Cmd::GenAssets { dir } => {

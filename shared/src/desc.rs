@@ -158,6 +158,17 @@ pub struct Mesh {
     pub normals: Vec<[f64; 3]>,
     pub uvs: Vec<[f64; 2]>,
     pub faces: Vec<[FaceVertex; 3]>,
+    /// The modeller's parts (OBJ `g`/`o`), in face order; empty for an ungrouped mesh.
+    pub groups: Vec<MeshGroup>,
+}
+
+/// A named run of consecutive faces of a mesh, from `first_face` to the next group's start.
+/// The DM makes each group a sub-cluster of its mesh (LINKS-1 4.1: the cluster hierarchy
+/// follows the object's structure).
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeshGroup {
+    pub name: String,
+    pub first_face: u32,
 }
 
 /// `kernel` of a density-sphere group (LINKS-1 2, primitive 3).

@@ -826,9 +826,31 @@ impl Dm<'_> {
                 smooth,
             } => {
                 let material = self.check_material(*material)?;
-                let tris = self.mesh_triangles(mesh, *smooth, material, full, &normal_m, path)?;
+                let mut tris = self.mesh_triangles(mesh, *smooth, material, full, &normal_m, path)?;
                 let node = self.open_node();
-                let b = self.triangles(tris);
+                let b = if mesh.groups.len() <= 1 {
+                    self.triangles(tris)
+                } else {
+                    // One sub-cluster per group (the model's parts), last group first so the
+                    // tail of `tris` can be split off; then written in file order.
+                    let mut parts = Vec::with_capacity(mesh.groups.len());
+                    for g in mesh.groups.iter().rev() {
+                        let at = (g.first_face as usize).min(tris.len());
+                        parts.push(tris.split_off(at));
+                    }
+                    if !tris.is_empty() {
+                        // Faces before the first group form a part of their own.
+                        parts.push(tris);
+                    }
+                    let mut b = Bounds::empty();
+                    for part in parts.into_iter().rev().filter(|p| !p.is_empty()) {
+                        let sub = self.open_node();
+                        let pb = self.triangles(part);
+                        self.close_node(sub, pb);
+                        b = b.union(pb);
+                    }
+                    b
+                };
                 self.close_node(node, b);
                 Ok(b)
             }
@@ -1207,6 +1229,7 @@ mod tests {
                 [fv(0, 0), fv(1, 0), fv(2, 0)],
                 [fv(0, 0), fv(2, 0), fv(3, 1)],
             ],
+            groups: vec![],
         }
     }
 

@@ -116,7 +116,8 @@ impl GenMesh {
         }
         for (i, f) in self.faces.iter().enumerate() {
             if let Some(p) = part_at.get(&i) {
-                let _ = writeln!(s, "# part: {}", p.name);
+                // One OBJ group per part: the scene loader makes each a sub-cluster.
+                let _ = writeln!(s, "g {}", p.name.replace(char::is_whitespace, "_"));
             }
             s.push('f');
             for &(p, n, t) in f {
@@ -929,6 +930,7 @@ pub(crate) mod check {
                     f += 1;
                 }
                 Some(x) if x.starts_with('#') => {}
+                Some("g") => assert_eq!(it.count(), 1, "{line}"),
                 None => {}
                 Some(other) => panic!("unexpected OBJ record {other:?}"),
             }
@@ -1117,10 +1119,10 @@ mod tests {
             vt 1.000000 0.000000\n\
             vt 1.000000 1.000000\n\
             vt 0.000000 1.000000\n\
-            # part: quad\n\
+            g quad\n\
             f 1/1/1 2/2/1 3/3/1\n\
             f 1/1/1 3/3/1 4/4/1\n\
-            # part: tri\n\
+            g tri\n\
             f 5//2 6//2 7//2\n";
         assert_eq!(obj, expected);
         assert_eq!(check::parse_obj(&obj), (7, 2, 4, 3));

@@ -1,16 +1,15 @@
 //! A small Wavefront OBJ reader: `v`, `vn`, `vt`, `f` (all four vertex forms, negative
-//! indices, polygons fan-triangulated). Grouping and material statements are ignored.
+//! indices, polygons fan-triangulated), and `g`/`o` groups (the model's parts, which become
+//! sub-clusters). Smoothing and material statements are ignored.
 
-use links_core::desc::{FaceVertex, Mesh};
+use links_core::desc::{FaceVertex, Mesh, MeshGroup};
 
 use super::error::SceneError;
 use super::values::{degenerate_triangle, normalize};
 
-/// Statements that are accepted and ignored: grouping, smoothing groups, materials (the scene
+/// Statements that are accepted and ignored: smoothing groups, materials (the scene
 /// file assigns the material), and point/line/curve-parameter elements (nothing to render).
 const IGNORED: &[&str] = &[
-    "o",
-    "g",
     "s",
     "usemtl",
     "mtllib",
@@ -31,6 +30,7 @@ pub(super) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, Sc
         normals: Vec::new(),
         uvs: Vec::new(),
         faces: Vec::new(),
+        groups: Vec::new(),
     };
     for (line_idx, raw_line) in text.lines().enumerate() {
         let line_no = line_idx + 1;
@@ -46,6 +46,15 @@ pub(super) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, Sc
             message,
         };
         match keyword {
+            "g" | "o" => {
+                let name = tokens.map(|(_, t)| t).collect::<Vec<_>>().join(" ");
+                let first_face = mesh.faces.len() as u32;
+                // A group with no faces yet is renamed, not kept empty.
+                if mesh.groups.last().is_some_and(|g| g.first_face == first_face) {
+                    mesh.groups.pop();
+                }
+                mesh.groups.push(MeshGroup { name, first_face });
+            }
             "v" => {
                 let nums =
                     numbers(&mut tokens, 3, 7, "v x y z [w]").map_err(|(c, m)| err(Some(c), m))?;

@@ -124,6 +124,7 @@ fn full_example_parses_to_the_expected_scene() {
             normal: None,
             uv: None,
         })],
+        groups: vec![],
     };
     let expected = SceneDesc {
         camera: Camera {
