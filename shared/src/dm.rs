@@ -1259,6 +1259,21 @@ mod tests {
     }
 
     #[test]
+    fn mesh_groups_become_sub_clusters() {
+        let mut mesh = quad_mesh([0.0, 0.0, 1.0]);
+        mesh.groups = vec![MeshGroup { name: "a".into(), first_face: 0 }, MeshGroup { name: "b".into(), first_face: 1 }];
+        let s = scene(vec![Node::Shape(Shape::Mesh { mesh, material: 0, smooth: false })]);
+        let opts = CompileOptions { mesh_hierarchy: MeshHierarchy::Flat, ..Default::default() };
+        let img = compile(&s, &opts).unwrap().bytes;
+        let v = SceneView::new(&img).unwrap();
+        // root, mesh, group a, its triangle, group b, its triangle.
+        let skips: Vec<u32> = (0..v.node_count()).map(|i| v.node_skip(i)).collect();
+        let leaves: Vec<bool> = (0..v.node_count()).map(|i| v.node_is_leaf(i)).collect();
+        assert_eq!(skips, [6, 6, 4, 4, 6, 6]);
+        assert_eq!(leaves, [false, false, false, true, false, true]);
+    }
+
+    #[test]
     fn boxes_contain_their_shapes_after_transforms() {
         let t = Transform {
             translate: [1.0, -2.0, 0.5],

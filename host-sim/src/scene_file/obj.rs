@@ -294,6 +294,17 @@ mod tests {
     }
 
     #[test]
+    fn groups_mark_the_parts_in_face_order() {
+        let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\ng lens\nf 1 3 2\nf 2 3 1\n\
+                    o empty\ng body part\nf 3 2 1\n";
+        let m = parse_obj(text, "g.obj", "g.obj").unwrap();
+        assert_eq!(m.faces.len(), 4);
+        let names: Vec<(&str, u32)> = m.groups.iter().map(|g| (g.name.as_str(), g.first_face)).collect();
+        // A group that receives no faces ("empty") is replaced by the next one.
+        assert_eq!(names, [("lens", 1), ("body part", 3)]);
+    }
+
+    #[test]
     fn quad_fan_and_forms() {
         let text = "# a quad\nmtllib x.mtl\no quad\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n\
                     vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 2\ng g1\nusemtl m\ns off\n\
