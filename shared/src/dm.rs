@@ -826,7 +826,8 @@ impl Dm<'_> {
                 smooth,
             } => {
                 let material = self.check_material(*material)?;
-                let mut tris = self.mesh_triangles(mesh, *smooth, material, full, &normal_m, path)?;
+                let mut tris =
+                    self.mesh_triangles(mesh, *smooth, material, full, &normal_m, path)?;
                 let node = self.open_node();
                 let b = if mesh.groups.len() <= 1 {
                     self.triangles(tris)
@@ -1265,32 +1266,83 @@ mod tests {
         let base = mesh.clone();
         for k in 1..40u32 {
             let off = mesh.positions.len() as u32;
-            mesh.positions.extend(base.positions.iter().map(|p| [p[0] + k as f64, p[1], p[2] + 0.1 * k as f64]));
-            mesh.faces.extend(base.faces.iter().map(|f| f.map(|v| FaceVertex { position: v.position + off, ..v })));
+            mesh.positions.extend(
+                base.positions
+                    .iter()
+                    .map(|p| [p[0] + k as f64, p[1], p[2] + 0.1 * k as f64]),
+            );
+            mesh.faces.extend(base.faces.iter().map(|f| {
+                f.map(|v| FaceVertex {
+                    position: v.position + off,
+                    ..v
+                })
+            }));
         }
-        mesh.groups = vec![MeshGroup { name: "a".into(), first_face: 0 }, MeshGroup { name: "b".into(), first_face: 33 }];
+        mesh.groups = vec![
+            MeshGroup {
+                name: "a".into(),
+                first_face: 0,
+            },
+            MeshGroup {
+                name: "b".into(),
+                first_face: 33,
+            },
+        ];
         let blob = Shape::Blobs {
-            balls: vec![Ball { center: [0.0; 3], radius: 1.0, strength: 1.0 }],
+            balls: vec![Ball {
+                center: [0.0; 3],
+                radius: 1.0,
+                strength: 1.0,
+            }],
             threshold: 0.5,
             kernel: BlobKernel::Links,
             material: 0,
         };
         let inner = Cluster {
             name: "inner".into(),
-            transform: Transform { translate: [1.0, 2.0, 3.0], ..Transform::default() },
+            transform: Transform {
+                translate: [1.0, 2.0, 3.0],
+                ..Transform::default()
+            },
             children: vec![
-                Node::Shape(Shape::Box { min: [0.0; 3], max: [1.0; 3], material: 0 }),
+                Node::Shape(Shape::Box {
+                    min: [0.0; 3],
+                    max: [1.0; 3],
+                    material: 0,
+                }),
                 Node::Shape(blob),
                 Node::Cluster(Cluster::default()),
             ],
         };
         let s = scene(vec![
-            Node::Shape(Shape::Mesh { mesh, material: 0, smooth: true }),
+            Node::Shape(Shape::Mesh {
+                mesh,
+                material: 0,
+                smooth: true,
+            }),
             Node::Cluster(inner),
-            Node::Shape(Shape::Ellipsoid { center: [0.0; 3], radii: [1.0; 3], rotate_deg: [0.0; 3], cut: None, material: 0 }),
+            Node::Shape(Shape::Ellipsoid {
+                center: [0.0; 3],
+                radii: [1.0; 3],
+                rotate_deg: [0.0; 3],
+                cut: None,
+                material: 0,
+            }),
         ]);
-        for h in [MeshHierarchy::Flat, MeshHierarchy::Median, MeshHierarchy::Sah] {
-            let img = compile(&s, &CompileOptions { mesh_hierarchy: h, ..Default::default() }).unwrap().bytes;
+        for h in [
+            MeshHierarchy::Flat,
+            MeshHierarchy::Median,
+            MeshHierarchy::Sah,
+        ] {
+            let img = compile(
+                &s,
+                &CompileOptions {
+                    mesh_hierarchy: h,
+                    ..Default::default()
+                },
+            )
+            .unwrap()
+            .bytes;
             let v = SceneView::new(&img).unwrap();
             let mut seen = std::collections::HashMap::new();
             for i in 0..v.node_count() {
@@ -1300,21 +1352,51 @@ mod tests {
                 // Subtrees nest: a child's subtree ends no later than its parent's.
                 let skip = v.node_skip(i);
                 for j in i + 1..skip {
-                    assert!(v.node_skip(j) <= skip, "{h:?}: node {j} leaves its parent {i}");
+                    assert!(
+                        v.node_skip(j) <= skip,
+                        "{h:?}: node {j} leaves its parent {i}"
+                    );
                 }
             }
-            assert_eq!(v.node_skip(0), v.node_count(), "{h:?}: the root spans everything");
-            assert_eq!(seen.len(), 80 + 3, "{h:?}: 80 triangles, a box, a blob group, an ellipsoid");
-            assert!(seen.values().all(|&n| n == 1), "{h:?}: every shape in exactly one leaf");
+            assert_eq!(
+                v.node_skip(0),
+                v.node_count(),
+                "{h:?}: the root spans everything"
+            );
+            assert_eq!(
+                seen.len(),
+                80 + 3,
+                "{h:?}: 80 triangles, a box, a blob group, an ellipsoid"
+            );
+            assert!(
+                seen.values().all(|&n| n == 1),
+                "{h:?}: every shape in exactly one leaf"
+            );
         }
     }
 
     #[test]
     fn mesh_groups_become_sub_clusters() {
         let mut mesh = quad_mesh([0.0, 0.0, 1.0]);
-        mesh.groups = vec![MeshGroup { name: "a".into(), first_face: 0 }, MeshGroup { name: "b".into(), first_face: 1 }];
-        let s = scene(vec![Node::Shape(Shape::Mesh { mesh, material: 0, smooth: false })]);
-        let opts = CompileOptions { mesh_hierarchy: MeshHierarchy::Flat, ..Default::default() };
+        mesh.groups = vec![
+            MeshGroup {
+                name: "a".into(),
+                first_face: 0,
+            },
+            MeshGroup {
+                name: "b".into(),
+                first_face: 1,
+            },
+        ];
+        let s = scene(vec![Node::Shape(Shape::Mesh {
+            mesh,
+            material: 0,
+            smooth: false,
+        })]);
+        let opts = CompileOptions {
+            mesh_hierarchy: MeshHierarchy::Flat,
+            ..Default::default()
+        };
         let img = compile(&s, &opts).unwrap().bytes;
         let v = SceneView::new(&img).unwrap();
         // root, mesh, group a, its triangle, group b, its triangle.

@@ -273,6 +273,13 @@ impl<T: Real> Aabb<T> {
     /// 1 + 2·gamma(3) (pbrt) so rounding can't make a ray graze past a box it touches.
     #[inline]
     pub fn hit(&self, ray: &Ray<T>, inv: &RayInv<T>, t_max: T) -> bool {
+        self.entry(ray, inv, t_max).is_some()
+    }
+
+    /// The slab test returning where the ray enters the box (0 when it starts inside), or
+    /// `None` when it misses within `[0, t_max]`.
+    #[inline]
+    pub fn entry(&self, ray: &Ray<T>, inv: &RayInv<T>, t_max: T) -> Option<T> {
         let mut t0 = T::ZERO;
         let mut t1 = t_max;
         let widen = T::ONE + T::TWO * T::err_gamma(3);
@@ -294,11 +301,11 @@ impl<T: Real> Aabb<T> {
                 t1 = tf;
             }
             if t0 > t1 {
-                return false;
+                return None;
             }
             axis += 1;
         }
-        true
+        Some(t0)
     }
 }
 

@@ -167,6 +167,54 @@ struct Hit<T> {
     detail: HitDetail<T>,
 }
 
+/// Depth of the closest-hit traversal stack (a node and its box entry distance per entry).
+const TRAVERSAL_STACK: usize = 48;
+/// Most children of one node visited nearest-first; further hit children are walked in place.
+const ORDERED_FANOUT: usize = 8;
+
+/// The nearest hit so far. Equal distances go to the lower node index, so the answer does
+/// not depend on the order shapes are tested in (ordered traversal, clipping, plain).
+struct Nearest<T> {
+    hit: Option<Hit<T>>,
+    node: u32,
+    t_max: T,
+}
+
+impl<T: Real> Nearest<T> {
+    fn new(t_max: T) -> Self {
+        Self {
+            hit: None,
+            node: u32::MAX,
+            t_max,
+        }
+    }
+    /// Upper bound for tests still worth making: a hit at exactly the current distance
+    /// may still win the tie, so one ulp beyond it.
+    #[inline]
+    fn limit(&self) -> T {
+        match &self.hit {
+            Some(h) => h.t.next_up(),
+            None => self.t_max,
+        }
+    }
+    /// Whether a box entered at `t` lies wholly behind the nearest hit.
+    #[inline]
+    fn beyond(&self, t: T) -> bool {
+        self.hit.as_ref().is_some_and(|h| t > h.t)
+    }
+    #[inline]
+    fn offer(&mut self, h: Hit<T>, node: u32) {
+        let better = match &self.hit {
+            None => true,
+            Some(b) => h.t < b.t || (h.t == b.t && node < self.node),
+        };
+        if better {
+            self.hit = Some(h);
+            self.node = node;
+        }
+    }
+}
+
 /// A finished hit: where, how accurately, which way the surface faces, what it is made of.
 #[derive(Clone, Copy, Debug)]
 pub struct Surface<T> {
@@ -275,8 +323,7 @@ impl<'a, T: Real> Tracer<'a, T> {
     /// those whose rectangle contains column `x`), each behind its own box test.
     fn closest_hit_clipped(&mut self, ray: &Ray<T>, x: u32) -> Option<Hit<T>> {
         let inv = RayInv::new(ray.dir);
-        let mut best: Option<Hit<T>> = None;
-        let mut t_best = T::MAX;
+        let mut near = Nearest::new(T::MAX);
         let col = x.min(u16::MAX as u32) as u16;
         let swept = self.techniques.x_clip && self.clip.advance(col, &mut self.stats.clip_compares);
         let n = if swept {
@@ -292,17 +339,14 @@ impl<'a, T: Real> Tracer<'a, T> {
             };
             let node = self.scene.node::<T>(leaf);
             self.stats.box_tests += 1;
-            if !node.bounds.hit(ray, &inv, t_best) {
+            if !node.bounds.hit(ray, &inv, near.limit()) {
                 continue;
             }
             if let Some(shape) = node.shape {
-                if let Some(h) = self.intersect_shape(shape, ray, t_best) {
-                    t_best = h.t;
-                    best = Some(h);
-                }
+                self.offer(&mut near, shape, leaf, ray);
             }
         }
-        best
+        near.hit
     }
 
     /// Nearest shape along `ray` in (0, t_max): walk the node list, skipping the subtree of
@@ -313,41 +357,105 @@ impl<'a, T: Real> Tracer<'a, T> {
             return self.closest_hit_plain(ray, t_max);
         }
         let inv = RayInv::new(ray.dir);
-        let n = self.scene.node_count();
-        let mut best: Option<Hit<T>> = None;
-        let mut t_best = t_max;
-        let mut i = 0;
-        while i < n {
+        let mut near = Nearest::new(t_max);
+        let mut stack = [(0u32, T::ZERO); TRAVERSAL_STACK];
+        self.stats.box_tests += 1;
+        let Some(t_root) = self.scene.node::<T>(0).bounds.entry(ray, &inv, t_max) else {
+            return None;
+        };
+        stack[0] = (0, t_root);
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let (i, t_in) = stack[sp];
+            if near.beyond(t_in) {
+                continue;
+            }
+            let node = self.scene.node::<T>(i);
+            if let Some(shape) = node.shape {
+                self.offer(&mut near, shape, i, ray);
+                continue;
+            }
+            // Test the children's boxes; visit the nearest first so later ones can be pruned.
+            let mut kids = [(0u32, T::ZERO); ORDERED_FANOUT];
+            let mut nk = 0;
+            let mut c = i + 1;
+            while c < node.skip {
+                let child = self.scene.node::<T>(c);
+                self.stats.box_tests += 1;
+                if let Some(t) = child.bounds.entry(ray, &inv, near.limit()) {
+                    if nk < ORDERED_FANOUT && sp + nk < TRAVERSAL_STACK {
+                        kids[nk] = (c, t);
+                        nk += 1;
+                    } else {
+                        // No room to order it: walk its subtree in place.
+                        self.walk_hit_subtree(c, child.shape, child.skip, ray, &inv, &mut near);
+                    }
+                }
+                c = child.skip;
+            }
+            // Push farthest first (insertion sort of at most ORDERED_FANOUT entries).
+            for k in 1..nk {
+                let mut j = k;
+                while j > 0 && kids[j - 1].1 < kids[j].1 {
+                    kids.swap(j - 1, j);
+                    j -= 1;
+                }
+            }
+            for kid in &kids[..nk] {
+                stack[sp] = *kid;
+                sp += 1;
+            }
+        }
+        near.hit
+    }
+
+    /// Depth-first walk (in node order) of a subtree whose root box the ray already hit.
+    fn walk_hit_subtree(
+        &mut self,
+        root: u32,
+        root_shape: Option<ShapeRef>,
+        end: u32,
+        ray: &Ray<T>,
+        inv: &RayInv<T>,
+        near: &mut Nearest<T>,
+    ) {
+        if let Some(shape) = root_shape {
+            self.offer(near, shape, root, ray);
+            return;
+        }
+        let mut i = root + 1;
+        while i < end {
             let node = self.scene.node::<T>(i);
             self.stats.box_tests += 1;
-            if !node.bounds.hit(ray, &inv, t_best) {
+            if !node.bounds.hit(ray, inv, near.limit()) {
                 i = node.skip;
                 continue;
             }
             if let Some(shape) = node.shape {
-                if let Some(h) = self.intersect_shape(shape, ray, t_best) {
-                    t_best = h.t;
-                    best = Some(h);
-                }
+                self.offer(near, shape, i, ray);
             }
             i += 1;
         }
-        best
+    }
+
+    /// Test a shape and keep it if it is the nearest so far.
+    #[inline]
+    fn offer(&mut self, near: &mut Nearest<T>, shape: ShapeRef, node: u32, ray: &Ray<T>) {
+        if let Some(h) = self.intersect_shape(shape, ray, near.limit()) {
+            near.offer(h, node);
+        }
     }
 
     /// The plain algorithm: every shape, no boxes (the paper's type 4).
     fn closest_hit_plain(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
-        let mut best: Option<Hit<T>> = None;
-        let mut t_best = t_max;
+        let mut near = Nearest::new(t_max);
         for i in 0..self.scene.node_count() {
             if let Some(shape) = self.scene.node::<T>(i).shape {
-                if let Some(h) = self.intersect_shape(shape, ray, t_best) {
-                    t_best = h.t;
-                    best = Some(h);
-                }
+                self.offer(&mut near, shape, i, ray);
             }
         }
-        best
+        near.hit
     }
 
     /// Whether any opaque surface lies along `ray` in (0, t_max) (stops at the first), and
