@@ -143,7 +143,11 @@ impl std::fmt::Display for AblationError {
 impl std::error::Error for AblationError {}
 
 /// The runs of one division count: `(y, x, len)`, row-major, each row cut into equal parts.
-pub fn runs(width: u32, height: u32, divisions: u32) -> Result<Vec<(u32, u32, u32)>, AblationError> {
+pub fn runs(
+    width: u32,
+    height: u32,
+    divisions: u32,
+) -> Result<Vec<(u32, u32, u32)>, AblationError> {
     if divisions == 0 || divisions % height != 0 || divisions / height > width {
         return Err(AblationError::BadDivisions { divisions, height });
     }
@@ -160,7 +164,11 @@ pub fn runs(width: u32, height: u32, divisions: u32) -> Result<Vec<(u32, u32, u3
 }
 
 /// Render every run with a fresh tracer and return each run's counts.
-fn run_costs(image: &[u8], techniques: Techniques, runs: &[(u32, u32, u32)]) -> Result<Vec<Stats>, AblationError> {
+fn run_costs(
+    image: &[u8],
+    techniques: Techniques,
+    runs: &[(u32, u32, u32)],
+) -> Result<Vec<Stats>, AblationError> {
     let view = SceneView::new(image).map_err(AblationError::Image)?;
     Ok(runs
         .par_iter()
@@ -179,7 +187,11 @@ pub fn makespan(cycles: &[u64], nodes: u32) -> u64 {
     let mut free_at = vec![0u64; nodes.max(1) as usize];
     for &c in cycles {
         // The node that becomes free first (lowest index on ties) takes the next run.
-        let (i, _) = free_at.iter().enumerate().min_by_key(|&(i, t)| (*t, i)).unwrap_or((0, &0));
+        let (i, _) = free_at
+            .iter()
+            .enumerate()
+            .min_by_key(|&(i, t)| (*t, i))
+            .unwrap_or((0, &0));
         free_at[i] += c;
     }
     free_at.into_iter().max().unwrap_or(0)
@@ -232,7 +244,9 @@ pub fn run_ablation(
             transparency: t,
             ..Default::default()
         };
-        compile(desc, &opts).map(|c| c.bytes).map_err(AblationError::Compile)
+        compile(desc, &opts)
+            .map(|c| c.bytes)
+            .map_err(AblationError::Compile)
     };
     let finest = *cfg.divisions.iter().max().unwrap_or(&cfg.height);
     let fine_runs = runs(cfg.width, cfg.height, finest)?;
@@ -245,7 +259,13 @@ pub fn run_ablation(
                 progress(&format!("{} ({d} sub-screens)", v.name));
                 let start = Instant::now();
                 let per_run = run_costs(&image, v.techniques, &runs(cfg.width, cfg.height, d)?)?;
-                cells.push(cell(v.name, d, &per_run, cfg, start.elapsed().as_secs_f64()));
+                cells.push(cell(
+                    v.name,
+                    d,
+                    &per_run,
+                    cfg,
+                    start.elapsed().as_secs_f64(),
+                ));
             }
         } else {
             // The same pixels cost the same however the screen is cut: render the finest
@@ -264,14 +284,30 @@ pub fn run_ablation(
     progress("type 1, refractive transparency");
     let image = compile_with(MeshHierarchy::Flat, Some(TransparencyMode::Refractive))?;
     let start = Instant::now();
-    let per_run = run_costs(&image, Techniques::PAPER_TYPE_1, &runs(cfg.width, cfg.height, finest)?)?;
-    let refractive = cell("type 1 refractive", finest, &per_run, cfg, start.elapsed().as_secs_f64());
-    Ok(AblationReport { config: cfg.clone(), cells, refractive })
+    let per_run = run_costs(
+        &image,
+        Techniques::PAPER_TYPE_1,
+        &runs(cfg.width, cfg.height, finest)?,
+    )?;
+    let refractive = cell(
+        "type 1 refractive",
+        finest,
+        &per_run,
+        cfg,
+        start.elapsed().as_secs_f64(),
+    );
+    Ok(AblationReport {
+        config: cfg.clone(),
+        cells,
+        refractive,
+    })
 }
 
 impl AblationReport {
     pub fn cell(&self, variant: &str, divisions: u32) -> Option<&Cell> {
-        self.cells.iter().find(|c| c.variant == variant && c.divisions == divisions)
+        self.cells
+            .iter()
+            .find(|c| c.variant == variant && c.divisions == divisions)
     }
 
     /// The Table 5.2 analog as Markdown: modelled seconds and ratios to type 1.
@@ -291,7 +327,9 @@ impl AblationReport {
             s.push_str(&format!("| {d} |"));
             for v in VARIANTS {
                 match self.cell(v.name, d) {
-                    Some(c) => s.push_str(&format!(" {:.3} s ({:.2}x) |", c.seconds, c.seconds / base)),
+                    Some(c) => {
+                        s.push_str(&format!(" {:.3} s ({:.2}x) |", c.seconds, c.seconds / base))
+                    }
                     None => s.push_str(" - |"),
                 }
             }
@@ -340,7 +378,16 @@ mod tests {
         let r = runs(512, 480, 2400).unwrap();
         assert_eq!(r.len(), 2400);
         assert_eq!(r.iter().map(|r| r.2).sum::<u32>(), 512 * 480);
-        assert_eq!(&r[..5], &[(0, 0, 102), (0, 102, 102), (0, 204, 103), (0, 307, 102), (0, 409, 103)]);
+        assert_eq!(
+            &r[..5],
+            &[
+                (0, 0, 102),
+                (0, 102, 102),
+                (0, 204, 103),
+                (0, 307, 102),
+                (0, 409, 103)
+            ]
+        );
         assert_eq!(runs(512, 480, 480).unwrap()[7], (7, 0, 512));
         assert!(runs(512, 480, 1000).is_err());
     }

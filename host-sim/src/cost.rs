@@ -93,8 +93,17 @@ mod tests {
 
     #[test]
     fn cycles_are_the_weighted_sum_of_counts() {
-        let m = CycleModel { cycles_per_instruction: 2.0, ..CycleModel::CORTEX_M4F_F32 };
-        let s = Stats { primary_rays: 1, box_tests: 10, triangle_tests: 2, shadings: 1, ..Stats::default() };
+        let m = CycleModel {
+            cycles_per_instruction: 2.0,
+            ..CycleModel::CORTEX_M4F_F32
+        };
+        let s = Stats {
+            primary_rays: 1,
+            box_tests: 10,
+            triangle_tests: 2,
+            shadings: 1,
+            ..Stats::default()
+        };
         let instr = 60.0 + 10.0 * 45.0 + 2.0 * 110.0 + 400.0 + 80.0;
         assert_eq!(m.instructions(&s), instr);
         assert_eq!(m.cycles(&s), (instr * 2.0) as u64);

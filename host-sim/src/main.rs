@@ -253,15 +253,32 @@ fn run(cli: Cli) -> Result<(), String> {
             );
             Ok(())
         }
-        Cmd::Sweep(SweepCmd::Ablation { scene, width, height, nodes, divisions, output }) => {
+        Cmd::Sweep(SweepCmd::Ablation {
+            scene,
+            width,
+            height,
+            nodes,
+            divisions,
+            output,
+        }) => {
             let desc = load_scene(&scene).map_err(|e| e.to_string())?;
-            let cfg = AblationConfig { width, height, nodes, divisions, ..AblationConfig::default() };
+            let cfg = AblationConfig {
+                width,
+                height,
+                nodes,
+                divisions,
+                ..AblationConfig::default()
+            };
             let report = run_ablation(&desc, &cfg, &|step| eprintln!("rendering {step} ..."))
                 .map_err(|e| format!("{}: {e}", scene.display()))?;
             let command = std::env::args().skip(1).collect::<Vec<_>>().join(" ");
-            let doc = links_host::ablation_doc::render(&report, &scene.display().to_string(), &command);
+            let doc =
+                links_host::ablation_doc::render(&report, &scene.display().to_string(), &command);
             println!("{}", report.table());
-            println!("refractive / non-refractive (type 1): {:.2}x", report.refractive_ratio());
+            println!(
+                "refractive / non-refractive (type 1): {:.2}x",
+                report.refractive_ratio()
+            );
             std::fs::write(&output, doc).map_err(|e| format!("{}: {e}", output.display()))?;
             eprintln!("wrote {}", output.display());
             Ok(())

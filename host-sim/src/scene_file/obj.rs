@@ -50,7 +50,11 @@ pub(super) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, Sc
                 let name = tokens.map(|(_, t)| t).collect::<Vec<_>>().join(" ");
                 let first_face = mesh.faces.len() as u32;
                 // A group with no faces yet is renamed, not kept empty.
-                if mesh.groups.last().is_some_and(|g| g.first_face == first_face) {
+                if mesh
+                    .groups
+                    .last()
+                    .is_some_and(|g| g.first_face == first_face)
+                {
                     mesh.groups.pop();
                 }
                 mesh.groups.push(MeshGroup { name, first_face });
@@ -299,7 +303,11 @@ mod tests {
                     o empty\ng body part\nf 3 2 1\n";
         let m = parse_obj(text, "g.obj", "g.obj").unwrap();
         assert_eq!(m.faces.len(), 4);
-        let names: Vec<(&str, u32)> = m.groups.iter().map(|g| (g.name.as_str(), g.first_face)).collect();
+        let names: Vec<(&str, u32)> = m
+            .groups
+            .iter()
+            .map(|g| (g.name.as_str(), g.first_face))
+            .collect();
         // A group that receives no faces ("empty") is replaced by the next one.
         assert_eq!(names, [("lens", 1), ("body part", 3)]);
     }
