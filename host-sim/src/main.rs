@@ -51,6 +51,9 @@ struct SceneArgs {
     /// Override the scene's transparency mode
     #[arg(long, value_enum)]
     transparency: Option<TransparencyArg>,
+    /// Render without shadows (no shadow rays)
+    #[arg(long)]
+    no_shadows: bool,
 }
 
 #[derive(Subcommand)]
@@ -132,6 +135,7 @@ fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
             TransparencyArg::NonRefractive => TransparencyMode::NonRefractive,
         }),
         mesh_hierarchy: Default::default(),
+        no_shadows: a.no_shadows,
     };
     let compiled = compile(&desc, &opts).map_err(|e| format!("{}: {e}", a.scene.display()))?;
     Ok(compiled.bytes)

@@ -171,7 +171,8 @@ impl RowClip {
     }
 }
 
-#[cfg(test)]
+// These tests build scenes with the DM, which needs `std`.
+#[cfg(all(test, feature = "std"))]
 mod tests {
     use super::*;
     use crate::desc::*;

@@ -31,6 +31,9 @@ pub struct CompileOptions {
     pub transparency: Option<TransparencyMode>,
     /// How the DM organises the triangles of a mesh below its cluster.
     pub mesh_hierarchy: MeshHierarchy,
+    /// Render without shadows (no shadow rays; lights always reach a lit surface), as the
+    /// paper's load-balancing measurements did.
+    pub no_shadows: bool,
 }
 
 /// The hierarchy the DM builds inside each mesh cluster.
@@ -574,7 +577,8 @@ impl Dm<'_> {
             width,
             height,
         };
-        let flags = u32::from(mode == TransparencyMode::NonRefractive);
+        let flags = u32::from(mode == TransparencyMode::NonRefractive)
+            | (u32::from(self.opts.no_shadows) << 1);
         self.w
             .push(Section::Frame)
             .1

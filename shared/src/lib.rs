@@ -10,7 +10,8 @@
 //! - [`render`]: the tracer and shading (eq. 2.1, 2.2), one run of pixels at a time.
 //! - `desc` and `dm` (feature `std`): the scene description and the DM scene compiler.
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
-#![forbid(unsafe_code)]
+// The one exception: the FPU square root in `num` (inline asm).
+#![deny(unsafe_code)]
 
 pub mod clip;
 #[cfg(feature = "std")]

@@ -360,9 +360,7 @@ impl<'a, T: Real> Tracer<'a, T> {
         let mut near = Nearest::new(t_max);
         let mut stack = [(0u32, T::ZERO); TRAVERSAL_STACK];
         self.stats.box_tests += 1;
-        let Some(t_root) = self.scene.node::<T>(0).bounds.entry(ray, &inv, t_max) else {
-            return None;
-        };
+        let t_root = self.scene.node::<T>(0).bounds.entry(ray, &inv, t_max)?;
         stack[0] = (0, t_root);
         let mut sp = 1;
         while sp > 0 {
@@ -770,8 +768,11 @@ impl<'a, T: Real> Tracer<'a, T> {
     /// the transmittances of every surface crossed (LINKS-1: transparent objects cast
     /// lighter shadows).
     fn shadow(&mut self, surf: &Surface<T>, dir: Vec3<T>, dist: T) -> Vec3<T> {
-        self.stats.shadow_rays += 1;
         let mut atten = Vec3::splat(T::ONE);
+        if self.frame.no_shadows {
+            return atten;
+        }
+        self.stats.shadow_rays += 1;
         let mut origin = offset_ray_origin(surf.p, surf.p_error, surf.ng, dir);
         let far = dist < T::MAX;
         let light_pos = surf.p + dir * dist;

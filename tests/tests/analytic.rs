@@ -301,6 +301,37 @@ fn shadow_behind_a_half_transmitting_sheet_is_lit_at_half() {
         }
     }
     assert!(n_half > 10 && n_full > 10, "half {n_half}, full {n_full}");
+
+    // Without shadows the same floor is fully lit everywhere and no shadow ray is cast.
+    let opts = links_core::dm::CompileOptions {
+        no_shadows: true,
+        ..Default::default()
+    };
+    let img = links_core::dm::compile(&s, &opts).unwrap().bytes;
+    let (rgb, stats) = render_all_with::<f64>(&img, links_core::render::Techniques::ALL);
+    assert_eq!(stats.shadow_rays, 0);
+    let view = links_core::image::SceneView::new(&img).unwrap();
+    let mut tracer = links_core::render::Tracer::<f64>::new(view);
+    let mut lit = 0;
+    for y in 0..h {
+        for x in 0..w {
+            let Some((_, surf)) = tracer.first_surface(&tracer.primary_ray(x, y)) else {
+                continue;
+            };
+            let [vx, vy, vz] = surf.p.to_f64();
+            let wz = 5.0 + up[2] * vy + fwd[2] * vz;
+            let wy = 10.0 + up[1] * vy + fwd[1] * vz;
+            if surf.material == 1 && wy.abs() < 1e-6 && vx > 0.2 && vx < 2.8 && wz < -2.2 {
+                let px = rgb[((y * w + x) * 3) as usize] as i32;
+                assert!(
+                    (px - full).abs() <= 1,
+                    "no shadows: ({x},{y}) {px} vs {full}"
+                );
+                lit += 1;
+            }
+        }
+    }
+    assert!(lit > 10);
 }
 
 /// LINKS-1's density kernel, written out independently of the renderer.
