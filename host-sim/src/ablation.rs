@@ -148,7 +148,7 @@ pub fn runs(
     height: u32,
     divisions: u32,
 ) -> Result<Vec<(u32, u32, u32)>, AblationError> {
-    if divisions == 0 || divisions % height != 0 || divisions / height > width {
+    if divisions == 0 || !divisions.is_multiple_of(height) || divisions / height > width {
         return Err(AblationError::BadDivisions { divisions, height });
     }
     let per_row = divisions / height;

@@ -2,6 +2,8 @@
 
 pub mod ablation;
 pub mod ablation_doc;
+pub mod cli_cluster;
+pub mod cluster;
 pub mod cost;
 pub mod frame;
 pub mod gen;

@@ -6,6 +6,8 @@ use links_core::desc::TransparencyMode;
 use links_core::dm::{compile, CompileOptions};
 use links_core::image::{SceneView, Section};
 use links_host::ablation::{run_ablation, AblationConfig};
+use links_host::cli_cluster;
+use links_host::cost::{self, CycleModel};
 use links_host::frame::{encode_png, psnr, render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::io::IsTerminal;
@@ -65,7 +67,7 @@ enum Cmd {
         /// Output PNG file
         #[arg(short, long, default_value = "out.png")]
         output: PathBuf,
-        /// Host threads (0 = all cores); the image does not depend on it
+        /// Host threads (0 = all cores; single-host render only); the image does not depend on it
         #[arg(long, default_value_t = 0)]
         threads: usize,
         /// Number type of the render
@@ -74,6 +76,18 @@ enum Cmd {
         /// No progress bar or stats line
         #[arg(short, long)]
         quiet: bool,
+        /// Render on a simulated LINKS-1 cluster of this many node computers (1..=256)
+        #[arg(long)]
+        nodes: Option<u16>,
+        /// SPI buses from the root computer (cluster only)
+        #[arg(long, default_value_t = 1)]
+        buses: u16,
+        /// SPI bit rate in MHz (cluster only)
+        #[arg(long, default_value_t = 42.0)]
+        bit_rate_mhz: f64,
+        /// Sub-screen policy (cluster only): decreasing, static, fixed=N, fixed-rect=N
+        #[arg(long, default_value = "decreasing")]
+        policy: String,
     },
     /// Compile a scene and print its SceneImage size by section
     Info {
@@ -94,6 +108,15 @@ enum Cmd {
     /// Measurement sweeps
     #[command(subcommand)]
     Sweep(SweepCmd),
+    /// Fit the cycle model's weights to QEMU-measured frames (scripts/qemu-bench's CSV)
+    Calibrate {
+        /// CSV written by scripts/qemu-bench
+        #[arg(long, default_value = "docs/cortex-m-bench.csv")]
+        csv: PathBuf,
+        /// Which target's samples to fit
+        #[arg(long, default_value = "thumbv7em-none-eabihf")]
+        target: String,
+    },
     /// Regenerate the procedural meshes and textures of the bundled scenes
     GenAssets {
         /// Output directory
@@ -122,6 +145,34 @@ enum SweepCmd {
         #[arg(short, long, default_value = "docs/techniques.md")]
         output: PathBuf,
     },
+    /// LINKS-1 Fig. 5.1 analog: cluster speed-up against node count (and the bus study)
+    Nodes {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        /// Directory for nodes.csv and nodes.svg
+        #[arg(short, long, default_value = "docs/cluster")]
+        output: PathBuf,
+    },
+    /// LINKS-1 Fig. 5.2 analog: frame time against the number of sub-screens at 64 nodes
+    Divisions {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        /// Directory for divisions[-noshadows].csv/svg
+        #[arg(short, long, default_value = "docs/cluster")]
+        output: PathBuf,
+    },
+}
+
+/// Scene arguments with every option at the scene's own setting.
+fn plain_args(scene: &std::path::Path) -> SceneArgs {
+    SceneArgs {
+        scene: scene.to_path_buf(),
+        width: None,
+        height: None,
+        max_depth: None,
+        transparency: None,
+        no_shadows: false,
+    }
 }
 
 fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
@@ -146,9 +197,61 @@ fn run(cli: Cli) -> Result<(), String> {
         Cmd::Render {
             scene,
             output,
+            threads: _,
+            precision,
+            quiet,
+            nodes: Some(nodes),
+            buses,
+            bit_rate_mhz,
+            policy,
+        } => {
+            if matches!(precision, PrecisionArg::F64) {
+                return Err(
+                    "the cluster's nodes compute in f32: drop --precision f64 or --nodes".into(),
+                );
+            }
+            if !(1..=256).contains(&nodes) {
+                return Err(format!(
+                    "--nodes {nodes}: a cluster has 1 to 256 node computers"
+                ));
+            }
+            let image = compile_scene(&scene)?;
+            let cfg = cli_cluster::config(
+                nodes,
+                buses,
+                bit_rate_mhz,
+                cli_cluster::parse_policy(&policy)?,
+            );
+            let start = std::time::Instant::now();
+            let r = cli_cluster::render(&image, &cfg)?;
+            let rep = &r.report;
+            let frame = rep.frames.first().ok_or("the simulation kept no frame")?;
+            let png = encode_png(rep.width, rep.height, frame).map_err(|e| e.to_string())?;
+            std::fs::write(&output, png).map_err(|e| format!("{}: {e}", output.display()))?;
+            if !quiet {
+                eprintln!(
+                    "{}: {}x{} on {nodes} simulated nodes ({buses} bus(es) at {bit_rate_mhz} MHz, {policy}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, {} bytes moved | host {:.2} s",
+                    output.display(),
+                    rep.width,
+                    rep.height,
+                    rep.time_s,
+                    r.speedup,
+                    r.one_node_s,
+                    100.0 * rep.bus_utilisation(),
+                    rep.bytes_moved(),
+                    start.elapsed().as_secs_f64()
+                );
+            }
+            Ok(())
+        }
+        Cmd::Render {
+            scene,
+            output,
             threads,
             precision,
             quiet,
+            nodes: None,
+            ..
         } => {
             let image = compile_scene(&scene)?;
             let view = SceneView::new(&image).map_err(|e| e.to_string())?;
@@ -182,7 +285,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 let s = &frame.stats;
                 let secs = frame.elapsed.as_secs_f64();
                 eprintln!(
-                    "{}: {}x{} {} in {:.3} s, {:.3} Mrays/s | rays: primary {}, shadow {}, reflect {}, refract {}, straight {} | tests: box {}, triangle {}, ellipsoid {}, box-shape {}, blob {} (field evals {}) | shadings {} | scene image {} B",
+                    "{}: {}x{} {} in {:.3} s, {:.3} Mrays/s | rays: primary {}, shadow {}, reflect {}, refract {}, straight {} | tests: box {}, triangle {}, ellipsoid {}, box-shape {}, blob {} (field evals {}) | shadings {} | clip compares {} | scene image {} B",
                     output.display(),
                     frame.width,
                     frame.height,
@@ -201,6 +304,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     s.blob_tests,
                     s.blob_field_evals,
                     s.shadings,
+                    s.clip_compares,
                     image.len()
                 );
             }
@@ -285,6 +389,66 @@ fn run(cli: Cli) -> Result<(), String> {
             );
             std::fs::write(&output, doc).map_err(|e| format!("{}: {e}", output.display()))?;
             eprintln!("wrote {}", output.display());
+            Ok(())
+        }
+        Cmd::Sweep(SweepCmd::Nodes { scene, output }) => {
+            let image = compile_scene(&plain_args(&scene))?;
+            let text =
+                cli_cluster::nodes_study(&image, &output, &|s| eprintln!("simulating {s} ..."))?;
+            println!("{text}");
+            eprintln!("wrote {}/nodes.csv and nodes.svg", output.display());
+            Ok(())
+        }
+        Cmd::Sweep(SweepCmd::Divisions { scene, output }) => {
+            let image = compile_scene(&plain_args(&scene))?;
+            let no_shadows = compile_scene(&SceneArgs {
+                no_shadows: true,
+                ..plain_args(&scene)
+            })?;
+            let text = cli_cluster::divisions_study(
+                &[("divisions-noshadows", &no_shadows), ("divisions", &image)],
+                &output,
+                &|s| eprintln!("simulating {s} ..."),
+            )?;
+            println!("{text}");
+            eprintln!("wrote {}/divisions*.csv and .svg", output.display());
+            Ok(())
+        }
+        Cmd::Calibrate { csv, target } => {
+            let text =
+                std::fs::read_to_string(&csv).map_err(|e| format!("{}: {e}", csv.display()))?;
+            let samples =
+                cost::parse_samples(&text).map_err(|e| format!("{}: {e}", csv.display()))?;
+            let fitted = cost::fit(
+                &samples,
+                &target,
+                CycleModel::CORTEX_M4F_F32.cycles_per_instruction,
+            )
+            .map_err(|e| format!("{}: {e}", csv.display()))?;
+            println!(
+                "fitted instructions per operation ({target}, {} frames):",
+                samples.iter().filter(|s| s.target == target).count()
+            );
+            for (name, w) in cost::FEATURES.iter().zip(fitted.weights()) {
+                println!("  {name:<18} {w:>9.1}");
+            }
+            println!(
+                "\n{:<28} {:>12} {:>12} {:>12}",
+                "frame", "measured", "fitted", "committed"
+            );
+            let committed = cost::prediction_ratios(&CycleModel::CORTEX_M4F_F32, &samples, &target);
+            for ((s, r), (_, rc)) in cost::prediction_ratios(&fitted, &samples, &target)
+                .iter()
+                .zip(&committed)
+            {
+                println!(
+                    "{:<28} {:>12} {:>11.1}% {:>11.1}%",
+                    format!("{} {}", s.scene, s.techniques),
+                    s.instructions,
+                    (r - 1.0) * 100.0,
+                    (rc - 1.0) * 100.0
+                );
+            }
             Ok(())
         }
         Cmd::GenAssets { dir } => {

@@ -9,6 +9,8 @@
 //! - [`clip`]: screen-space Y/X clipping of primary rays (LINKS-1 4.4).
 //! - [`render`]: the tracer and shading (eq. 2.1, 2.2), one run of pixels at a time.
 //! - `desc` and `dm` (feature `std`): the scene description and the DM scene compiler.
+//! - [`wire`], [`link`], [`sched`], [`node`], [`root`]: the cluster (bus messages, the IMSU
+//!   link traits, sub-screen scheduling, the NC and RC behaviour).
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 // The one exception: the FPU square root in `num` (inline asm).
 #![deny(unsafe_code)]
@@ -20,6 +22,11 @@ pub mod desc;
 pub mod dm;
 pub mod geom;
 pub mod image;
+pub mod link;
+pub mod node;
 pub mod num;
 pub mod render;
+pub mod root;
+pub mod sched;
 pub mod shape;
+pub mod wire;

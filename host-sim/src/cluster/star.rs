@@ -1,0 +1,366 @@
+//! The emulated SPI star: buses, chip-selects, ready lines, DMA banks, fault injection, and
+//! the snooping pixel collector feeding the frame memory.
+//!
+//! Timing of one transfer on a bus: `overhead` (handshake: ready-line interrupt, chip-select
+//! set-up, DMA arming on both sides) + `(header + body) · 8 / bit_rate`, where an exchange's
+//! body is the longer of the two frames (full duplex) and the header phase carries both
+//! lengths. A bus does one transfer at a time; different buses run in parallel.
+
+use super::exec::{Delay, PollFn, Ps, SharedClock};
+use super::framemem::FrameMemory;
+use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
+use std::cell::RefCell;
+use std::collections::VecDeque;
+use std::rc::Rc;
+
+/// Bus timing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BusTiming {
+    /// SPI clock in bits per second (STM32F407 SPI1: up to 42 MHz).
+    pub bit_rate_hz: f64,
+    /// Per-transfer handshake and DMA set-up, in nanoseconds.
+    pub overhead_ns: f64,
+    /// Bytes of the length header each transfer starts with.
+    pub header_bytes: u32,
+}
+
+impl Default for BusTiming {
+    fn default() -> Self {
+        Self {
+            bit_rate_hz: 42e6,
+            overhead_ns: 2000.0,
+            header_bytes: 4,
+        }
+    }
+}
+
+impl BusTiming {
+    pub fn duration_ps(&self, body: usize) -> Ps {
+        let bits = (self.header_bytes as f64 + body as f64) * 8.0;
+        ((self.overhead_ns * 1e3) + bits * 1e12 / self.bit_rate_hz).ceil() as Ps
+    }
+}
+
+/// Deterministic fault injection: flip one bit in one of every `n` frames of a kind (0 =
+/// never).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Faults {
+    /// NC -> RC halves of exchanges.
+    pub up_every: u32,
+    /// RC -> NC halves of exchanges.
+    pub down_every: u32,
+    /// Broadcast frames as one node receives them.
+    pub broadcast_every: u32,
+    /// `None`: exactly every `n`-th frame (of a broadcast, one receiver per hit, in turn).
+    /// `Some(seed)`: each frame (each receiver's copy of a broadcast) independently with
+    /// probability `1/n`, from a xorshift generator seeded here: still deterministic, but
+    /// cannot fall into step with the protocol's own period.
+    pub random: Option<u64>,
+}
+
+/// Traffic counters of one bus.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BusCounters {
+    pub exchanges: u64,
+    pub broadcasts: u64,
+    /// Bytes clocked (header + body, both directions of an exchange counted once: SPI moves
+    /// them simultaneously).
+    pub clocked_bytes: u64,
+    /// Payload bytes: RC -> NC, NC -> RC, broadcast.
+    pub down_bytes: u64,
+    pub up_bytes: u64,
+    pub broadcast_bytes: u64,
+    pub busy_ps: Ps,
+    /// Frames corrupted by fault injection: NC -> RC, RC -> NC, broadcast.
+    pub corrupted_up: u64,
+    pub corrupted_down: u64,
+    pub corrupted_broadcast: u64,
+}
+
+impl BusCounters {
+    pub fn corrupted(&self) -> u64 {
+        self.corrupted_up + self.corrupted_down + self.corrupted_broadcast
+    }
+}
+
+struct NodeState {
+    /// The TX bank (a posted frame) and whether the ready line is up.
+    tx: Option<Vec<u8>>,
+    inbox: VecDeque<(bool, Vec<u8>)>,
+}
+
+struct BusState {
+    first: NodeId,
+    count: u16,
+    busy_until: Ps,
+    /// Round-robin position of the ready-line scan.
+    next_scan: u16,
+    counters: BusCounters,
+}
+
+/// Everything on the wires.
+pub struct Star {
+    clock: SharedClock,
+    timing: BusTiming,
+    faults: Faults,
+    nodes: Vec<NodeState>,
+    buses: Vec<BusState>,
+    transfers: [u64; 3],
+    bcast_victim: usize,
+    rng: u64,
+    /// The pixel collector listening on every bus's MISO line.
+    snoop: Option<Rc<RefCell<FrameMemory>>>,
+}
+
+pub type SharedStar = Rc<RefCell<Star>>;
+
+impl Star {
+    pub fn new(
+        clock: &SharedClock,
+        nodes: u16,
+        buses: u16,
+        timing: BusTiming,
+        faults: Faults,
+        snoop: Option<Rc<RefCell<FrameMemory>>>,
+    ) -> SharedStar {
+        let buses = buses.clamp(1, nodes.max(1));
+        let bus_states = (0..buses)
+            .map(|b| {
+                let first = (b as u32 * nodes as u32 / buses as u32) as u16;
+                let end = ((b as u32 + 1) * nodes as u32 / buses as u32) as u16;
+                BusState {
+                    first,
+                    count: end - first,
+                    busy_until: 0,
+                    next_scan: 0,
+                    counters: BusCounters::default(),
+                }
+            })
+            .collect();
+        Rc::new(RefCell::new(Star {
+            clock: clock.clone(),
+            timing,
+            faults,
+            nodes: (0..nodes)
+                .map(|_| NodeState {
+                    tx: None,
+                    inbox: VecDeque::new(),
+                })
+                .collect(),
+            buses: bus_states,
+            transfers: [0; 3],
+            bcast_victim: 0,
+            rng: faults.random.unwrap_or(1).max(1),
+            snoop,
+        }))
+    }
+
+    pub fn bus_count(&self) -> usize {
+        self.buses.len()
+    }
+
+    pub fn counters(&self) -> Vec<BusCounters> {
+        self.buses.iter().map(|b| b.counters).collect()
+    }
+
+    fn touch(&self) {
+        self.clock.borrow_mut().changes += 1;
+    }
+
+    /// Corrupt `frame` if this is the `every`-th transfer of kind `k`.
+    fn next_rand(&mut self) -> u64 {
+        let mut x = self.rng;
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        self.rng = x;
+        x
+    }
+
+    fn maybe_corrupt(&mut self, k: usize, every: u32, frame: &mut [u8], bus: usize) {
+        self.transfers[k] += 1;
+        let hit = every > 0
+            && match self.faults.random {
+                None => self.transfers[k].is_multiple_of(every as u64),
+                Some(_) => self.next_rand().is_multiple_of(every as u64),
+            };
+        if hit && !frame.is_empty() {
+            let bit = (self.next_rand() % (frame.len() as u64 * 8)) as usize;
+            frame[bit / 8] ^= 1 << (bit % 8);
+            let c = &mut self.buses[bus].counters;
+            match k {
+                0 => c.corrupted_up += 1,
+                1 => c.corrupted_down += 1,
+                _ => c.corrupted_broadcast += 1,
+            }
+        }
+    }
+}
+
+/// A node's end of the link.
+pub struct SimNodeLink {
+    star: SharedStar,
+    id: usize,
+}
+
+impl SimNodeLink {
+    pub fn new(star: &SharedStar, id: NodeId) -> Self {
+        Self {
+            star: star.clone(),
+            id: id as usize,
+        }
+    }
+}
+
+impl NodeLink for SimNodeLink {
+    fn post(&mut self, frame: &[u8]) -> Result<(), LinkError> {
+        let mut s = self.star.borrow_mut();
+        if s.nodes[self.id].tx.is_some() {
+            return Err(LinkError::Busy);
+        }
+        s.nodes[self.id].tx = Some(frame.to_vec());
+        s.touch();
+        Ok(())
+    }
+
+    async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError> {
+        let (exchanged, frame) = PollFn(|| {
+            let mut s = self.star.borrow_mut();
+            let got = s.nodes[self.id].inbox.pop_front();
+            if got.is_some() {
+                s.touch();
+            }
+            got
+        })
+        .await;
+        let len = frame.len();
+        let max = rx.len() as u32;
+        let dst = rx.get_mut(..len).ok_or(LinkError::TooLong {
+            len: len as u32,
+            max,
+        })?;
+        dst.copy_from_slice(&frame);
+        Ok(if exchanged {
+            Incoming::Exchanged { len }
+        } else {
+            Incoming::Broadcast { len }
+        })
+    }
+}
+
+/// The RC's end of one bus.
+pub struct SimBus {
+    star: SharedStar,
+    clock: SharedClock,
+    bus: usize,
+}
+
+impl SimBus {
+    pub fn new(star: &SharedStar, bus: usize) -> Self {
+        let clock = star.borrow().clock.clone();
+        Self {
+            star: star.clone(),
+            clock,
+            bus,
+        }
+    }
+
+    /// Claim the bus for a transfer of `body` bytes; returns its end time.
+    fn claim(&self, body: usize) -> Ps {
+        let mut s = self.star.borrow_mut();
+        let now = self.clock.borrow().now;
+        let d = s.timing.duration_ps(body);
+        let header = s.timing.header_bytes as u64;
+        let b = &mut s.buses[self.bus];
+        let start = now.max(b.busy_until);
+        b.busy_until = start + d;
+        b.counters.busy_ps += d;
+        b.counters.clocked_bytes += header + body as u64;
+        start + d
+    }
+}
+
+impl RootBus for SimBus {
+    fn nodes(&self) -> (NodeId, u16) {
+        let s = self.star.borrow();
+        (s.buses[self.bus].first, s.buses[self.bus].count)
+    }
+
+    fn ready(&self) -> Option<NodeId> {
+        let s = self.star.borrow();
+        let b = &s.buses[self.bus];
+        (0..b.count)
+            .map(|i| b.first + (b.next_scan + i) % b.count)
+            .find(|&n| s.nodes[n as usize].tx.is_some())
+    }
+
+    async fn wait_ready(&mut self) -> NodeId {
+        PollFn(|| self.ready()).await
+    }
+
+    async fn exchange(
+        &mut self,
+        node: NodeId,
+        tx: &[u8],
+        rx: &mut [u8],
+    ) -> Result<usize, LinkError> {
+        let (first, count) = self.nodes();
+        if node < first || node >= first + count {
+            return Err(LinkError::NoSuchNode { node });
+        }
+        // Chip-select asserted: the node's TX bank is committed to this transfer.
+        let up = {
+            let mut s = self.star.borrow_mut();
+            let b = &mut s.buses[self.bus];
+            b.next_scan = (node - first + 1) % count;
+            s.nodes[node as usize].tx.take().ok_or(LinkError::Aborted)?
+        };
+        let end = self.claim(tx.len().max(up.len()));
+        Delay::new(&self.clock, end).await;
+        let mut s = self.star.borrow_mut();
+        let (fu, fd) = (s.faults.up_every, s.faults.down_every);
+        let mut up = up;
+        let mut down = tx.to_vec();
+        s.maybe_corrupt(0, fu, &mut up, self.bus);
+        s.maybe_corrupt(1, fd, &mut down, self.bus);
+        let c = &mut s.buses[self.bus].counters;
+        c.exchanges += 1;
+        c.up_bytes += up.len() as u64;
+        c.down_bytes += down.len() as u64;
+        if let Some(fm) = &s.snoop {
+            fm.borrow_mut().snoop(&up);
+        }
+        s.nodes[node as usize].inbox.push_back((true, down));
+        s.touch();
+        let max = rx.len() as u32;
+        let dst = rx.get_mut(..up.len()).ok_or(LinkError::TooLong {
+            len: up.len() as u32,
+            max,
+        })?;
+        dst.copy_from_slice(&up);
+        Ok(up.len())
+    }
+
+    async fn broadcast(&mut self, frame: &[u8]) -> Result<(), LinkError> {
+        let end = self.claim(frame.len());
+        Delay::new(&self.clock, end).await;
+        let mut s = self.star.borrow_mut();
+        let (first, count) = (s.buses[self.bus].first, s.buses[self.bus].count);
+        let c = &mut s.buses[self.bus].counters;
+        c.broadcasts += 1;
+        c.broadcast_bytes += frame.len() as u64;
+        let every = s.faults.broadcast_every;
+        for n in first..first + count {
+            let mut f = frame.to_vec();
+            // One receiver per hit, in turn, sees the corruption.
+            let victim = s.bcast_victim % count as usize == (n - first) as usize;
+            if every > 0 && (victim || s.faults.random.is_some()) {
+                s.maybe_corrupt(2, every, &mut f, self.bus);
+            }
+            s.nodes[n as usize].inbox.push_back((false, f));
+        }
+        s.bcast_victim += 1;
+        s.touch();
+        Ok(())
+    }
+}

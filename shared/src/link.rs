@@ -1,0 +1,106 @@
+//! The IMSU analog: the RC-NC link over SPI, as traits the node and root logic are generic over.
+//!
+//! LINKS-1's IMSU swapped two memory banks after a handshake, could write one transfer into
+//! several IMSUs at once (overwrite/broadcast), let a second receiver capture what is read
+//! (snoop) and add an address offset. Over SPI:
+//!
+//! - **exchange** = one full-duplex transfer: the node raises its ready line with a frame in
+//!   its TX bank; the RC clocks the transfer with the node's chip-select asserted, shifting
+//!   its own frame out while the node's shifts in (SPI is a shift-register swap). A short
+//!   fixed header phase carries both lengths, the body is the longer of the two.
+//! - **broadcast** = the RC asserts several chip-selects and writes one frame; every selected
+//!   node receives it.
+//! - **snoop** = a further listener on the bus's MISO line (the frame memory's pixel
+//!   collector) captures what a node sends while the RC receives it, so pixels do not cross
+//!   the RC twice. It is a property of the bus, invisible to these traits.
+//! - **address offset** = scene frames carry the byte offset they land at in the bank
+//!   ([`crate::wire::Down::Scene`]).
+//!
+//! DMA double buffering: [`NodeLink::post`] hands a frame to the TX bank and returns at once,
+//! so the node renders its next run while the previous one waits for, and crosses, the bus;
+//! [`NodeLink::recv`] waits for the transfer to finish.
+
+use core::fmt;
+
+/// A node number (0-based, up to 256 nodes).
+pub type NodeId = u16;
+
+/// What went wrong on the link itself (frame contents are [`crate::wire`]'s business).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LinkError {
+    /// A frame longer than the bank or the receiver's buffer.
+    TooLong { len: u32, max: u32 },
+    /// A frame was posted while the TX bank still held one.
+    Busy,
+    /// The node is not on this bus.
+    NoSuchNode { node: NodeId },
+    /// The transfer was aborted (bus fault, node vanished).
+    Aborted,
+}
+
+impl fmt::Display for LinkError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            LinkError::TooLong { len, max } => {
+                write!(f, "transfer of {len} bytes exceeds the {max}-byte buffer")
+            }
+            LinkError::Busy => write!(f, "TX bank still holds an unsent frame"),
+            LinkError::NoSuchNode { node } => write!(f, "node {node} is not on this bus"),
+            LinkError::Aborted => write!(f, "transfer aborted"),
+        }
+    }
+}
+
+impl core::error::Error for LinkError {}
+
+/// What a node's link delivered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Incoming {
+    /// The RC swapped banks with us: our posted frame went out, `len` bytes of the RC's
+    /// frame are in the receive buffer.
+    Exchanged { len: usize },
+    /// A broadcast (overwrite) frame of `len` bytes is in the receive buffer.
+    Broadcast { len: usize },
+}
+
+/// The node side of the link.
+#[allow(async_fn_in_trait)]
+pub trait NodeLink {
+    /// Put `frame` into the TX bank and raise the ready line. Returns at once; the frame
+    /// goes out in the next exchange the RC clocks. Fails with [`LinkError::Busy`] if the
+    /// previous frame has not been exchanged yet.
+    fn post(&mut self, frame: &[u8]) -> Result<(), LinkError>;
+
+    /// Wait for the next transfer addressed to this node (an exchange of the posted frame, or
+    /// a broadcast) and copy the received frame into `rx`.
+    async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError>;
+}
+
+/// One bus of the root's star: the nodes on it, their ready lines, exchange and broadcast.
+#[allow(async_fn_in_trait)]
+pub trait RootBus {
+    /// The nodes on this bus: `first..first + count`.
+    fn nodes(&self) -> (NodeId, u16);
+
+    /// Wait until some node on this bus has raised its ready line; returns it (lowest
+    /// number first when several are ready).
+    async fn wait_ready(&mut self) -> NodeId;
+
+    /// A node on this bus whose ready line is up now, if any (the same choice
+    /// [`RootBus::wait_ready`] would make).
+    fn ready(&self) -> Option<NodeId>;
+
+    /// Swap frames with `node`: send `tx`, receive its frame into `rx`; returns the number
+    /// of bytes received.
+    async fn exchange(
+        &mut self,
+        node: NodeId,
+        tx: &[u8],
+        rx: &mut [u8],
+    ) -> Result<usize, LinkError>;
+
+    /// Write `frame` to every node on this bus at once (all chip-selects asserted).
+    async fn broadcast(&mut self, frame: &[u8]) -> Result<(), LinkError>;
+}

@@ -1,0 +1,699 @@
+//! The node computer (NC): receive the scene, take jobs, render, return pixel runs.
+//!
+//! [`run_node`] is the whole behaviour of an NC, generic over the link ([`NodeLink`]), a
+//! [`WorkClock`] (on hardware time passes by itself; in the simulator it advances virtual
+//! time by the cost model) and a [`RunRenderer`] (the tracer; the simulator may substitute a
+//! memo of identical results). No heap: the scene banks are borrowed from the caller, every
+//! other buffer is a fixed array inside the future.
+//!
+//! Loop: post a frame (a pixel run, a scene status, or a poll for acknowledgements), render
+//! the next run while that frame waits for and crosses the bus (DMA double buffer), then take
+//! what arrives (broadcast scene chunks, the RC's reply to the exchange) until the exchange
+//! is done. Frames stay in one of two banks until the RC acknowledges them; a gap in the
+//! RC's acknowledgements makes the node send them again (go-back-N). Nothing read from the
+//! bus can make it panic: bad frames are counted and otherwise ignored.
+
+use crate::image::SceneView;
+use crate::link::{Incoming, LinkError, NodeLink};
+use crate::num::Real;
+use crate::render::{render_run, RenderError, Rgb8, Stats, Tracer};
+use crate::wire::{
+    self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_FRAME, MAX_RUN, SCENE_CHUNK,
+};
+use core::fmt;
+use core::marker::PhantomData;
+
+/// Where compute time goes.
+#[allow(async_fn_in_trait)]
+pub trait WorkClock {
+    /// The node just did the work counted in `stats` (a delta).
+    async fn worked(&mut self, stats: &Stats);
+}
+
+/// Renders one scanline run of the scene held in a bank.
+pub trait RunRenderer {
+    /// Render `out.len()` pixels of scanline `y` from column `x` of frame `frame`'s scene;
+    /// returns the operations counted.
+    fn render(
+        &mut self,
+        scene: SceneView<'_>,
+        frame: u16,
+        y: u32,
+        x: u32,
+        out: &mut [Rgb8],
+    ) -> Result<Stats, RenderError>;
+}
+
+/// The real renderer: a [`Tracer`] in number type `T`.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Tracing<T>(PhantomData<T>);
+
+impl<T: Real> Tracing<T> {
+    pub const fn new() -> Self {
+        Self(PhantomData)
+    }
+}
+
+impl<T: Real> RunRenderer for Tracing<T> {
+    fn render(
+        &mut self,
+        scene: SceneView<'_>,
+        _frame: u16,
+        y: u32,
+        x: u32,
+        out: &mut [Rgb8],
+    ) -> Result<Stats, RenderError> {
+        let mut t = Tracer::<T>::new(scene);
+        render_run(&mut t, y, x, out)?;
+        Ok(t.stats)
+    }
+}
+
+/// A clock for hardware: time passes by itself.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RealTime;
+
+impl WorkClock for RealTime {
+    async fn worked(&mut self, _stats: &Stats) {}
+}
+
+/// Node options.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct NodeConfig {
+    /// Send a pixel run run-length coded ([`Up::PixelsRle`]) when that is shorter.
+    pub rle: bool,
+}
+
+impl Default for NodeConfig {
+    fn default() -> Self {
+        Self { rle: true }
+    }
+}
+
+/// Why a node stopped other than by the RC's `Stop`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NodeError {
+    Link(LinkError),
+    /// A scene bank is smaller than a frame needs or the banks differ in size.
+    BankTooSmall {
+        len: u32,
+    },
+}
+
+impl fmt::Display for NodeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            NodeError::Link(e) => write!(f, "link: {e}"),
+            NodeError::BankTooSmall { len } => write!(f, "scene bank of {len} bytes is too small"),
+        }
+    }
+}
+
+impl core::error::Error for NodeError {}
+
+impl From<LinkError> for NodeError {
+    fn from(e: LinkError) -> Self {
+        NodeError::Link(e)
+    }
+}
+
+/// What a node did (for diagnostics and tests).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NodeReport {
+    pub jobs: u32,
+    pub pixels: u64,
+    /// Frames posted, of which re-sent after a missing acknowledgement, and polls.
+    pub frames_posted: u32,
+    pub frames_resent: u32,
+    pub polls: u32,
+    /// Frames from the RC that failed their CRC or were malformed.
+    pub bad_frames: u32,
+    /// Jobs dropped because their region or scene was unusable.
+    pub bad_jobs: u32,
+    /// Scene chunks written.
+    pub chunks: u32,
+    pub stats: Stats,
+}
+
+#[cfg(feature = "defmt")]
+impl defmt::Format for NodeReport {
+    fn format(&self, f: defmt::Formatter<'_>) {
+        defmt::write!(
+            f,
+            "jobs={} pixels={} posted={} resent={} polls={} bad={} bad_jobs={} chunks={}",
+            self.jobs,
+            self.pixels,
+            self.frames_posted,
+            self.frames_resent,
+            self.polls,
+            self.bad_frames,
+            self.bad_jobs,
+            self.chunks
+        )
+    }
+}
+
+/// Reception state of one scene bank.
+struct Bank {
+    frame: Option<u16>,
+    total: u32,
+    /// CRC-32 of the whole scene (every chunk carries it).
+    crc: u32,
+    got: [u32; MAX_CHUNKS / 32],
+    /// The broadcast's SceneEnd was seen (so missing chunks are really missing).
+    ended: bool,
+    ready: bool,
+}
+
+impl Bank {
+    const EMPTY: Bank = Bank {
+        frame: None,
+        total: 0,
+        crc: 0,
+        got: [0; MAX_CHUNKS / 32],
+        ended: false,
+        ready: false,
+    };
+
+    fn chunks(&self) -> u32 {
+        self.total.div_ceil(SCENE_CHUNK as u32)
+    }
+
+    fn first_missing(&self) -> Option<u32> {
+        (0..self.chunks()).find(|&c| self.got[(c / 32) as usize] & (1 << (c % 32)) == 0)
+    }
+
+    /// Start receiving another scene into this bank unless it is the one being received.
+    fn expect(&mut self, frame: u16, total: u32, crc: u32) {
+        if self.frame != Some(frame) || self.total != total || self.crc != crc {
+            *self = Bank::EMPTY;
+            self.frame = Some(frame);
+            self.total = total;
+            self.crc = crc;
+        }
+    }
+}
+
+/// A frame kept until acknowledged.
+struct Slot {
+    seq: u16,
+    len: usize,
+    /// Exchange number it was last sent in.
+    sent_in: u32,
+    buf: [u8; MAX_FRAME],
+}
+
+/// The run rendered and waiting for a free bank.
+#[derive(Clone, Copy)]
+struct Built {
+    job: u32,
+    frame: u16,
+    y: u16,
+    x: u16,
+    len: usize,
+    done: bool,
+}
+
+/// Where the node is in its current job.
+#[derive(Clone, Copy)]
+struct Cursor {
+    job: Job,
+    piece: u32,
+    offset: u32,
+}
+
+fn seq_le(a: u16, b: u16) -> bool {
+    (b.wrapping_sub(a) as i16) >= 0
+}
+
+/// The node's state apart from the banks.
+struct Nc {
+    banks: [Bank; 2],
+    queue: [Option<Job>; JOB_QUEUE],
+    last_taken: Option<u32>,
+    cursor: Option<Cursor>,
+    built: Option<Built>,
+    slots: [Option<Slot>; 2],
+    /// Index of the next slot to (re)send; 2 = none.
+    resend: usize,
+    next_seq: u16,
+    exchanges: u32,
+    last_rc_seq: u16,
+    /// Scene state to report (sequenced).
+    status: Option<SceneState>,
+    stopped: bool,
+    report: NodeReport,
+}
+
+impl Nc {
+    fn unacked(&self) -> usize {
+        self.slots.iter().filter(|s| s.is_some()).count()
+    }
+
+    /// Encode a new sequenced frame into a free slot; returns the slot index.
+    fn push_slot(
+        &mut self,
+        f: impl FnOnce(u16, &mut [u8]) -> Result<usize, wire::WireError>,
+    ) -> Option<usize> {
+        self.order_slots();
+        let i = self.slots.iter().position(|s| s.is_none())?;
+        let seq = self.next_seq;
+        let mut slot = Slot {
+            seq,
+            len: 0,
+            sent_in: self.exchanges,
+            buf: [0; MAX_FRAME],
+        };
+        slot.len = f(seq, &mut slot.buf).ok()?;
+        self.next_seq = self.next_seq.wrapping_add(1);
+        self.slots[i] = Some(slot);
+        Some(i)
+    }
+
+    fn order_slots(&mut self) {
+        if let (Some(a), Some(b)) = (&self.slots[0], &self.slots[1]) {
+            if !seq_le(a.seq, b.seq) {
+                self.slots.swap(0, 1);
+            }
+        } else if self.slots[0].is_none() && self.slots[1].is_some() {
+            self.slots.swap(0, 1);
+        }
+    }
+
+    /// Apply the RC's acknowledgement after exchange `ex` (`ack` = None when its frame was
+    /// unreadable): drop what it covers, go back to the first frame it should have covered.
+    fn acknowledge(&mut self, ack: Option<u16>, ex: u32) {
+        if let Some(a) = ack {
+            for s in self.slots.iter_mut() {
+                if s.as_ref().is_some_and(|s| seq_le(s.seq, a)) {
+                    *s = None;
+                }
+            }
+        }
+        self.order_slots();
+        // A frame sent before this exchange and still unacknowledged was lost (or its
+        // acknowledgement was): send it and everything after it again.
+        if self.slots[0].as_ref().is_some_and(|s| s.sent_in < ex) {
+            self.resend = 0;
+        }
+    }
+
+    fn take_jobs(&mut self, jobs: &[Option<Job>; JOB_QUEUE], dims: [Option<(u16, u32, u32)>; 2]) {
+        let bank_dims = |frame: u16| match dims[(frame % 2) as usize] {
+            Some((f, w, h)) if f == frame => Some((w, h)),
+            _ => None,
+        };
+        for job in jobs.iter().flatten() {
+            if self.last_taken.is_some_and(|l| job.id <= l) {
+                continue;
+            }
+            let Some(free) = self.queue.iter().position(|q| q.is_none()) else {
+                return;
+            };
+            let Some((w, h)) = bank_dims(job.frame) else {
+                // Scene not ready for that frame: the RC will list the job again.
+                return;
+            };
+            self.last_taken = Some(job.id);
+            if !job.region.fits(w, h) {
+                self.report.bad_jobs += 1;
+                continue;
+            }
+            self.queue[free] = Some(*job);
+        }
+    }
+
+    fn bank_state(&self, b: usize) -> SceneState {
+        let bank = &self.banks[b];
+        match bank.frame {
+            None => SceneState::None,
+            Some(frame) if bank.ready => SceneState::Ready { frame },
+            Some(frame) => {
+                let mut chunks = [0u32; MAX_CHUNKS / 32];
+                for c in 0..bank.chunks() {
+                    let (w, bit) = ((c / 32) as usize, 1u32 << (c % 32));
+                    if bank.got[w] & bit == 0 {
+                        chunks[w] |= bit;
+                    }
+                }
+                SceneState::Missing { frame, chunks }
+            }
+        }
+    }
+}
+
+/// Write a scene chunk into its bank; update readiness. Returns whether the state changed in
+/// a way the RC must hear (scene now ready, or still incomplete after the broadcast ended).
+fn scene_chunk(
+    nc: &mut Nc,
+    banks: &mut [&mut [u8]; 2],
+    frame: u16,
+    offset: u32,
+    total: u32,
+    crc: u32,
+    data: &[u8],
+) -> bool {
+    let b = (frame % 2) as usize;
+    let cap = banks[b].len() as u32;
+    let expect = (total.saturating_sub(offset)).min(SCENE_CHUNK as u32) as usize;
+    if total as usize > wire::MAX_SCENE
+        || total > cap
+        || total == 0
+        || !offset.is_multiple_of(SCENE_CHUNK as u32)
+        || offset >= total
+        || data.len() != expect
+    {
+        nc.report.bad_frames += 1;
+        return false;
+    }
+    nc.banks[b].expect(frame, total, crc);
+    if nc.banks[b].ready {
+        return false;
+    }
+    let end = offset as usize + data.len();
+    banks[b][offset as usize..end].copy_from_slice(data);
+    let c = offset / SCENE_CHUNK as u32;
+    nc.banks[b].got[(c / 32) as usize] |= 1 << (c % 32);
+    nc.report.chunks += 1;
+    // Broadcasts go in order: the last chunk ends it even if its SceneEnd is lost.
+    if end == total as usize {
+        nc.banks[b].ended = true;
+    }
+    check_scene(nc, banks, b);
+    nc.banks[b].ready || nc.banks[b].ended
+}
+
+fn check_scene(nc: &mut Nc, banks: &[&mut [u8]; 2], b: usize) {
+    let bank = &mut nc.banks[b];
+    if bank.first_missing().is_some() {
+        return;
+    }
+    let bytes = &banks[b][..bank.total as usize];
+    let ok = bank.crc == wire::CRC32.checksum(bytes) && SceneView::new(bytes).is_ok();
+    if ok {
+        bank.ready = true;
+    } else {
+        // Complete but wrong: take it all again.
+        bank.got = [0; MAX_CHUNKS / 32];
+    }
+}
+
+/// Run a node until the RC sends `Stop`. `banks` are the two scene banks (each at least as
+/// large as any scene the RC sends; frame `f` lands in bank `f % 2`). `report` is kept up to
+/// date as the node works (readable once the future is dropped, even if it never ends).
+pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
+    cfg: NodeConfig,
+    link: &mut L,
+    clock: &mut C,
+    renderer: &mut R,
+    mut banks: [&mut [u8]; 2],
+    report: &mut NodeReport,
+) -> Result<(), NodeError> {
+    let mut nc = Nc {
+        banks: [Bank::EMPTY, Bank::EMPTY],
+        queue: [None; JOB_QUEUE],
+        last_taken: None,
+        cursor: None,
+        built: None,
+        slots: [None, None],
+        resend: 2,
+        next_seq: 0,
+        exchanges: 0,
+        last_rc_seq: 0,
+        status: None,
+        stopped: false,
+        report: *report,
+    };
+    let mut pix: [Rgb8; MAX_RUN] = [[0; 3]; MAX_RUN];
+    let mut rx = [0u8; MAX_FRAME];
+    let mut coded = [0u8; 3 * MAX_RUN];
+    let mut poll = [0u8; 16];
+    while !nc.stopped {
+        // 1. Choose what to post.
+        let mut posted = false;
+        if nc.resend < 2 {
+            if let Some(s) = &mut nc.slots[nc.resend] {
+                s.sent_in = nc.exchanges;
+                link.post(&s.buf[..s.len])?;
+                nc.report.frames_resent += 1;
+                posted = true;
+            }
+            nc.resend += 1;
+        }
+        if !posted && nc.unacked() < 2 {
+            let ack = nc.last_rc_seq;
+            let slot = if let Some(scene) = nc.status.take() {
+                nc.push_slot(|seq, buf| wire::encode(seq, ack, &Up::Status { scene }, buf))
+            } else if let Some(b) = nc.built.take() {
+                let rgb = pix[..b.len].as_flattened();
+                let rle = if cfg.rle {
+                    wire::rle_encode(rgb, &mut coded)
+                } else {
+                    None
+                };
+                let up = match rle {
+                    Some(n) if n < rgb.len() => Up::PixelsRle {
+                        job: b.job,
+                        frame: b.frame,
+                        y: b.y,
+                        x: b.x,
+                        len: b.len as u16,
+                        data: &coded[..n],
+                        done: b.done,
+                    },
+                    _ => Up::Pixels {
+                        job: b.job,
+                        frame: b.frame,
+                        y: b.y,
+                        x: b.x,
+                        rgb,
+                        done: b.done,
+                    },
+                };
+                nc.push_slot(|seq, buf| wire::encode(seq, ack, &up, buf))
+            } else {
+                None
+            };
+            if let Some(s) = slot.and_then(|i| nc.slots[i].as_ref()) {
+                link.post(&s.buf[..s.len])?;
+                posted = true;
+                // A new frame goes after any still to be re-sent.
+                nc.resend = 2;
+            }
+        }
+        if posted {
+            nc.report.frames_posted += 1;
+        } else if nc.unacked() > 0 {
+            let n = wire::encode(nc.next_seq, nc.last_rc_seq, &Up::Poll, &mut poll).unwrap_or(0);
+            link.post(&poll[..n])?;
+            nc.report.polls += 1;
+            posted = true;
+        }
+
+        // 2. While that frame waits for the bus, render the next run.
+        let rendered = if nc.built.is_none() {
+            render_next(&mut nc, &banks, renderer, &mut pix, clock).await
+        } else {
+            false
+        };
+        if !posted && rendered {
+            continue;
+        }
+        // Otherwise wait for our exchange (or, with nothing posted and nothing to render, for
+        // a broadcast).
+
+        // 3. Take what arrives until our exchange is done.
+        loop {
+            let got = link.recv(&mut rx).await?;
+            let (len, exchanged) = match got {
+                Incoming::Exchanged { len } => (len, true),
+                Incoming::Broadcast { len } => (len, false),
+            };
+            let frame = rx.get(..len).map(wire::decode::<Down>);
+            let mut ack = None;
+            match frame {
+                Some(Ok(env)) => {
+                    if exchanged {
+                        ack = Some(env.ack);
+                        nc.last_rc_seq = env.seq;
+                    }
+                    handle_down(&mut nc, &mut banks, env.msg);
+                }
+                _ => nc.report.bad_frames += 1,
+            }
+            *report = nc.report;
+            if exchanged {
+                nc.acknowledge(ack, nc.exchanges);
+                nc.exchanges = nc.exchanges.wrapping_add(1);
+                // A scene still incomplete after its broadcast: keep telling the RC what is
+                // missing (each report fetches a chunk; a lost repair is asked for again).
+                if nc.status.is_none() {
+                    if let Some(b) = (0..2).find(|&b| nc.banks[b].ended && !nc.banks[b].ready) {
+                        nc.status = Some(nc.bank_state(b));
+                    }
+                }
+                break;
+            }
+            if nc.stopped || !posted {
+                break;
+            }
+        }
+    }
+    *report = nc.report;
+    Ok(())
+}
+
+/// Render the next run of the current (or next queued) job into `pix`, then account for its
+/// compute time. Returns whether a run was rendered.
+async fn render_next<C: WorkClock, R: RunRenderer>(
+    nc: &mut Nc,
+    banks: &[&mut [u8]; 2],
+    renderer: &mut R,
+    pix: &mut [Rgb8; MAX_RUN],
+    clock: &mut C,
+) -> bool {
+    if nc.cursor.is_none() {
+        let Some(job) = nc.queue[0].take() else {
+            return false;
+        };
+        nc.queue.rotate_left(1);
+        nc.cursor = Some(Cursor {
+            job,
+            piece: 0,
+            offset: 0,
+        });
+    }
+    let Some(mut cur) = nc.cursor else {
+        return false;
+    };
+    let b = (cur.job.frame % 2) as usize;
+    let bank = &nc.banks[b];
+    let view = if bank.ready && bank.frame == Some(cur.job.frame) {
+        SceneView::new(&banks[b][..bank.total as usize]).ok()
+    } else {
+        None
+    };
+    let Some(view) = view else {
+        nc.report.bad_jobs += 1;
+        nc.cursor = None;
+        return false;
+    };
+    let width = view.frame::<f32>().width;
+    let Some((y, x0, plen)) = cur.job.region.piece(width, cur.piece) else {
+        nc.report.bad_jobs += 1;
+        nc.cursor = None;
+        return false;
+    };
+    let x = x0 + cur.offset;
+    let n = (plen - cur.offset).min(MAX_RUN as u32) as usize;
+    let (Ok(y16), Ok(x16)) = (u16::try_from(y), u16::try_from(x)) else {
+        nc.report.bad_jobs += 1;
+        nc.cursor = None;
+        return false;
+    };
+    let stats = match renderer.render(view, cur.job.frame, y, x, &mut pix[..n]) {
+        Ok(s) => s,
+        Err(_) => {
+            nc.report.bad_jobs += 1;
+            nc.cursor = None;
+            return false;
+        }
+    };
+    cur.offset += n as u32;
+    if cur.offset >= plen {
+        cur.piece += 1;
+        cur.offset = 0;
+    }
+    let done = cur.job.region.piece(width, cur.piece).is_none();
+    nc.cursor = if done {
+        nc.report.jobs += 1;
+        None
+    } else {
+        Some(cur)
+    };
+    nc.built = Some(Built {
+        job: cur.job.id,
+        frame: cur.job.frame,
+        y: y16,
+        x: x16,
+        len: n,
+        done,
+    });
+    nc.report.pixels += n as u64;
+    nc.report.stats.add(&stats);
+    clock.worked(&stats).await;
+    true
+}
+
+fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>) {
+    match msg {
+        Down::Work { jobs } => {
+            let mut dims = [None; 2];
+            for (b, d) in dims.iter_mut().enumerate() {
+                if let (Some(frame), true) = (nc.banks[b].frame, nc.banks[b].ready) {
+                    if let Ok(v) = SceneView::new(&banks[b][..nc.banks[b].total as usize]) {
+                        let f = v.frame::<f32>();
+                        *d = Some((frame, f.width, f.height));
+                    }
+                }
+            }
+            nc.take_jobs(&jobs, dims);
+        }
+        Down::Scene {
+            frame,
+            offset,
+            total,
+            crc,
+            data,
+        } => {
+            if scene_chunk(nc, banks, frame, offset, total, crc, data) {
+                nc.status = Some(nc.bank_state((frame % 2) as usize));
+            }
+        }
+        Down::SceneEnd { frame, len, crc } => {
+            let b = (frame % 2) as usize;
+            if len as usize > banks[b].len() || len as usize > wire::MAX_SCENE || len == 0 {
+                nc.report.bad_frames += 1;
+                return;
+            }
+            nc.banks[b].expect(frame, len, crc);
+            if nc.banks[b].ready {
+                return;
+            }
+            nc.banks[b].ended = true;
+            check_scene(nc, banks, b);
+            nc.status = Some(nc.bank_state(b));
+        }
+        Down::Stop => nc.stopped = true,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sequence_order_survives_wrap_around() {
+        assert!(seq_le(5, 5) && seq_le(5, 6) && !seq_le(6, 5));
+        assert!(seq_le(u16::MAX, 0) && seq_le(u16::MAX - 3, 2) && !seq_le(2, u16::MAX - 3));
+    }
+
+    #[test]
+    fn bank_bitmap_tracks_missing_chunks() {
+        let mut b = Bank::EMPTY;
+        b.expect(3, 5 * SCENE_CHUNK as u32 + 1, 0);
+        assert_eq!(b.chunks(), 6);
+        assert_eq!(b.first_missing(), Some(0));
+        b.got[0] = 0b11_1011;
+        assert_eq!(b.first_missing(), Some(2));
+        b.got[0] |= 0b100;
+        assert_eq!(b.first_missing(), None);
+        // The same scene again keeps what arrived; another one starts over.
+        b.expect(3, 5 * SCENE_CHUNK as u32 + 1, 0);
+        assert_eq!(b.first_missing(), None);
+        b.expect(5, 5 * SCENE_CHUNK as u32 + 1, 0);
+        assert_eq!(b.first_missing(), Some(0));
+    }
+}

@@ -1,0 +1,590 @@
+//! The root computer (RC): broadcast each frame's scene, hand out sub-screens, collect the
+//! finished pixels, detect completion.
+//!
+//! The shared state is one [`RootState`] in a `RefCell`; one [`run_bus`] future per SPI bus
+//! drives that bus (they run concurrently on one executor, so several buses overlap their
+//! transfers). No heap: per-node bookkeeping is a fixed table of [`MAX_NODES`] entries.
+//!
+//! Per exchange the RC must fill its half of the swap *before* it sees the node's half, so
+//! its reply carries state: the node's job list (idempotent) and the highest in-order frame
+//! it has received from that node (`ack`). Animation: frame `f`'s scene goes to node bank
+//! `f % 2` while frame `f - 1` renders; its jobs are handed out as soon as frame `f - 1`'s are
+//! all issued, to nodes that have reported the scene ready.
+
+use crate::image::SceneView;
+use crate::link::{LinkError, NodeId, RootBus};
+use crate::sched::{Policy, SchedError, Scheduler};
+use crate::wire::{self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_FRAME, SCENE_CHUNK};
+use core::cell::RefCell;
+use core::fmt;
+use core::future::Future;
+use core::pin::Pin;
+use core::task::{Context, Poll, Waker};
+use embassy_futures::select::{select, Either};
+
+/// Most buses (concurrent [`run_bus`] tasks) one RC drives.
+pub const MAX_BUSES: usize = 8;
+
+/// Most nodes an RC drives (LINKS-1's design limit).
+pub const MAX_NODES: usize = 256;
+
+/// The scene image of each animation frame (the DM's output).
+pub trait SceneSource {
+    fn scene(&self, frame: u16) -> Option<&[u8]>;
+}
+
+impl<T: AsRef<[u8]>> SceneSource for [T] {
+    fn scene(&self, frame: u16) -> Option<&[u8]> {
+        self.get(frame as usize).map(|s| s.as_ref())
+    }
+}
+
+/// Where the RC delivers accepted pixel runs (frame memory, serial readback). With a
+/// snooping frame memory on the bus the RC needs none: use `()`.
+pub trait PixelSink {
+    fn pixels(&mut self, frame: u16, y: u16, x: u16, rgb: &[u8]);
+}
+
+impl PixelSink for () {
+    fn pixels(&mut self, _: u16, _: u16, _: u16, _: &[u8]) {}
+}
+
+/// What the RC runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RootConfig {
+    pub policy: Policy,
+    pub nodes: u16,
+    pub frames: u16,
+}
+
+/// Why the RC cannot run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RootError {
+    TooManyNodes {
+        nodes: u16,
+    },
+    /// Frame `frame` has no scene, or it is not a valid SceneImage, or larger than a bank.
+    BadScene {
+        frame: u16,
+    },
+    /// Frames of one animation differ in screen size.
+    SizeChanged {
+        frame: u16,
+    },
+    Sched(SchedError),
+    Link(LinkError),
+}
+
+impl fmt::Display for RootError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RootError::TooManyNodes { nodes } => {
+                write!(f, "{nodes} nodes (at most {MAX_NODES})")
+            }
+            RootError::BadScene { frame } => write!(f, "frame {frame} has no usable scene image"),
+            RootError::SizeChanged { frame } => write!(f, "frame {frame} changes the screen size"),
+            RootError::Sched(e) => write!(f, "scheduling: {e}"),
+            RootError::Link(e) => write!(f, "link: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for RootError {}
+
+impl From<LinkError> for RootError {
+    fn from(e: LinkError) -> Self {
+        RootError::Link(e)
+    }
+}
+
+/// Counters of what the RC saw.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RootReport {
+    pub exchanges: u32,
+    pub broadcasts: u32,
+    pub jobs: u32,
+    pub pixels: u64,
+    /// Node frames that failed CRC or decoding.
+    pub bad_frames: u32,
+    /// Node frames out of sequence (duplicates after a lost acknowledgement, or frames
+    /// behind a lost one), dropped.
+    pub out_of_order: u32,
+    /// Valid frames whose contents were not plausible (unknown job, run outside the frame).
+    pub rejected: u32,
+    /// Scene chunks re-sent point-to-point.
+    pub repairs: u32,
+    pub polls: u32,
+    /// Node frames accepted in sequence.
+    pub accepted: u64,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct NodeSlot {
+    expect: u16,
+    jobs: [Option<Job>; JOB_QUEUE],
+    /// Highest frame whose scene the node reported ready.
+    ready_upto: Option<u16>,
+    /// Scene chunks the node lacks (frame, bitmap), minus those already re-sent.
+    repair: Option<(u16, [u32; wire::MAX_CHUNKS / 32])>,
+    /// The chunk re-sent in the exchange in progress.
+    repairing: Option<u32>,
+}
+
+impl NodeSlot {
+    const NEW: NodeSlot = NodeSlot {
+        expect: 0,
+        jobs: [None; JOB_QUEUE],
+        ready_upto: None,
+        repair: None,
+        repairing: None,
+    };
+    fn ready_for(&self, frame: u16) -> bool {
+        self.ready_upto.is_some_and(|r| r >= frame)
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Progress {
+    frame: u16,
+    issued: u32,
+    done: u32,
+    all_issued: bool,
+    complete: bool,
+}
+
+/// The RC's state, shared by its bus tasks.
+pub struct RootState {
+    cfg: RootConfig,
+    width: u32,
+    height: u32,
+    nodes: [NodeSlot; MAX_NODES],
+    sched: Scheduler,
+    /// The frame whose jobs `sched` hands out.
+    sched_frame: u16,
+    progress: [Progress; 2],
+    /// Frames complete, counted in order.
+    complete: u16,
+    next_job: u32,
+    report: RootReport,
+    /// Bus tasks waiting for the end (woken when the last frame completes).
+    finish_wakers: [Option<Waker>; MAX_BUSES],
+}
+
+/// Resolves when every frame is complete.
+struct Finished<'a> {
+    root: &'a RefCell<RootState>,
+    slot: usize,
+}
+
+impl Future for Finished<'_> {
+    type Output = ();
+    fn poll(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<()> {
+        let mut r = self.root.borrow_mut();
+        if r.finished() {
+            return Poll::Ready(());
+        }
+        let slot = self.slot % MAX_BUSES;
+        r.finish_wakers[slot] = Some(cx.waker().clone());
+        Poll::Pending
+    }
+}
+
+impl RootState {
+    /// Check every frame's scene and set up the first frame's schedule.
+    pub fn new<S: SceneSource + ?Sized>(cfg: RootConfig, scenes: &S) -> Result<Self, RootError> {
+        if cfg.nodes as usize > MAX_NODES || cfg.nodes == 0 {
+            return Err(RootError::TooManyNodes { nodes: cfg.nodes });
+        }
+        let mut dims = None;
+        for frame in 0..cfg.frames {
+            let bytes = scenes.scene(frame).ok_or(RootError::BadScene { frame })?;
+            if bytes.len() > wire::MAX_SCENE {
+                return Err(RootError::BadScene { frame });
+            }
+            let v = SceneView::new(bytes).map_err(|_| RootError::BadScene { frame })?;
+            let f = v.frame::<f32>();
+            match dims {
+                None => dims = Some((f.width, f.height)),
+                Some(d) if d != (f.width, f.height) => {
+                    return Err(RootError::SizeChanged { frame })
+                }
+                Some(_) => {}
+            }
+        }
+        let (width, height) = dims.ok_or(RootError::BadScene { frame: 0 })?;
+        let sched = Scheduler::new(cfg.policy, width, height, cfg.nodes as u32)
+            .map_err(RootError::Sched)?;
+        Ok(Self {
+            cfg,
+            width,
+            height,
+            nodes: [NodeSlot::NEW; MAX_NODES],
+            sched,
+            sched_frame: 0,
+            progress: [
+                Progress::default(),
+                Progress {
+                    frame: 1,
+                    ..Progress::default()
+                },
+            ],
+            complete: 0,
+            next_job: 0,
+            report: RootReport::default(),
+            finish_wakers: [const { None }; MAX_BUSES],
+        })
+    }
+
+    /// Screen size.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Frames finished, in order.
+    pub fn frames_complete(&self) -> u16 {
+        self.complete
+    }
+
+    /// Whether every frame is finished.
+    pub fn finished(&self) -> bool {
+        self.complete >= self.cfg.frames
+    }
+
+    pub fn report(&self) -> RootReport {
+        self.report
+    }
+
+    /// Whether frame `f`'s scene may be broadcast (its node bank and frame-memory bank are
+    /// free: frame `f - 2` is complete).
+    pub fn may_broadcast(&self, frame: u16) -> bool {
+        frame < self.cfg.frames && (frame < 2 || self.complete > frame - 2)
+    }
+
+    fn prog(&mut self, frame: u16) -> Option<&mut Progress> {
+        let p = &mut self.progress[(frame % 2) as usize];
+        (p.frame == frame).then_some(p)
+    }
+
+    fn update_complete(&mut self) {
+        loop {
+            let f = self.complete;
+            if f >= self.cfg.frames {
+                return;
+            }
+            let p = &mut self.progress[(f % 2) as usize];
+            if p.frame != f || !(p.all_issued && p.done == p.issued) {
+                return;
+            }
+            p.complete = true;
+            self.complete += 1;
+            if self.complete >= self.cfg.frames {
+                for w in self.finish_wakers.iter_mut() {
+                    if let Some(w) = w.take() {
+                        w.wake();
+                    }
+                }
+            }
+            // Recycle the slot for frame f + 2.
+            *p = Progress {
+                frame: f + 2,
+                ..Progress::default()
+            };
+        }
+    }
+
+    /// Move the schedule on to the next frame if the current one is all issued and the
+    /// next one's progress slot is free.
+    fn advance_schedule(&mut self) {
+        if !self.sched.exhausted() {
+            return;
+        }
+        let cur = self.sched_frame;
+        if let Some(p) = self.prog(cur) {
+            p.all_issued = true;
+        }
+        self.update_complete();
+        let next = cur + 1;
+        if next >= self.cfg.frames || self.progress[(next % 2) as usize].frame != next {
+            return;
+        }
+        if let Ok(s) = Scheduler::new(
+            self.cfg.policy,
+            self.width,
+            self.height,
+            self.cfg.nodes as u32,
+        ) {
+            self.sched = s;
+            self.sched_frame = next;
+        }
+    }
+
+    /// Top up a node's job list (called when composing its exchange reply).
+    fn assign(&mut self, node: NodeId) {
+        loop {
+            self.advance_schedule();
+            let slot = &self.nodes[node as usize];
+            let held = slot.jobs.iter().filter(|j| j.is_some()).count();
+            if held >= JOB_QUEUE || (held > 0 && !self.sched.may_prefetch()) {
+                return;
+            }
+            let frame = self.sched_frame;
+            if !slot.ready_for(frame) || self.sched.exhausted() {
+                return;
+            }
+            let Some(region) = self.sched.next_for(node) else {
+                return;
+            };
+            let job = Job {
+                id: self.next_job,
+                frame,
+                region,
+            };
+            self.next_job += 1;
+            self.report.jobs += 1;
+            if let Some(p) = self.prog(frame) {
+                p.issued += 1;
+            }
+            if let Some(free) = self.nodes[node as usize]
+                .jobs
+                .iter_mut()
+                .find(|j| j.is_none())
+            {
+                *free = Some(job);
+            }
+        }
+    }
+
+    /// Compose the RC's half of an exchange with `node` into `tx`; returns its length.
+    fn reply<S: SceneSource + ?Sized>(&mut self, node: NodeId, scenes: &S, tx: &mut [u8]) -> usize {
+        if node >= self.cfg.nodes {
+            return 0;
+        }
+        let ack = self.nodes[node as usize].expect.wrapping_sub(1);
+        let seq = self.report.exchanges as u16;
+        let slot = &mut self.nodes[node as usize];
+        slot.repairing = None;
+        let next = slot.repair.and_then(|(frame, map)| {
+            let c = (0..wire::MAX_CHUNKS as u32)
+                .find(|&c| map[(c / 32) as usize] & (1 << (c % 32)) != 0)?;
+            Some((frame, c))
+        });
+        if let Some((frame, c)) = next {
+            if let Some((_, map)) = &mut slot.repair {
+                map[(c / 32) as usize] &= !(1 << (c % 32));
+            }
+            slot.repairing = Some(c);
+            if let Some(scene) = scenes.scene(frame) {
+                let start = (c as usize * SCENE_CHUNK).min(scene.len());
+                let end = (start + SCENE_CHUNK).min(scene.len());
+                let msg = Down::Scene {
+                    frame,
+                    offset: start as u32,
+                    total: scene.len() as u32,
+                    crc: wire::CRC32.checksum(scene),
+                    data: &scene[start..end],
+                };
+                self.report.repairs += 1;
+                return wire::encode(seq, ack, &msg, tx).unwrap_or(0);
+            }
+        }
+        if self.finished() {
+            // A node that missed the Stop broadcast learns it here.
+            return wire::encode(seq, ack, &Down::Stop, tx).unwrap_or(0);
+        }
+        self.assign(node);
+        let jobs = self.nodes[node as usize].jobs;
+        wire::encode(seq, ack, &Down::Work { jobs }, tx).unwrap_or(0)
+    }
+
+    /// Take a node's half of an exchange.
+    fn take<P: PixelSink>(&mut self, node: NodeId, bytes: &[u8], sink: &mut P) {
+        if node >= self.cfg.nodes {
+            self.report.rejected += 1;
+            return;
+        }
+        let env = match wire::decode::<Up>(bytes) {
+            Ok(e) => e,
+            Err(_) => {
+                self.report.bad_frames += 1;
+                return;
+            }
+        };
+        let slot = &mut self.nodes[node as usize];
+        if env.msg == Up::Poll {
+            self.report.polls += 1;
+            return;
+        }
+        if env.seq != slot.expect {
+            self.report.out_of_order += 1;
+            return;
+        }
+        slot.expect = slot.expect.wrapping_add(1);
+        self.report.accepted += 1;
+        match env.msg {
+            Up::Poll => {}
+            Up::Status { scene } => match scene {
+                SceneState::Ready { frame } => {
+                    slot.ready_upto = Some(slot.ready_upto.map_or(frame, |r| r.max(frame)));
+                    if slot.repair.is_some_and(|(f, _)| f == frame) {
+                        slot.repair = None;
+                    }
+                }
+                SceneState::Missing { frame, mut chunks } => {
+                    // The node wrote this before our reply in this exchange reached it.
+                    if let Some(c) = slot.repairing {
+                        chunks[(c / 32) as usize] &= !(1 << (c % 32));
+                    }
+                    slot.repair = Some((frame, chunks));
+                }
+                SceneState::None => {}
+            },
+            Up::Pixels { .. } | Up::PixelsRle { .. } => {
+                let mut buf = [0u8; 3 * wire::MAX_RUN];
+                let (job, frame, y, x, rgb, done) = match env.msg {
+                    Up::Pixels {
+                        job,
+                        frame,
+                        y,
+                        x,
+                        rgb,
+                        done,
+                    } => (job, frame, y, x, rgb, done),
+                    Up::PixelsRle {
+                        job,
+                        frame,
+                        y,
+                        x,
+                        len,
+                        data,
+                        done,
+                    } => {
+                        let Some(out) = buf.get_mut(..3 * len as usize) else {
+                            self.report.rejected += 1;
+                            return;
+                        };
+                        if wire::rle_decode(data, out).is_err() {
+                            self.report.rejected += 1;
+                            return;
+                        }
+                        (job, frame, y, x, &*out, done)
+                    }
+                    _ => return,
+                };
+                let Some(k) = slot
+                    .jobs
+                    .iter()
+                    .position(|j| j.is_some_and(|j| j.id == job && j.frame == frame))
+                else {
+                    self.report.rejected += 1;
+                    return;
+                };
+                let n = rgb.len() / 3;
+                if rgb.len() % 3 != 0 || y as u32 >= self.height || x as u32 + n as u32 > self.width
+                {
+                    self.report.rejected += 1;
+                    return;
+                }
+                sink.pixels(frame, y, x, rgb);
+                self.report.pixels += n as u64;
+                if done {
+                    slot.jobs[k] = None;
+                    if slot.jobs[0].is_none() {
+                        slot.jobs.swap(0, 1);
+                    }
+                    if let Some(p) = self.prog(frame) {
+                        p.done += 1;
+                    }
+                    self.advance_schedule();
+                    self.update_complete();
+                }
+            }
+        }
+    }
+}
+
+/// Drive one bus until every frame is complete, then broadcast `Stop`. `index` numbers the
+/// bus tasks (0..[`MAX_BUSES`]) sharing `root`.
+pub async fn run_bus<B: RootBus, S: SceneSource + ?Sized, P: PixelSink>(
+    index: usize,
+    bus: &mut B,
+    root: &RefCell<RootState>,
+    scenes: &S,
+    sink: &RefCell<P>,
+) -> Result<RootReport, RootError> {
+    let mut tx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_FRAME];
+    // Broadcast position: frame, byte offset (None = SceneEnd next).
+    let mut bframe: u16 = 0;
+    let mut boffset: Option<u32> = Some(0);
+    let mut bcrc: Option<(u16, u32)> = None;
+    loop {
+        if root.borrow().finished() {
+            let n = wire::encode(0, 0, &Down::Stop, &mut tx).unwrap_or(0);
+            bus.broadcast(&tx[..n]).await?;
+            return Ok(root.borrow().report());
+        }
+        let node = match bus.ready() {
+            Some(n) => Some(n),
+            None if root.borrow().may_broadcast(bframe) => None,
+            None => {
+                let end = Finished { root, slot: index };
+                match select(bus.wait_ready(), end).await {
+                    Either::First(n) => Some(n),
+                    Either::Second(()) => continue,
+                }
+            }
+        };
+        match node {
+            Some(node) => {
+                let n = root.borrow_mut().reply(node, scenes, &mut tx);
+                let got = bus.exchange(node, &tx[..n], &mut rx).await?;
+                let mut r = root.borrow_mut();
+                r.report.exchanges += 1;
+                r.take(node, &rx[..got.min(rx.len())], &mut *sink.borrow_mut());
+            }
+            None => {
+                let scene = scenes
+                    .scene(bframe)
+                    .ok_or(RootError::BadScene { frame: bframe })?;
+                let crc = match bcrc {
+                    Some((f, c)) if f == bframe => c,
+                    _ => {
+                        let c = wire::CRC32.checksum(scene);
+                        bcrc = Some((bframe, c));
+                        c
+                    }
+                };
+                let n = match boffset {
+                    Some(off) => {
+                        let start = off as usize;
+                        let end = (start + SCENE_CHUNK).min(scene.len());
+                        let msg = Down::Scene {
+                            frame: bframe,
+                            offset: off,
+                            total: scene.len() as u32,
+                            crc,
+                            data: &scene[start..end],
+                        };
+                        boffset = (end < scene.len()).then_some(end as u32);
+                        wire::encode(0, 0, &msg, &mut tx).unwrap_or(0)
+                    }
+                    None => {
+                        let msg = Down::SceneEnd {
+                            frame: bframe,
+                            len: scene.len() as u32,
+                            crc,
+                        };
+                        bframe += 1;
+                        boffset = Some(0);
+                        wire::encode(0, 0, &msg, &mut tx).unwrap_or(0)
+                    }
+                };
+                bus.broadcast(&tx[..n]).await?;
+                root.borrow_mut().report.broadcasts += 1;
+            }
+        }
+    }
+}

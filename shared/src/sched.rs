@@ -1,0 +1,434 @@
+//! Sub-screen scheduling (LINKS-1 4.6): which region of the screen a node renders next.
+//!
+//! Three policies, all deterministic and heap-free (regions are computed on demand):
+//! - [`Policy::Static`]: one region per node, node `i` gets region `i` (no balancing).
+//! - [`Policy::Fixed`]: `divisions` equal sub-screens handed out in order to whichever node
+//!   asks (dynamic balancing with a fixed grain).
+//! - [`Policy::Decreasing`]: LINKS-1's large-first, smaller-near-the-end: each job is
+//!   `remaining / (factor · nodes)` pixels, never below `min_pixels` (guided
+//!   self-scheduling), so early jobs amortise the traffic and late ones balance the finish.
+//!
+//! Sub-screens are raster-order runs of pixels ([`Shape::Span`], the paper's scanline runs)
+//! or rectangles ([`Shape::Rect`], a grid as close to square cells as the count allows).
+
+use crate::link::NodeId;
+use crate::wire::Region;
+use core::fmt;
+
+/// The form of a sub-screen.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Shape {
+    Span,
+    Rect,
+}
+
+/// How the screen is divided and handed out.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Policy {
+    Static { shape: Shape },
+    Fixed { divisions: u32, shape: Shape },
+    Decreasing { factor: u32, min_pixels: u32 },
+}
+
+impl Policy {
+    /// LINKS-1's decreasing sizes with the defaults used in `docs/cluster.md`.
+    pub const DECREASING: Policy = Policy::Decreasing {
+        factor: 6,
+        min_pixels: 128,
+    };
+}
+
+/// Why a schedule cannot be made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SchedError {
+    /// Zero nodes, zero divisions, a zero factor or an empty screen.
+    Empty,
+    /// More sub-screens than pixels, or a rectangle grid finer than the screen.
+    TooFine { divisions: u32 },
+    /// A screen larger than a region can address (65535 pixels a side).
+    ScreenTooLarge,
+}
+
+impl fmt::Display for SchedError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            SchedError::Empty => write!(f, "nothing to schedule (no nodes, divisions or pixels)"),
+            SchedError::TooFine { divisions } => {
+                write!(
+                    f,
+                    "{divisions} sub-screens are more than the screen can be split into"
+                )
+            }
+            SchedError::ScreenTooLarge => write!(f, "screen larger than 65535 pixels a side"),
+        }
+    }
+}
+
+impl core::error::Error for SchedError {}
+
+/// Hands out the regions of one frame.
+#[derive(Clone, Debug)]
+pub struct Scheduler {
+    policy: Policy,
+    width: u32,
+    height: u32,
+    nodes: u32,
+    /// Rectangle grid (columns, rows) for rectangle shapes.
+    grid: (u32, u32),
+    /// Next region index (static, fixed) — for static, a bitmap of handed-out nodes.
+    next: u32,
+    given: [u32; 8],
+    /// Next pixel (decreasing).
+    next_pixel: u32,
+    /// Regions handed out so far.
+    issued: u32,
+}
+
+/// The grid `(cols, rows)` with `cols · rows = n` whose cells are closest to square.
+fn grid_for(n: u32, width: u32, height: u32) -> (u32, u32) {
+    let mut best = (n, 1);
+    let mut best_err = f32::MAX;
+    let mut rows = 1;
+    while rows <= n {
+        if n.is_multiple_of(rows) {
+            let cols = n / rows;
+            let cw = width as f32 / cols as f32;
+            let ch = height as f32 / rows as f32;
+            let r = if cw > ch { cw / ch } else { ch / cw };
+            if r < best_err {
+                best_err = r;
+                best = (cols, rows);
+            }
+        }
+        rows += 1;
+    }
+    best
+}
+
+impl Scheduler {
+    /// Most nodes a static split addresses.
+    pub const MAX_NODES: u32 = 256;
+
+    pub fn new(policy: Policy, width: u32, height: u32, nodes: u32) -> Result<Self, SchedError> {
+        if width == 0 || height == 0 || nodes == 0 || nodes > Self::MAX_NODES {
+            return Err(SchedError::Empty);
+        }
+        if width > u16::MAX as u32 || height > u16::MAX as u32 {
+            return Err(SchedError::ScreenTooLarge);
+        }
+        let total = width * height;
+        let (count, shape) = match policy {
+            Policy::Static { shape } => (nodes, shape),
+            Policy::Fixed { divisions, shape } => (divisions, shape),
+            Policy::Decreasing { factor, min_pixels } => {
+                if factor == 0 || min_pixels == 0 {
+                    return Err(SchedError::Empty);
+                }
+                (1, Shape::Span)
+            }
+        };
+        if count == 0 {
+            return Err(SchedError::Empty);
+        }
+        if count > total {
+            return Err(SchedError::TooFine { divisions: count });
+        }
+        let grid = if shape == Shape::Rect {
+            let g = grid_for(count, width, height);
+            if g.0 > width || g.1 > height {
+                return Err(SchedError::TooFine { divisions: count });
+            }
+            g
+        } else {
+            (0, 0)
+        };
+        Ok(Self {
+            policy,
+            width,
+            height,
+            nodes,
+            grid,
+            next: 0,
+            given: [0; 8],
+            next_pixel: 0,
+            issued: 0,
+        })
+    }
+
+    pub fn policy(&self) -> Policy {
+        self.policy
+    }
+
+    /// Regions handed out so far.
+    pub fn issued(&self) -> u32 {
+        self.issued
+    }
+
+    /// Region `i` of `count` equal pieces of the screen in the given shape.
+    fn piece(&self, i: u32, count: u32, shape: Shape) -> Region {
+        match shape {
+            Shape::Span => {
+                let total = self.width as u64 * self.height as u64;
+                let a = (total * i as u64 / count as u64) as u32;
+                let b = (total * (i as u64 + 1) / count as u64) as u32;
+                Region::Span {
+                    start: a,
+                    len: b - a,
+                }
+            }
+            Shape::Rect => {
+                let (cols, rows) = self.grid;
+                let (c, r) = (i % cols, i / cols);
+                let x0 = self.width * c / cols;
+                let x1 = self.width * (c + 1) / cols;
+                let y0 = self.height * r / rows;
+                let y1 = self.height * (r + 1) / rows;
+                Region::Rect {
+                    x: x0 as u16,
+                    y: y0 as u16,
+                    w: (x1 - x0) as u16,
+                    h: (y1 - y0) as u16,
+                }
+            }
+        }
+    }
+
+    /// The next region for `node`, or `None` when this node gets nothing more.
+    pub fn next_for(&mut self, node: NodeId) -> Option<Region> {
+        let total = self.width * self.height;
+        let region = match self.policy {
+            Policy::Static { shape } => {
+                let n = node as u32;
+                if n >= self.nodes {
+                    return None;
+                }
+                let (w, b) = ((n / 32) as usize, 1u32 << (n % 32));
+                if self.given[w] & b != 0 {
+                    return None;
+                }
+                self.given[w] |= b;
+                self.next += 1;
+                self.piece(n, self.nodes, shape)
+            }
+            Policy::Fixed { divisions, shape } => {
+                if self.next >= divisions {
+                    return None;
+                }
+                self.next += 1;
+                self.piece(self.next - 1, divisions, shape)
+            }
+            Policy::Decreasing { factor, min_pixels } => {
+                let remaining = total - self.next_pixel;
+                if remaining == 0 {
+                    return None;
+                }
+                let share = remaining.div_ceil(factor.saturating_mul(self.nodes));
+                let len = share.max(min_pixels).min(remaining);
+                let start = self.next_pixel;
+                self.next_pixel += len;
+                Region::Span { start, len }
+            }
+        };
+        self.issued += 1;
+        Some(region)
+    }
+
+    /// Whether every region has been handed out.
+    pub fn exhausted(&self) -> bool {
+        match self.policy {
+            Policy::Static { .. } => self.next >= self.nodes,
+            Policy::Fixed { divisions, .. } => self.next >= divisions,
+            Policy::Decreasing { .. } => self.next_pixel >= self.width * self.height,
+        }
+    }
+
+    /// About how many regions are still to come (exact for static and fixed).
+    pub fn remaining(&self) -> u32 {
+        match self.policy {
+            Policy::Static { .. } => self.nodes - self.next,
+            Policy::Fixed { divisions, .. } => divisions - self.next,
+            Policy::Decreasing { factor, min_pixels } => {
+                let remaining = self.width * self.height - self.next_pixel;
+                let share = remaining
+                    .div_ceil(factor.saturating_mul(self.nodes))
+                    .max(min_pixels);
+                remaining.div_ceil(share.max(1))
+            }
+        }
+    }
+
+    /// Whether a node already holding a job may be given a second one to queue: only while
+    /// more regions remain than nodes, so a queued job never idles another node. Never for a
+    /// static split (each node has exactly one region).
+    pub fn may_prefetch(&self) -> bool {
+        !matches!(self.policy, Policy::Static { .. }) && self.remaining() > self.nodes
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn coverage(mut s: Scheduler, w: u32, h: u32, nodes: u16) -> (u32, [u8; 64 * 60]) {
+        let mut seen = [0u8; 64 * 60];
+        let mut n = 0;
+        let mut node = 0;
+        let mut idle = 0;
+        while idle < nodes {
+            match s.next_for(node) {
+                Some(r) => {
+                    idle = 0;
+                    n += 1;
+                    assert!(r.fits(w, h), "{r:?}");
+                    let mut i = 0;
+                    while let Some((y, x, len)) = r.piece(w, i) {
+                        for px in x..x + len {
+                            seen[(y * w + px) as usize] += 1;
+                        }
+                        i += 1;
+                    }
+                }
+                None => idle += 1,
+            }
+            node = (node + 1) % nodes;
+        }
+        assert!(s.exhausted());
+        (n, seen)
+    }
+
+    #[test]
+    fn every_policy_covers_every_pixel_exactly_once() {
+        let policies = [
+            Policy::Static { shape: Shape::Span },
+            Policy::Static { shape: Shape::Rect },
+            Policy::Fixed {
+                divisions: 7,
+                shape: Shape::Span,
+            },
+            Policy::Fixed {
+                divisions: 48,
+                shape: Shape::Rect,
+            },
+            Policy::Fixed {
+                divisions: 3840,
+                shape: Shape::Span,
+            },
+            Policy::DECREASING,
+            Policy::Decreasing {
+                factor: 1,
+                min_pixels: 1,
+            },
+        ];
+        for p in policies {
+            let s = Scheduler::new(p, 64, 60, 6).unwrap();
+            let (_, seen) = coverage(s, 64, 60, 6);
+            assert!(seen.iter().all(|&c| c == 1), "{p:?}");
+        }
+    }
+
+    #[test]
+    fn counts_and_sizes() {
+        let (n, _) = coverage(
+            Scheduler::new(
+                Policy::Fixed {
+                    divisions: 48,
+                    shape: Shape::Rect,
+                },
+                64,
+                60,
+                4,
+            )
+            .unwrap(),
+            64,
+            60,
+            4,
+        );
+        assert_eq!(n, 48);
+        // 8 columns x 6 rows of 8x10 cells.
+        assert_eq!(grid_for(48, 64, 60), (8, 6));
+        assert_eq!(grid_for(1024, 512, 480), (32, 32));
+        assert_eq!(grid_for(64, 512, 480), (8, 8));
+        // Decreasing: the first job is remaining / (factor * nodes), the sizes shrink to the
+        // floor.
+        let p = Policy::Decreasing {
+            factor: 2,
+            min_pixels: 64,
+        };
+        let mut s = Scheduler::new(p, 64, 60, 4).unwrap();
+        assert_eq!(s.next_for(0), Some(Region::Span { start: 0, len: 480 }));
+        assert_eq!(
+            s.next_for(1),
+            Some(Region::Span {
+                start: 480,
+                len: 420
+            })
+        );
+        let mut last = 0;
+        while let Some(r) = s.next_for(0) {
+            last = r.pixels();
+        }
+        assert!(last <= 64);
+        // Static: each node exactly once.
+        let mut s = Scheduler::new(Policy::Static { shape: Shape::Span }, 64, 60, 4).unwrap();
+        assert_eq!(
+            s.next_for(2),
+            Some(Region::Span {
+                start: 1920,
+                len: 960
+            })
+        );
+        assert_eq!(s.next_for(2), None);
+        assert_eq!(s.next_for(9), None);
+        assert!(!s.may_prefetch());
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        assert_eq!(
+            Scheduler::new(Policy::DECREASING, 64, 60, 0).unwrap_err(),
+            SchedError::Empty
+        );
+        assert_eq!(
+            Scheduler::new(
+                Policy::Fixed {
+                    divisions: 0,
+                    shape: Shape::Span
+                },
+                4,
+                4,
+                1
+            )
+            .unwrap_err(),
+            SchedError::Empty
+        );
+        assert_eq!(
+            Scheduler::new(
+                Policy::Fixed {
+                    divisions: 17,
+                    shape: Shape::Span
+                },
+                4,
+                4,
+                1
+            )
+            .unwrap_err(),
+            SchedError::TooFine { divisions: 17 }
+        );
+        assert_eq!(
+            Scheduler::new(
+                Policy::Fixed {
+                    divisions: 7,
+                    shape: Shape::Rect
+                },
+                4,
+                4,
+                1
+            )
+            .unwrap_err(),
+            SchedError::TooFine { divisions: 7 }
+        );
+    }
+}

@@ -1,0 +1,545 @@
+//! Every message on the RC-NC bus (the "ICD"): versioned, postcard-encoded, CRC-32 checked.
+//!
+//! ## Frame layout
+//! ```text
+//! postcard(Envelope { version, seq, ack, msg }) ++ CRC-32/ISO-HDLC (4 bytes, little-endian)
+//! ```
+//! SPI transfers are length-delimited (the link's handshake phase carries the length), so a
+//! frame needs no COBS stuffing on the bus; a byte stream (serial readback) wraps the same
+//! frame in COBS. The CRC covers every byte before it; a frame whose CRC, version or layout
+//! is wrong decodes to a [`WireError`], never a panic.
+//!
+//! Messages borrow their payloads from the received bytes (pixel runs, scene chunks), so
+//! decoding copies nothing and allocates nothing.
+//!
+//! ## Reliability
+//! RC -> NC exchange messages ([`Down::Work`]) carry *state*, not deltas (the node's whole
+//! job queue), so a lost one is simply superseded by the next. NC -> RC frames carry a sequence
+//! number; the RC acknowledges the highest in-order one in every reply (`ack`), and a node
+//! keeps each frame in its bank until acknowledged and sends it again otherwise (go-back-N with
+//! a window of two: the two DMA banks).
+
+use core::fmt;
+use serde::{Deserialize, Serialize};
+
+/// Protocol version carried in every frame.
+pub const PROTOCOL_VERSION: u8 = 1;
+/// Most pixels in one [`Up::Pixels`] message (one full 512-pixel scanline).
+pub const MAX_RUN: usize = 512;
+/// Bytes of scene image in one broadcast chunk.
+pub const SCENE_CHUNK: usize = 1024;
+/// Largest scene image a node bank holds (the IMSU's 128 KB bank).
+pub const MAX_SCENE: usize = 128 * 1024;
+/// Scene chunks in a full bank.
+pub const MAX_CHUNKS: usize = MAX_SCENE / SCENE_CHUNK;
+/// Jobs a node holds at once: the one it renders and the next (prefetch hides the round trip).
+pub const JOB_QUEUE: usize = 2;
+/// Bytes of CRC at the end of every frame.
+pub const CRC_LEN: usize = 4;
+/// Upper bound of an encoded frame (the largest is a full pixel run or a scene chunk).
+pub const MAX_FRAME: usize = 3 * MAX_RUN + 40;
+
+/// The CRC every frame carries (CRC-32/ISO-HDLC, as Ethernet and zip).
+pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
+
+/// A sub-screen: what a node renders for one job.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Region {
+    /// `len` pixels in raster order from pixel index `start` (= y * width + x): runs of
+    /// scanlines, as LINKS-1 hands out (may continue onto the next scanline).
+    Span { start: u32, len: u32 },
+    /// A rectangle of `w` x `h` pixels with its top-left corner at (x, y).
+    Rect { x: u16, y: u16, w: u16, h: u16 },
+}
+
+impl Region {
+    /// Pixels in the region.
+    pub fn pixels(&self) -> u32 {
+        match *self {
+            Region::Span { len, .. } => len,
+            Region::Rect { w, h, .. } => w as u32 * h as u32,
+        }
+    }
+
+    /// Whether the region lies inside a `width` x `height` frame and is not empty.
+    pub fn fits(&self, width: u32, height: u32) -> bool {
+        match *self {
+            Region::Span { start, len } => {
+                len > 0 && (start as u64 + len as u64) <= width as u64 * height as u64
+            }
+            Region::Rect { x, y, w, h } => {
+                w > 0 && h > 0 && x as u32 + w as u32 <= width && y as u32 + h as u32 <= height
+            }
+        }
+    }
+
+    /// The `i`-th scanline piece of the region: (y, x, len), or `None` past the end. A
+    /// span yields one piece per scanline it touches, a rectangle one per row.
+    pub fn piece(&self, width: u32, i: u32) -> Option<(u32, u32, u32)> {
+        match *self {
+            Region::Span { start, len } => {
+                if width == 0 {
+                    return None;
+                }
+                let end = start.checked_add(len)?;
+                let first_y = start / width;
+                let y = first_y.checked_add(i)?;
+                let row0 = y.checked_mul(width)?;
+                let lo = start.max(row0);
+                let hi = end.min(row0.checked_add(width)?);
+                (lo < hi).then(|| (y, lo - row0, hi - lo))
+            }
+            Region::Rect { x, y, w, h } => {
+                (i < h as u32).then_some((y as u32 + i, x as u32, w as u32))
+            }
+        }
+    }
+}
+
+/// One unit of work: a region of one animation frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Job {
+    /// Globally increasing job number (a node receives its jobs in increasing order).
+    pub id: u32,
+    /// Animation frame; its scene lives in node bank `frame % 2`.
+    pub frame: u16,
+    pub region: Region,
+}
+
+/// What a node knows about the scene of one frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum SceneState {
+    /// Complete, CRC-checked and validated.
+    Ready { frame: u16 },
+    /// The broadcast ended but these chunks are missing (bit `c` of word `c / 32` set =
+    /// chunk `c`, at byte `c · SCENE_CHUNK`, lost or corrupt).
+    Missing {
+        frame: u16,
+        chunks: [u32; MAX_CHUNKS / 32],
+    },
+    /// Nothing received yet.
+    None,
+}
+
+/// RC -> NC messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Down<'a> {
+    /// Exchange reply: the node's job queue as the RC sees it (jobs it has not reported
+    /// finished, oldest first). Idempotent: the node ignores jobs it already took.
+    Work { jobs: [Option<Job>; JOB_QUEUE] },
+    /// A piece of a scene image written at `offset` (the IMSU's address offset) into the
+    /// bank of `frame`, broadcast or, as a repair, in an exchange. Every chunk carries the
+    /// scene's length and CRC-32, so a node whose `SceneEnd` was lost still completes.
+    Scene {
+        frame: u16,
+        offset: u32,
+        total: u32,
+        crc: u32,
+        data: &'a [u8],
+    },
+    /// End of a scene broadcast: its length and CRC-32.
+    SceneEnd { frame: u16, len: u32, crc: u32 },
+    /// No more work: the node may stop.
+    Stop,
+}
+
+/// NC -> RC messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Up<'a> {
+    /// The node's scene changed state (sequenced: delivered reliably).
+    Status { scene: SceneState },
+    /// Not sequenced, carries nothing: "swap with me so I learn your `ack`" (a node with
+    /// unacknowledged frames and nothing new to send).
+    Poll,
+    /// Finished pixels of job `job`: `rgb` holds RGB8 triples of scanline `y` from column
+    /// `x` (the address + colour record, LINKS-1's 54-bit pixel analog, per run). `done`
+    /// marks the job's last run.
+    Pixels {
+        job: u32,
+        frame: u16,
+        y: u16,
+        x: u16,
+        rgb: &'a [u8],
+        done: bool,
+    },
+    /// As [`Up::Pixels`], the `len` pixels run-length coded ([`rle_encode`]): lossless, and
+    /// much shorter over flat backgrounds.
+    PixelsRle {
+        job: u32,
+        frame: u16,
+        y: u16,
+        x: u16,
+        len: u16,
+        data: &'a [u8],
+        done: bool,
+    },
+}
+
+/// Run-length code RGB8 pixels as `(count - 1, r, g, b)` quadruples (runs of up to 256 equal
+/// pixels). Returns the coded length, or `None` if it would not fit `out`.
+pub fn rle_encode(rgb: &[u8], out: &mut [u8]) -> Option<usize> {
+    let mut n = 0;
+    let mut px = rgb.chunks_exact(3).peekable();
+    while let Some(p) = px.next() {
+        let mut count = 1usize;
+        while count < 256 && px.peek() == Some(&p) {
+            px.next();
+            count += 1;
+        }
+        let q = out.get_mut(n..n + 4)?;
+        q[0] = (count - 1) as u8;
+        q[1..4].copy_from_slice(p);
+        n += 4;
+    }
+    Some(n)
+}
+
+/// Decode [`rle_encode`]'s output into `out`, which must be filled exactly.
+pub fn rle_decode(data: &[u8], out: &mut [u8]) -> Result<(), WireError> {
+    if !data.len().is_multiple_of(4) {
+        return Err(WireError::Malformed);
+    }
+    let mut at = 0;
+    for q in data.chunks_exact(4) {
+        let count = q[0] as usize + 1;
+        let dst = out
+            .get_mut(at..at + 3 * count)
+            .ok_or(WireError::Malformed)?;
+        for d in dst.chunks_exact_mut(3) {
+            d.copy_from_slice(&q[1..4]);
+        }
+        at += 3 * count;
+    }
+    if at == out.len() {
+        Ok(())
+    } else {
+        Err(WireError::Malformed)
+    }
+}
+
+/// The header and message of a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Envelope<M> {
+    pub version: u8,
+    /// Sender's sequence number (NC frames; 0 in broadcasts).
+    pub seq: u16,
+    /// RC frames: the highest in-order NC sequence number received. NC frames: the last
+    /// RC exchange it decoded (diagnostic only).
+    pub ack: u16,
+    pub msg: M,
+}
+
+/// Why bytes are not a valid frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum WireError {
+    /// Shorter than the CRC, or the CRC does not match.
+    BadCrc,
+    /// CRC fine but the contents are not a message of this protocol.
+    Malformed,
+    /// A frame of another protocol version.
+    Version { found: u8 },
+    /// The output buffer is too small for the frame.
+    BufferFull,
+}
+
+impl fmt::Display for WireError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            WireError::BadCrc => write!(f, "frame failed its CRC check"),
+            WireError::Malformed => write!(f, "frame holds no valid message"),
+            WireError::Version { found } => write!(
+                f,
+                "frame of protocol version {found} (expected {PROTOCOL_VERSION})"
+            ),
+            WireError::BufferFull => write!(f, "frame does not fit the buffer"),
+        }
+    }
+}
+
+impl core::error::Error for WireError {}
+
+/// Encode a message into `buf`; returns the frame's length.
+pub fn encode<M: Serialize>(
+    seq: u16,
+    ack: u16,
+    msg: &M,
+    buf: &mut [u8],
+) -> Result<usize, WireError> {
+    let env = Envelope {
+        version: PROTOCOL_VERSION,
+        seq,
+        ack,
+        msg,
+    };
+    postcard::to_slice_crc32(&env, buf, CRC32.digest())
+        .map(|s| s.len())
+        .map_err(|_| WireError::BufferFull)
+}
+
+/// Decode a frame (checking CRC and version). The message borrows from `bytes`.
+pub fn decode<'a, M: Deserialize<'a>>(bytes: &'a [u8]) -> Result<Envelope<M>, WireError> {
+    if bytes.len() < CRC_LEN {
+        return Err(WireError::BadCrc);
+    }
+    let (body, tail) = bytes.split_at(bytes.len() - CRC_LEN);
+    let want = u32::from_le_bytes([tail[0], tail[1], tail[2], tail[3]]);
+    if CRC32.checksum(body) != want {
+        return Err(WireError::BadCrc);
+    }
+    // The version is the first byte (a u8 encodes as itself).
+    match body.first() {
+        Some(&PROTOCOL_VERSION) => {}
+        Some(&v) => return Err(WireError::Version { found: v }),
+        None => return Err(WireError::Malformed),
+    }
+    let (env, rest): (Envelope<M>, &[u8]) =
+        postcard::take_from_bytes(body).map_err(|_| WireError::Malformed)?;
+    if !rest.is_empty() {
+        return Err(WireError::Malformed);
+    }
+    Ok(env)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn roundtrip<'a, M>(msg: M, buf: &'a mut [u8]) -> Envelope<M>
+    where
+        M: Serialize + Deserialize<'a> + PartialEq + fmt::Debug + Copy,
+    {
+        let n = encode(7, 3, &msg, buf).expect("fits");
+        let env: Envelope<M> = decode(&buf[..n]).expect("decodes");
+        assert_eq!(env.msg, msg);
+        assert_eq!((env.version, env.seq, env.ack), (PROTOCOL_VERSION, 7, 3));
+        env
+    }
+
+    #[test]
+    fn every_message_round_trips() {
+        let job = Job {
+            id: 9,
+            frame: 1,
+            region: Region::Span { start: 5, len: 700 },
+        };
+        let rect = Job {
+            id: 10,
+            frame: 1,
+            region: Region::Rect {
+                x: 1,
+                y: 2,
+                w: 3,
+                h: 4,
+            },
+        };
+        let data = [1u8, 2, 3, 250];
+        let rgb = [7u8; 3 * MAX_RUN];
+        let downs = [
+            Down::Work {
+                jobs: [Some(job), Some(rect)],
+            },
+            Down::Work { jobs: [None, None] },
+            Down::Scene {
+                frame: 3,
+                offset: 1024,
+                total: 90536,
+                crc: 7,
+                data: &data,
+            },
+            Down::SceneEnd {
+                frame: 3,
+                len: 90536,
+                crc: 0xdead_beef,
+            },
+            Down::Stop,
+        ];
+        for d in downs {
+            roundtrip(d, &mut [0u8; MAX_FRAME]);
+        }
+        let ups = [
+            Up::Status {
+                scene: SceneState::Ready { frame: 2 },
+            },
+            Up::Status {
+                scene: SceneState::Missing {
+                    frame: 2,
+                    chunks: [1, 0, 0, 1 << 31],
+                },
+            },
+            Up::Status {
+                scene: SceneState::None,
+            },
+            Up::Poll,
+            Up::Pixels {
+                job: 4,
+                frame: 0,
+                y: 479,
+                x: 0,
+                rgb: &rgb,
+                done: true,
+            },
+            Up::PixelsRle {
+                job: 4,
+                frame: 0,
+                y: 479,
+                x: 0,
+                len: 512,
+                data: &data,
+                done: false,
+            },
+        ];
+        for u in ups {
+            roundtrip(u, &mut [0u8; MAX_FRAME]);
+        }
+    }
+
+    #[test]
+    fn largest_frames_fit_max_frame() {
+        let rgb = [0xffu8; 3 * MAX_RUN];
+        let up = Up::Pixels {
+            job: u32::MAX,
+            frame: u16::MAX,
+            y: u16::MAX,
+            x: u16::MAX,
+            rgb: &rgb,
+            done: true,
+        };
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(u16::MAX, u16::MAX, &up, &mut buf).expect("fits");
+        assert!(n <= MAX_FRAME);
+        let chunk = [0xffu8; SCENE_CHUNK];
+        let d = Down::Scene {
+            frame: u16::MAX,
+            offset: u32::MAX,
+            total: u32::MAX,
+            crc: u32::MAX,
+            data: &chunk,
+        };
+        assert!(encode(u16::MAX, u16::MAX, &d, &mut buf).expect("fits") <= MAX_FRAME);
+    }
+
+    #[test]
+    fn exact_size_of_a_pixel_frame() {
+        // version 1 + seq 1 + ack 1 + variant 1 + job 1 + frame 1 + y 1 + x 1
+        // + len varint 2 + 384 bytes + done 1 + crc 4 = 399
+        let rgb = [0u8; 384];
+        let up = Up::Pixels {
+            job: 1,
+            frame: 0,
+            y: 5,
+            x: 0,
+            rgb: &rgb,
+            done: false,
+        };
+        let mut buf = [0u8; MAX_FRAME];
+        assert_eq!(encode(1, 0, &up, &mut buf), Ok(399));
+    }
+
+    #[test]
+    fn crc_catches_every_single_bit_flip() {
+        let rgb = [0x5au8; 64];
+        let up = Up::Pixels {
+            job: 1,
+            frame: 0,
+            y: 5,
+            x: 3,
+            rgb: &rgb,
+            done: true,
+        };
+        let mut buf = [0u8; MAX_FRAME];
+        let n = encode(1, 0, &up, &mut buf).unwrap();
+        for bit in 0..n * 8 {
+            let mut b = buf;
+            b[bit / 8] ^= 1 << (bit % 8);
+            assert_eq!(decode::<Up>(&b[..n]), Err(WireError::BadCrc), "bit {bit}");
+        }
+        assert_eq!(decode::<Up>(&buf[..n - 1]), Err(WireError::BadCrc));
+        assert_eq!(decode::<Up>(&[]), Err(WireError::BadCrc));
+    }
+
+    #[test]
+    fn wrong_version_and_garbage_are_errors_not_panics() {
+        let mut buf = [0u8; 64];
+        let n = encode(0, 0, &Down::Stop, &mut buf).unwrap();
+        buf[0] = 2;
+        let crc = CRC32.checksum(&buf[..n - 4]).to_le_bytes();
+        buf[n - 4..n].copy_from_slice(&crc);
+        assert_eq!(
+            decode::<Down>(&buf[..n]),
+            Err(WireError::Version { found: 2 })
+        );
+        // Valid CRC over bytes that are no message.
+        let mut g = [PROTOCOL_VERSION, 0, 0, 99, 0, 0, 0, 0];
+        let crc = CRC32.checksum(&g[..4]).to_le_bytes();
+        g[4..].copy_from_slice(&crc);
+        assert_eq!(decode::<Down>(&g), Err(WireError::Malformed));
+        assert_eq!(
+            encode(0, 0, &Down::Stop, &mut [0u8; 3]),
+            Err(WireError::BufferFull)
+        );
+    }
+
+    #[test]
+    fn rle_round_trips_and_rejects_bad_input() {
+        let mut rgb = [0u8; 3 * 600];
+        for (i, p) in rgb.chunks_exact_mut(3).enumerate() {
+            let v = if i < 300 { 9 } else { (i / 7) as u8 };
+            p.copy_from_slice(&[v, v / 2, 1]);
+        }
+        let mut coded = [0u8; 4 * 600];
+        let n = rle_encode(&rgb, &mut coded).unwrap();
+        // 300 equal pixels: two quadruples (256 + 44); then runs of 7 (the first short).
+        assert_eq!(n, 4 * (2 + 300usize.div_ceil(7) + 1));
+        let mut back = [0u8; 3 * 600];
+        rle_decode(&coded[..n], &mut back).unwrap();
+        assert_eq!(back, rgb);
+        assert_eq!(
+            rle_decode(&coded[..n - 1], &mut back),
+            Err(WireError::Malformed)
+        );
+        assert_eq!(
+            rle_decode(&coded[..n - 4], &mut back),
+            Err(WireError::Malformed)
+        );
+        assert_eq!(
+            rle_decode(&coded[..n], &mut back[..30]),
+            Err(WireError::Malformed)
+        );
+        assert_eq!(rle_encode(&rgb, &mut coded[..7]), None);
+        assert_eq!(rle_encode(&[], &mut coded), Some(0));
+    }
+
+    #[test]
+    fn region_pieces() {
+        let s = Region::Span { start: 10, len: 30 };
+        assert_eq!(s.piece(16, 0), Some((0, 10, 6)));
+        assert_eq!(s.piece(16, 1), Some((1, 0, 16)));
+        assert_eq!(s.piece(16, 2), Some((2, 0, 8)));
+        assert_eq!(s.piece(16, 3), None);
+        let r = Region::Rect {
+            x: 2,
+            y: 3,
+            w: 4,
+            h: 2,
+        };
+        assert_eq!(r.piece(16, 1), Some((4, 2, 4)));
+        assert_eq!(r.piece(16, 2), None);
+        assert!(r.fits(6, 5) && !r.fits(5, 5));
+        assert!(!Region::Span { start: 0, len: 0 }.fits(4, 4));
+        assert_eq!(
+            Region::Span {
+                start: u32::MAX,
+                len: 2
+            }
+            .piece(16, 0),
+            None
+        );
+    }
+}

@@ -1,0 +1,696 @@
+//! The simulated cluster: frames bit-identical to the single-node render for every node
+//! count, bus count, scheduling policy and collection path; recovery from corrupted frames;
+//! exact broadcast byte counts; determinism.
+
+use links_core::dm::{compile, CompileOptions};
+use links_core::node::NodeConfig;
+use links_core::sched::{Policy, Shape};
+use links_core::wire::{self, Down, SCENE_CHUNK};
+use links_host::cluster::star::Faults;
+use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimReport};
+use links_host::frame::{render_frame, Precision};
+use links_host::scene_file::load_scene;
+use std::path::Path;
+
+fn image(scene: &str, w: u32, h: u32) -> Vec<u8> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(scene);
+    let desc = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let opts = CompileOptions {
+        width: Some(w),
+        height: Some(h),
+        ..Default::default()
+    };
+    compile(&desc, &opts).expect("compiles").bytes
+}
+
+fn reference(img: &[u8]) -> Vec<u8> {
+    render_frame(img, Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb
+}
+
+fn run(img: &[u8], cfg: SimConfig) -> SimReport {
+    let cfg = SimConfig {
+        keep_frames: true,
+        ..cfg
+    };
+    simulate_frame(img, &cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e}"))
+}
+
+#[test]
+fn cluster_frames_are_bit_identical_to_the_single_node_render() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let cases = [
+        (1, 1, Policy::DECREASING),
+        (3, 1, Policy::Static { shape: Shape::Span }),
+        (8, 2, Policy::Static { shape: Shape::Rect }),
+        (
+            5,
+            1,
+            Policy::Fixed {
+                divisions: 48,
+                shape: Shape::Rect,
+            },
+        ),
+        (
+            7,
+            3,
+            Policy::Fixed {
+                divisions: 100,
+                shape: Shape::Span,
+            },
+        ),
+        (16, 4, Policy::DECREASING),
+        (64, 1, Policy::DECREASING),
+        (
+            200,
+            8,
+            Policy::Decreasing {
+                factor: 1,
+                min_pixels: 1,
+            },
+        ),
+    ];
+    for (i, (nodes, buses, policy)) in cases.into_iter().enumerate() {
+        let r = run(
+            &img,
+            SimConfig {
+                nodes,
+                buses,
+                policy,
+                node: NodeConfig { rle: i % 2 == 0 },
+                ..SimConfig::default()
+            },
+        );
+        assert_eq!(r.frames.len(), 1);
+        assert!(
+            r.frames[0] == want,
+            "{nodes} nodes, {buses} buses, {policy:?}"
+        );
+        assert_eq!(r.root.pixels, 64 * 60);
+        assert_eq!(r.root.bad_frames, 0);
+        let px: u64 = r.node_reports.iter().map(|n| n.pixels).sum();
+        assert_eq!(px, 64 * 60);
+        assert!(r.time_s > 0.0);
+    }
+}
+
+#[test]
+fn render_cluster_reports_the_speed_up_against_one_node() {
+    let img = image("photo1.ron", 64, 60);
+    let r = links_host::cluster::render_cluster(
+        &img,
+        &SimConfig {
+            nodes: 8,
+            ..SimConfig::default()
+        },
+    )
+    .expect("renders");
+    assert!(r.report.frames[0] == reference(&img));
+    let one = simulate_frame(
+        &img,
+        &SimConfig {
+            nodes: 1,
+            ..SimConfig::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(r.one_node_s, one.time_s);
+    assert_eq!(r.speedup, one.time_s / r.report.time_s);
+    assert!(r.speedup > 1.0 && r.speedup <= 8.0, "{}", r.speedup);
+}
+
+#[test]
+fn pixels_through_the_root_give_the_same_frame_and_time() {
+    let img = image("photo1.ron", 64, 60);
+    let cfg = SimConfig {
+        nodes: 6,
+        ..SimConfig::default()
+    };
+    let a = run(&img, cfg.clone());
+    let b = run(
+        &img,
+        SimConfig {
+            collect: Collect::ViaRoot,
+            ..cfg
+        },
+    );
+    assert!(a.frames[0] == b.frames[0]);
+    assert_eq!(a.time_s, b.time_s);
+}
+
+#[test]
+fn corrupted_frames_are_caught_and_resent() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let r = run(
+        &img,
+        SimConfig {
+            nodes: 6,
+            buses: 2,
+            faults: Faults {
+                up_every: 5,
+                down_every: 7,
+                broadcast_every: 11,
+                random: None,
+            },
+            ..SimConfig::default()
+        },
+    );
+    assert!(r.frames[0] == want);
+    let sum =
+        |f: fn(&links_host::cluster::star::BusCounters) -> u64| r.bus.iter().map(f).sum::<u64>();
+    let (up, down, bcast) = (
+        sum(|b| b.corrupted_up),
+        sum(|b| b.corrupted_down),
+        sum(|b| b.corrupted_broadcast),
+    );
+    assert!(up > 10 && down > 10 && bcast > 5, "{up} {down} {bcast}");
+    // Every corrupted NC frame is caught by the RC's CRC, every corrupted RC frame by the
+    // node's, and the lost frames are sent again.
+    assert!(r.root.bad_frames > 0);
+    let node_bad: u32 = r.node_reports.iter().map(|n| n.bad_frames).sum();
+    let resent: u32 = r.node_reports.iter().map(|n| n.frames_resent).sum();
+    assert!(node_bad > 0 && resent > 0);
+    // The RC sees every exchange it clocks: each corrupted NC frame is caught exactly once.
+    assert_eq!(r.root.bad_frames as u64, up);
+    // Nodes catch what reaches them (a node that has stopped reads no more).
+    assert!(
+        node_bad as u64 <= down + bcast && node_bad as u64 >= down / 2,
+        "{node_bad}"
+    );
+    // Broadcast damage was repaired point-to-point.
+    assert!(r.root.repairs > 0);
+}
+
+#[test]
+fn heavy_fault_patterns_never_stall_or_change_a_pixel() {
+    let img = image("reflections.ron", 32, 30);
+    let want = reference(&img);
+    let patterns = [
+        (2, 3, 0),
+        (3, 2, 5),
+        (4, 4, 3),
+        (2, 2, 2),
+        (6, 5, 4),
+        (3, 3, 7),
+    ];
+    for (i, (up, down, bcast)) in patterns.into_iter().enumerate() {
+        for nodes in [1u16, 3, 5] {
+            let r = run(
+                &img,
+                SimConfig {
+                    nodes,
+                    buses: 1 + (i as u16 % 2),
+                    faults: Faults {
+                        up_every: up,
+                        down_every: down,
+                        broadcast_every: bcast,
+                        random: Some(1 + i as u64),
+                    },
+                    ..SimConfig::default()
+                },
+            );
+            assert!(
+                r.frames[0] == want,
+                "faults {up}/{down}/{bcast}, {nodes} nodes"
+            );
+        }
+    }
+}
+
+#[test]
+fn faults_in_step_with_the_protocol_are_reported_as_livelock_not_a_hang() {
+    // One node, every second NC frame corrupted: the go-back-N resend always lands on an
+    // even transfer. A real link is not that adversarial; the simulator must still stop.
+    let img = image("reflections.ron", 32, 30);
+    let cfg = SimConfig {
+        nodes: 1,
+        faults: Faults {
+            up_every: 2,
+            ..Faults::default()
+        },
+        ..SimConfig::default()
+    };
+    match simulate_frame(&img, &cfg) {
+        Err(e) => assert!(e.to_string().contains("livelock"), "{e}"),
+        Ok(r) => assert!(r.frames.is_empty() || r.root.pixels == 32 * 30),
+    }
+}
+
+#[test]
+fn a_node_repairs_a_broadcast_that_lost_every_other_chunk_and_its_end() {
+    let img = image("photo1.ron", 64, 60);
+    let chunks = img.len().div_ceil(SCENE_CHUNK);
+    // One node, every second broadcast frame corrupted: chunks 1, 3, 5, ... are lost, and
+    // either the last chunk (even count) or the SceneEnd after it (odd count): the node
+    // learns the broadcast ended from whichever arrives.
+    let r = run(
+        &img,
+        SimConfig {
+            nodes: 1,
+            faults: Faults {
+                broadcast_every: 2,
+                ..Faults::default()
+            },
+            ..SimConfig::default()
+        },
+    );
+    assert!(r.frames[0] == reference(&img));
+    assert_eq!(r.root.repairs as usize, chunks / 2);
+    assert_eq!(
+        r.node_reports[0].chunks as usize,
+        chunks.div_ceil(2) + chunks / 2
+    );
+}
+
+#[test]
+fn broadcast_bytes_are_exact() {
+    let img = image("photo1.ron", 64, 60);
+    let r = run(
+        &img,
+        SimConfig {
+            nodes: 4,
+            buses: 2,
+            node: NodeConfig { rle: false },
+            ..SimConfig::default()
+        },
+    );
+    // Every bus carries the scene in SCENE_CHUNK pieces, its SceneEnd and a Stop.
+    let mut buf = [0u8; wire::MAX_FRAME];
+    let mut want = 0u64;
+    for (i, chunk) in img.chunks(SCENE_CHUNK).enumerate() {
+        let m = Down::Scene {
+            frame: 0,
+            offset: (i * SCENE_CHUNK) as u32,
+            total: img.len() as u32,
+            crc: wire::CRC32.checksum(&img),
+            data: chunk,
+        };
+        want += wire::encode(0, 0, &m, &mut buf).unwrap() as u64;
+    }
+    let end = Down::SceneEnd {
+        frame: 0,
+        len: img.len() as u32,
+        crc: wire::CRC32.checksum(&img),
+    };
+    want += wire::encode(0, 0, &end, &mut buf).unwrap() as u64;
+    want += wire::encode(0, 0, &Down::Stop, &mut buf).unwrap() as u64;
+    for b in &r.bus {
+        assert_eq!(b.broadcast_bytes, want);
+        assert_eq!(b.broadcasts, img.len().div_ceil(SCENE_CHUNK) as u64 + 2);
+    }
+    // Pixel payload: at least 3 bytes per pixel, plus a few bytes of header per run.
+    let up: u64 = r.bus.iter().map(|b| b.up_bytes).sum();
+    assert!((3 * 64 * 60..4 * 64 * 60).contains(&up), "{up}");
+}
+
+#[test]
+fn run_length_coding_is_lossless_and_shrinks_the_traffic() {
+    let img = image("photo1.ron", 64, 60);
+    let cfg = |rle| SimConfig {
+        nodes: 4,
+        node: NodeConfig { rle },
+        ..SimConfig::default()
+    };
+    let raw = run(&img, cfg(false));
+    let rle = run(&img, cfg(true));
+    assert!(raw.frames[0] == rle.frames[0]);
+    let up = |r: &SimReport| r.bus.iter().map(|b| b.up_bytes).sum::<u64>();
+    assert!(up(&rle) * 3 < up(&raw) * 2, "{} vs {}", up(&rle), up(&raw));
+}
+
+#[test]
+fn animation_frames_are_identical_and_pipelined() {
+    let a = image("photo1.ron", 64, 60);
+    let b = image("reflections.ron", 64, 60);
+    let scenes = [a.clone(), b.clone(), a.clone()];
+    let r = simulate(
+        &scenes,
+        &SimConfig {
+            nodes: 8,
+            keep_frames: true,
+            ..SimConfig::default()
+        },
+    )
+    .expect("simulates");
+    let (ra, rb) = (reference(&a), reference(&b));
+    assert_eq!(r.frames.len(), 3);
+    assert!(r.frames[0] == ra && r.frames[1] == rb && r.frames[2] == ra);
+    assert!(r.frame_done_s.windows(2).all(|w| w[0] < w[1]));
+}
+
+#[test]
+fn virtual_time_is_deterministic() {
+    let img = image("photo1.ron", 64, 60);
+    let cfg = SimConfig {
+        nodes: 12,
+        buses: 2,
+        faults: Faults {
+            up_every: 9,
+            ..Faults::default()
+        },
+        ..SimConfig::default()
+    };
+    let a = run(&img, cfg.clone());
+    // The same simulation on other host threads, concurrently.
+    let others: Vec<SimReport> = std::thread::scope(|s| {
+        let hs: Vec<_> = (0..3).map(|_| s.spawn(|| run(&img, cfg.clone()))).collect();
+        hs.into_iter().map(|h| h.join().expect("thread")).collect()
+    });
+    for b in others {
+        assert_eq!(a.time_s, b.time_s);
+        assert_eq!(a.bus, b.bus);
+        assert_eq!(a.root, b.root);
+        assert_eq!(a.node_compute_s, b.node_compute_s);
+        assert!(a.frames == b.frames);
+    }
+}
+
+#[test]
+fn node_and_root_state_fit_the_mcu_budget() {
+    use links_core::node::{run_node, NodeReport, RealTime, Tracing};
+    use links_core::root::RootState;
+    use links_host::cluster::exec::Clock;
+    use links_host::cluster::star::{BusTiming, SimNodeLink, Star};
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    let clock = Rc::new(RefCell::new(Clock::default()));
+    let star = Star::new(&clock, 1, 1, BusTiming::default(), Faults::default(), None);
+    let mut link = SimNodeLink::new(&star, 0);
+    let (mut a, mut b) = ([0u8; 16], [0u8; 16]);
+    let mut report = NodeReport::default();
+    let mut renderer = Tracing::<f32>::new();
+    let mut clk = RealTime;
+    let fut = run_node(
+        NodeConfig::default(),
+        &mut link,
+        &mut clk,
+        &mut renderer,
+        [&mut a, &mut b],
+        &mut report,
+    );
+    // The node's whole state besides its two scene banks (the future holds every buffer):
+    // two TX banks, the RX buffer, the run being rendered and its coded form.
+    let node = std::mem::size_of_val(&fut);
+    assert!(node < 12 * 1024, "node state {node} bytes");
+    // The RC's table for 256 nodes.
+    let root = std::mem::size_of::<RootState>();
+    assert!(root < 40 * 1024, "root state {root} bytes");
+    println!("node future {node} B, root state {root} B");
+}
+
+/// CRC-valid but adversarial frames (random fields, wrong lengths, absurd offsets) and raw
+/// garbage, fed straight into the node and root logic: they must neither panic nor hang.
+mod hostile_bus {
+    use super::*;
+    use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
+    use links_core::node::{run_node, NodeReport, RealTime, Tracing};
+    use links_core::root::{run_bus, RootConfig, RootState};
+    use links_core::wire::{Job, Region, SceneState, Up};
+    use links_tests::Rng;
+    use std::cell::RefCell;
+    use std::future::Future;
+    use std::pin::pin;
+    use std::task::{Context, Waker};
+
+    fn drive<F: Future>(f: F) {
+        let mut f = pin!(f);
+        let mut cx = Context::from_waker(Waker::noop());
+        for _ in 0..100_000 {
+            if f.as_mut().poll(&mut cx).is_ready() {
+                return;
+            }
+        }
+        panic!("did not finish");
+    }
+
+    fn small(r: &mut Rng, max: u64) -> u64 {
+        r.next_u64() % max
+    }
+
+    fn region(r: &mut Rng) -> Region {
+        if r.next_u64().is_multiple_of(2) {
+            Region::Span {
+                start: small(r, 5000) as u32,
+                len: small(r, 800) as u32,
+            }
+        } else {
+            Region::Rect {
+                x: small(r, 80) as u16,
+                y: small(r, 80) as u16,
+                w: small(r, 80) as u16,
+                h: small(r, 80) as u16,
+            }
+        }
+    }
+
+    fn down_frame(r: &mut Rng, img: &[u8], buf: &mut [u8]) -> usize {
+        let crc = wire::CRC32.checksum(img);
+        let data = [0xa5u8; SCENE_CHUNK + 2];
+        let n = match r.next_u64() % 7 {
+            0 => {
+                let job = |r: &mut Rng| Job {
+                    id: small(r, 40) as u32,
+                    frame: small(r, 3) as u16,
+                    region: region(r),
+                };
+                let jobs = [
+                    Some(job(r)),
+                    if r.next_u64().is_multiple_of(2) {
+                        Some(job(r))
+                    } else {
+                        None
+                    },
+                ];
+                wire::encode(0, small(r, 9) as u16, &Down::Work { jobs }, buf)
+            }
+            1 => {
+                // A real chunk of the real scene (so some frames do get rendered).
+                let c = small(r, img.len().div_ceil(SCENE_CHUNK) as u64) as usize;
+                let end = (c * SCENE_CHUNK + SCENE_CHUNK).min(img.len());
+                let m = Down::Scene {
+                    frame: 0,
+                    offset: (c * SCENE_CHUNK) as u32,
+                    total: img.len() as u32,
+                    crc,
+                    data: &img[c * SCENE_CHUNK..end],
+                };
+                wire::encode(0, 0, &m, buf)
+            }
+            2 => {
+                let len = small(r, SCENE_CHUNK as u64 + 2) as usize;
+                let m = Down::Scene {
+                    frame: small(r, 4) as u16,
+                    offset: r.next_u64() as u32,
+                    total: r.next_u64() as u32,
+                    crc: r.next_u64() as u32,
+                    data: &data[..len],
+                };
+                wire::encode(0, 0, &m, buf)
+            }
+            3 => {
+                let m = Down::SceneEnd {
+                    frame: small(r, 3) as u16,
+                    len: if r.next_u64().is_multiple_of(2) {
+                        img.len() as u32
+                    } else {
+                        r.next_u64() as u32
+                    },
+                    crc,
+                };
+                wire::encode(0, 0, &m, buf)
+            }
+            4 => {
+                let n = small(r, 64) as usize;
+                for b in &mut buf[..n] {
+                    *b = r.next_u64() as u8;
+                }
+                Ok(n)
+            }
+            _ => {
+                let job = Job {
+                    id: 1000 + small(r, 1000) as u32,
+                    frame: 0,
+                    region: Region::Span {
+                        start: small(r, 3000) as u32,
+                        len: 1 + small(r, 600) as u32,
+                    },
+                };
+                wire::encode(
+                    0,
+                    small(r, 50) as u16,
+                    &Down::Work {
+                        jobs: [Some(job), None],
+                    },
+                    buf,
+                )
+            }
+        };
+        n.unwrap_or(0)
+    }
+
+    struct ScriptedNodeLink {
+        rng: Rng,
+        img: Vec<u8>,
+        left: u32,
+        posted: bool,
+    }
+
+    impl NodeLink for ScriptedNodeLink {
+        fn post(&mut self, _frame: &[u8]) -> Result<(), LinkError> {
+            self.posted = true;
+            Ok(())
+        }
+        async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError> {
+            if self.left == 0 {
+                return Err(LinkError::Aborted);
+            }
+            self.left -= 1;
+            let len = down_frame(&mut self.rng, &self.img, rx);
+            if self.posted && self.rng.next_u64().is_multiple_of(2) {
+                self.posted = false;
+                Ok(Incoming::Exchanged { len })
+            } else {
+                Ok(Incoming::Broadcast { len })
+            }
+        }
+    }
+
+    #[test]
+    fn a_node_survives_hostile_frames() {
+        let img = image("reflections.ron", 32, 30);
+        let (mut jobs, mut bad_jobs) = (0, 0);
+        for seed in 1..=20u64 {
+            let mut link = ScriptedNodeLink {
+                rng: Rng(seed * 7919),
+                img: img.clone(),
+                left: 3000,
+                posted: false,
+            };
+            let (mut a, mut b) = (vec![0u8; img.len()], vec![0u8; img.len() + 100]);
+            let mut report = NodeReport::default();
+            drive(run_node(
+                NodeConfig::default(),
+                &mut link,
+                &mut RealTime,
+                &mut Tracing::<f32>::new(),
+                [&mut a, &mut b],
+                &mut report,
+            ));
+            assert!(report.bad_frames > 0 && report.chunks > 0, "{report:?}");
+            jobs += report.jobs;
+            bad_jobs += report.bad_jobs;
+        }
+        // Some scenes completed and jobs were rendered; absurd regions were refused.
+        assert!(jobs > 0 && bad_jobs > 0, "{jobs} {bad_jobs}");
+    }
+
+    struct HostileBus {
+        rng: Rng,
+        left: u32,
+    }
+
+    impl RootBus for HostileBus {
+        fn nodes(&self) -> (NodeId, u16) {
+            (0, 4)
+        }
+        fn ready(&self) -> Option<NodeId> {
+            Some((self.rng.0 % 6) as NodeId) // sometimes a node that does not exist
+        }
+        async fn wait_ready(&mut self) -> NodeId {
+            0
+        }
+        async fn exchange(
+            &mut self,
+            _node: NodeId,
+            _tx: &[u8],
+            rx: &mut [u8],
+        ) -> Result<usize, LinkError> {
+            if self.left == 0 {
+                return Err(LinkError::Aborted);
+            }
+            self.left -= 1;
+            let r = &mut self.rng;
+            let rgb = [0x33u8; 3 * 600];
+            let coded = [0x01u8, 2, 3, 4, 200, 5, 6, 7, 9];
+            let msg = match r.next_u64() % 6 {
+                0 => Up::Pixels {
+                    job: small(r, 30) as u32,
+                    frame: small(r, 2) as u16,
+                    y: small(r, 40) as u16,
+                    x: small(r, 40) as u16,
+                    rgb: &rgb[..small(r, 1700) as usize],
+                    done: r.next_u64().is_multiple_of(2),
+                },
+                1 => Up::PixelsRle {
+                    job: small(r, 30) as u32,
+                    frame: 0,
+                    y: small(r, 40) as u16,
+                    x: small(r, 40) as u16,
+                    len: small(r, 70000) as u16,
+                    data: &coded[..small(r, 10) as usize],
+                    done: r.next_u64().is_multiple_of(2),
+                },
+                2 => Up::Status {
+                    scene: SceneState::Ready {
+                        frame: small(r, 3) as u16,
+                    },
+                },
+                3 => Up::Status {
+                    scene: SceneState::Missing {
+                        frame: small(r, 3) as u16,
+                        chunks: [r.next_u64() as u32, r.next_u64() as u32, 0, u32::MAX],
+                    },
+                },
+                4 => Up::Poll,
+                _ => {
+                    let n = small(r, 40) as usize;
+                    for b in &mut rx[..n] {
+                        *b = r.next_u64() as u8;
+                    }
+                    return Ok(n);
+                }
+            };
+            Ok(wire::encode(small(r, 4) as u16, 0, &msg, rx).unwrap_or(0))
+        }
+        async fn broadcast(&mut self, _frame: &[u8]) -> Result<(), LinkError> {
+            self.rng.next_u64();
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_root_survives_hostile_frames() {
+        let img = image("reflections.ron", 32, 30);
+        for seed in 1..=20u64 {
+            let cfg = RootConfig {
+                policy: Policy::DECREASING,
+                nodes: 4,
+                frames: 2,
+            };
+            let root =
+                RefCell::new(RootState::new(cfg, &[img.clone(), img.clone()][..]).expect("valid"));
+            let sink = RefCell::new(());
+            let mut bus = HostileBus {
+                rng: Rng(seed * 104729),
+                left: 3000,
+            };
+            drive(async {
+                let r = run_bus(0, &mut bus, &root, &[img.clone(), img.clone()][..], &sink).await;
+                assert_eq!(
+                    r.err(),
+                    Some(links_core::root::RootError::Link(LinkError::Aborted))
+                );
+            });
+            let rep = root.borrow().report();
+            assert!(
+                rep.bad_frames > 0 && rep.rejected > 0 && rep.accepted > 0,
+                "{rep:?}"
+            );
+        }
+    }
+}
