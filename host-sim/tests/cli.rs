@@ -120,3 +120,50 @@ fn info_reports_the_scene_image_size_by_section() {
         "{text}"
     );
 }
+
+#[test]
+fn cluster_render_gives_the_host_render_and_reports_virtual_time() {
+    let (host, cluster) = (tmp("host.png"), tmp("cluster.png"));
+    let args = |out: &Path| {
+        let mut c = links();
+        c.args([
+            "render",
+            scene("photo1.ron").to_str().unwrap(),
+            "--width",
+            "64",
+            "--height",
+            "60",
+            "-o",
+        ])
+        .arg(out);
+        c
+    };
+    assert!(args(&host).arg("--quiet").status().unwrap().success());
+    let o = args(&cluster)
+        .args(["--nodes", "8", "--policy", "fixed=64"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        std::fs::read(&host).unwrap(),
+        std::fs::read(&cluster).unwrap()
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("8 simulated nodes") && err.contains("virtual") && err.contains("speed-up"),
+        "{err}"
+    );
+    let bad = links()
+        .args([
+            "render",
+            scene("photo1.ron").to_str().unwrap(),
+            "--nodes",
+            "0",
+            "-o",
+        ])
+        .arg(tmp("x.png"))
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("1 to 256"));
+}
