@@ -59,8 +59,15 @@ pub fn render(r: &AblationReport, scene: &str, command: &str) -> String {
     let (t4_total, _) = split("type 4");
     let (t1_total, t1_rest) = split("type 1");
     let (bx_total, bx_rest) = split("BVH+exit");
-    let per_ray = |v: &str, x: f64| r.cell(v, d0).map_or(f64::NAN, |c| x / c.stats.rays().max(1) as f64);
-    let visits = |v: &str| r.cell(v, d0).map_or(f64::NAN, |c| c.stats.box_tests as f64 / c.stats.rays().max(1) as f64);
+    let per_ray = |v: &str, x: f64| {
+        r.cell(v, d0)
+            .map_or(f64::NAN, |c| x / c.stats.rays().max(1) as f64)
+    };
+    let visits = |v: &str| {
+        r.cell(v, d0).map_or(f64::NAN, |c| {
+            c.stats.box_tests as f64 / c.stats.rays().max(1) as f64
+        })
+    };
     let w = c_model_weights(r);
     let t4_ray = per_ray("type 4", t4_total);
     s.push_str(&format!(
