@@ -12,10 +12,11 @@
 use crate::clip::RowClip;
 use crate::geom::{offset_ray_origin, Ray, RayInv, Vec3};
 use crate::image::{
-    Frame, LightKind, MapTarget, Material, SceneView, ShapeKind, ShapeRef, MAX_DEPTH_LIMIT, NONE,
+    BlobGroupRec, Frame, LightKind, MapTarget, Material, SceneView, ShapeKind, ShapeRef,
+    MAX_DEPTH_LIMIT, NONE,
 };
 use crate::num::Real;
-use crate::shape::blob::{BlobGroup, BlobStats};
+use crate::shape::blob::{Ball, BlobGroup, BlobStats};
 use crate::shape::boxshape::BoxHit;
 use crate::shape::ellipsoid::EllipsoidHit;
 use core::fmt;
@@ -529,15 +530,7 @@ impl<'a, T: Real> Tracer<'a, T> {
             }
             ShapeKind::Blob => {
                 self.stats.blob_tests += 1;
-                let g = s.blob_group::<T>(shape.index);
-                let scene = *s;
-                let first = g.first;
-                let group = BlobGroup {
-                    count: g.count as usize,
-                    ball: |k: usize| scene.ball::<T>(first + k as u32),
-                    kernel: g.kernel,
-                    threshold: g.threshold,
-                };
+                let (_, group) = blob_group(*s, shape.index);
                 let mut bs = BlobStats::default();
                 let h = group.intersect(ray, T::ZERO, t_max, &mut bs);
                 self.stats.blob_field_evals += bs.field_evals as u64;
@@ -636,15 +629,7 @@ impl<'a, T: Real> Tracer<'a, T> {
                 }
             }
             HitDetail::Blob { t_error } => {
-                let g = s.blob_group::<T>(shape.index);
-                let scene = *s;
-                let first = g.first;
-                let group = BlobGroup {
-                    count: g.count as usize,
-                    ball: |k: usize| scene.ball::<T>(first + k as u32),
-                    kernel: g.kernel,
-                    threshold: g.threshold,
-                };
+                let (g, group) = blob_group(*s, shape.index);
                 let p = ray.at(hit.t);
                 let n = (-group.gradient(p)).normalize();
                 let p_error = ray.dir.abs() * t_error + p.abs() * T::err_gamma(4);
@@ -946,6 +931,25 @@ impl<'a, T: Real> Tracer<'a, T> {
         let hit = self.closest_hit(ray, T::MAX)?;
         Some((hit.t, self.surface(ray, &hit)))
     }
+}
+
+/// A density-sphere group record and the group itself, its balls read in place.
+fn blob_group<T: Real>(
+    scene: SceneView<'_>,
+    index: u32,
+) -> (
+    BlobGroupRec<T>,
+    BlobGroup<T, impl Fn(usize) -> Ball<T> + '_>,
+) {
+    let g = scene.blob_group::<T>(index);
+    let first = g.first;
+    let group = BlobGroup {
+        count: g.count as usize,
+        ball: move |k: usize| scene.ball::<T>(first + k as u32),
+        kernel: g.kernel,
+        threshold: g.threshold,
+    };
+    (g, group)
 }
 
 /// Quantise a linear colour to 8 bits (clamped, rounded to nearest).
