@@ -1,0 +1,239 @@
+//! The places ray-tracing numerics fail, one named test per case and number type (the
+//! numerics issue's stability suite; the fixed-point backend joins when it lands). Cases
+//! already covered elsewhere: shared edges and vertices and self-intersection
+//! (`robustness.rs`), total internal reflection and nesting beyond the depth cap
+//! (`analytic.rs`), thin metaball necks and tangent rays (`shared/src/shape/blob.rs`),
+//! degenerate input (`host-sim/src/scene_file`, `shared/src/dm.rs`).
+
+use links_core::desc::*;
+use links_core::geom::{Aabb, Ray, RayInv, Vec3};
+use links_core::image::SceneView;
+use links_core::num::Real;
+use links_core::render::Tracer;
+use links_core::shape::boxshape::BoxShape;
+use links_tests::*;
+use std::path::Path;
+
+fn v<T: Real>(x: f64, y: f64, z: f64) -> Vec3<T> {
+    Vec3::new(T::from_f64(x), T::from_f64(y), T::from_f64(z))
+}
+
+/// Rays in the plane of a slab, along a box edge, and through its corners: the slab test
+/// meets 0 * inf = NaN there and must neither report NaN-driven hits nor drop real ones.
+fn slab_parallel_and_edge_rays<T: Real>() {
+    let b = Aabb {
+        min: v::<T>(-1.0, -1.0, -1.0),
+        max: v::<T>(1.0, 1.0, 1.0),
+    };
+    let cases: [(Vec3<T>, Vec3<T>, bool); 8] = [
+        // In the y = 1 face plane, parallel to it: touching counts as a hit.
+        (v(0.0, 1.0, -5.0), v(0.0, 0.0, 1.0), true),
+        // Along the edge x = 1, y = 1.
+        (v(1.0, 1.0, -5.0), v(0.0, 0.0, 1.0), true),
+        // Just outside the face plane.
+        (v(0.0, 1.0 + 1e-3, -5.0), v(0.0, 0.0, 1.0), false),
+        // Through a corner diagonally.
+        (v(-3.0, -3.0, -3.0), v(1.0, 1.0, 1.0), true),
+        // Grazing past a corner.
+        (v(-3.0, -3.0, -3.0 + 1e-2), v(1.0, 1.0, -1.0), false),
+        // Axis-aligned with two zero components, inside the slab of both.
+        (v(0.5, 0.5, 9.0), v(0.0, 0.0, -1.0), true),
+        // Axis-aligned, outside one slab.
+        (v(2.0, 0.5, 9.0), v(0.0, 0.0, -1.0), false),
+        // Starting inside.
+        (v(0.0, 0.0, 0.0), v(0.0, 1.0, 0.0), true),
+    ];
+    for (k, (o, d, want)) in cases.into_iter().enumerate() {
+        let ray = Ray::new(o, d);
+        assert_eq!(
+            b.hit(&ray, &RayInv::new(d), T::MAX),
+            want,
+            "{} slab case {k}",
+            T::NAME
+        );
+    }
+    // The box primitive: a ray along its face plane touches it (no NaN normal).
+    let bx = BoxShape {
+        center: v::<T>(0.0, 0.0, 10.0),
+        m: links_core::geom::Mat3 {
+            r: [v(0.5, 0.0, 0.0), v(0.0, 0.5, 0.0), v(0.0, 0.0, 0.5)],
+        },
+        l: links_core::geom::Mat3 {
+            r: [v(2.0, 0.0, 0.0), v(0.0, 2.0, 0.0), v(0.0, 0.0, 2.0)],
+        },
+    };
+    let ray = Ray::new(v::<T>(2.0, 0.0, 0.0), v::<T>(0.0, 0.0, 1.0));
+    let h = bx
+        .intersect(&ray, T::MAX)
+        .expect("a ray in a face plane touches the box");
+    let s = bx.surface(&ray, &h, T::ZERO);
+    assert!(s.n.is_finite() && s.p.is_finite(), "{}: {s:?}", T::NAME);
+}
+
+/// Rays passing a sphere and an ellipsoid at distances just inside and outside their
+/// silhouette: hit exactly when inside, never NaN.
+fn grazing_rays_on_spheres_and_ellipsoids<T: Real>() {
+    for (name, radii) in [("sphere", [2.0; 3]), ("ellipsoid", [3.0, 1.5, 0.5])] {
+        let s = scene(
+            4,
+            4,
+            40.0,
+            vec![Shape::Ellipsoid {
+                center: [0.0, 0.0, -20.0],
+                radii,
+                rotate_deg: [0.0; 3],
+                cut: None,
+                material: 0,
+            }],
+        );
+        let img = image_of(&s);
+        let mut tracer = Tracer::<T>::new(SceneView::new(&img).unwrap());
+        let rx = radii[0];
+        // The image stores the shape in f32 (1/3 is not exact), so the silhouette is known to
+        // ~1e-7 relative whatever the number type: test 1e-5 either side of it.
+        let eps = 1e-5;
+        for (off, want) in [(-eps, true), (eps, false), (-0.1, true), (0.1, false)] {
+            let x = rx * (1.0 + off);
+            let ray = Ray::new(v::<T>(x, 0.0, 0.0), v::<T>(0.0, 0.0, 1.0));
+            let hit = tracer.first_surface(&ray);
+            assert_eq!(hit.is_some(), want, "{} {name} at x = {x}", T::NAME);
+            if let Some((t, surf)) = hit {
+                assert!(
+                    t.is_finite() && surf.ng.is_finite() && surf.p.is_finite(),
+                    "{} {name}",
+                    T::NAME
+                );
+            }
+        }
+    }
+}
+
+/// The eye inside a sphere, a box and a blob: every pixel sees the inside, finite colours.
+fn eye_inside_an_object<T: Real>() {
+    let shapes = [
+        (
+            "sphere",
+            Shape::Ellipsoid {
+                center: [0.0, 0.0, -1.0],
+                radii: [5.0; 3],
+                rotate_deg: [0.0; 3],
+                cut: None,
+                material: 1,
+            },
+        ),
+        (
+            "box",
+            Shape::Box {
+                min: [-3.0, -2.0, -4.0],
+                max: [3.0, 2.0, 4.0],
+                material: 1,
+            },
+        ),
+        (
+            "blob",
+            Shape::Blobs {
+                balls: vec![Ball {
+                    center: [0.0; 3],
+                    radius: 8.0,
+                    strength: 1.0,
+                }],
+                threshold: 0.5,
+                kernel: BlobKernel::Links,
+                material: 1,
+            },
+        ),
+    ];
+    for (name, shape) in shapes {
+        for glass in [false, true] {
+            let mut s = scene(12, 10, 90.0, vec![shape.clone()]);
+            s.ambient = [0.3; 3];
+            s.lights = vec![Light::Point {
+                pos: [0.5, 0.5, 0.0],
+                color: [1.0; 3],
+                falloff: false,
+            }];
+            s.materials.push(Material {
+                name: "m".into(),
+                diffuse: [0.6, 0.5, 0.4],
+                transmit: if glass { [0.8; 3] } else { [0.0; 3] },
+                ior: if glass { 1.5 } else { 1.0 },
+                ..Material::default()
+            });
+            let img = image_of(&s);
+            let mut tracer = Tracer::<T>::new(SceneView::new(&img).unwrap());
+            for y in 0..10 {
+                for x in 0..12 {
+                    let ray = tracer.primary_ray(x, y);
+                    assert!(
+                        tracer.first_surface(&ray).is_some(),
+                        "{} {name}: pixel ({x},{y}) sees no inside",
+                        T::NAME
+                    );
+                    let c = tracer.pixel(x, y);
+                    assert!(
+                        c.is_finite(),
+                        "{} {name} glass={glass}: pixel ({x},{y}) = {c:?}",
+                        T::NAME
+                    );
+                    assert!(
+                        c.max_component() > T::ZERO,
+                        "{} {name}: the inside is lit",
+                        T::NAME
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Every bundled scene renders without a single NaN or infinite colour (before quantising).
+fn no_nan_in_any_bundled_scene<T: Real>() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "ron") {
+            continue;
+        }
+        let desc = links_host::scene_file::load_scene(&path).unwrap();
+        let opts = links_core::dm::CompileOptions {
+            width: Some(48),
+            height: Some(45),
+            ..Default::default()
+        };
+        let img = links_core::dm::compile(&desc, &opts).unwrap().bytes;
+        let mut tracer = Tracer::<T>::new(SceneView::new(&img).unwrap());
+        for y in 0..45 {
+            tracer.begin_run(y);
+            for x in 0..48 {
+                let c = tracer.pixel(x, y);
+                assert!(
+                    c.is_finite(),
+                    "{} {}: pixel ({x},{y}) = {c:?}",
+                    T::NAME,
+                    path.display()
+                );
+            }
+        }
+        n += 1;
+    }
+    assert!(n >= 6);
+}
+
+macro_rules! per_backend {
+    ($($case:ident),*) => {
+        mod f32_backend {
+            $( #[test] fn $case() { super::$case::<f32>() } )*
+        }
+        mod f64_backend {
+            $( #[test] fn $case() { super::$case::<f64>() } )*
+        }
+    };
+}
+
+per_backend!(
+    slab_parallel_and_edge_rays,
+    grazing_rays_on_spheres_and_ellipsoids,
+    eye_inside_an_object,
+    no_nan_in_any_bundled_scene
+);
