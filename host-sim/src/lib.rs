@@ -2,6 +2,7 @@
 
 pub mod ablation;
 pub mod ablation_doc;
+pub mod accuracy;
 pub mod cli_cluster;
 pub mod cluster;
 pub mod cost;

@@ -8,7 +8,7 @@ use links_core::image::{SceneView, Section};
 use links_host::ablation::{run_ablation, AblationConfig};
 use links_host::cli_cluster;
 use links_host::cost::{self, CycleModel};
-use links_host::frame::{encode_png, psnr, render_frame, Precision};
+use links_host::frame::{encode_png, render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -339,25 +339,24 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Cmd::Compare { scene, threads } => {
             let image = compile_scene(&scene)?;
-            let f64_frame =
-                render_frame(&image, Precision::F64, threads, &|| {}).map_err(|e| e.to_string())?;
-            let f32_frame =
-                render_frame(&image, Precision::F32, threads, &|| {}).map_err(|e| e.to_string())?;
-            let (a, b) = (&f64_frame.rgb, &f32_frame.rgb);
-            let max = a
-                .iter()
-                .zip(b)
-                .map(|(x, y)| x.abs_diff(*y))
-                .max()
-                .unwrap_or(0);
-            let off = a.chunks(3).zip(b.chunks(3)).filter(|(p, q)| p != q).count();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .map_err(|e| e.to_string())?;
+            let a = pool
+                .install(|| links_host::accuracy::compare_f32_to_f64(&image))
+                .map_err(|e| e.to_string())?;
             println!(
-                "{}: {}x{} f32 vs f64: PSNR {:.1} dB, max channel difference {max}/255, {:.3}% pixels differ",
+                "{}: {}x{} f32 vs f64: PSNR {:.1} dB, max channel error {}/255, {:.3}% pixels off by > 1/255, {} NaN/inf pixels, {} hit-mask mismatches ({} off silhouettes)",
                 scene.scene.display(),
-                f64_frame.width,
-                f64_frame.height,
-                psnr(a, b),
-                100.0 * off as f64 / (f64_frame.width * f64_frame.height) as f64
+                a.width,
+                a.height,
+                a.psnr_db,
+                a.max_channel_error,
+                100.0 * a.frac_off_by_more_than_1,
+                a.non_finite_pixels,
+                a.hit_mismatches,
+                a.hit_mismatches_off_silhouette
             );
             Ok(())
         }

@@ -110,23 +110,26 @@ fn golden_images_match() {
 #[test]
 fn f32_and_f64_renders_agree_to_50_db() {
     println!(
-        "{:<12} {:>10} {:>14}",
-        "scene", "PSNR (dB)", "max channel Δ"
+        "{:<12} {:>10} {:>10} {:>8} {:>10}",
+        "scene", "PSNR (dB)", "max error", "NaN/inf", "hit diffs"
     );
     for scene in bundled_scenes() {
         let name = scene.file_stem().unwrap().to_string_lossy().into_owned();
-        let img = small_image(&scene);
-        let a = render_all::<f64>(&img);
-        let b = render_all::<f32>(&img);
-        let p = psnr(&a, &b);
-        let max = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| x.abs_diff(*y))
-            .max()
-            .unwrap_or(0);
-        println!("{name:<12} {p:>10.1} {max:>14}");
-        assert!(p >= 50.0, "{name}: f32 vs f64 PSNR {p:.1} dB < 50 dB");
+        let a = links_host::accuracy::compare_f32_to_f64(&small_image(&scene)).unwrap();
+        println!(
+            "{name:<12} {:>10.1} {:>10} {:>8} {:>10}",
+            a.psnr_db, a.max_channel_error, a.non_finite_pixels, a.hit_mismatches
+        );
+        assert!(
+            a.psnr_db >= 50.0,
+            "{name}: f32 vs f64 PSNR {:.1} dB < 50 dB",
+            a.psnr_db
+        );
+        assert_eq!(a.non_finite_pixels, 0, "{name}: NaN or infinite colours");
+        assert_eq!(
+            a.hit_mismatches_off_silhouette, 0,
+            "{name}: f32 hit another shape away from a silhouette"
+        );
     }
 }
 
