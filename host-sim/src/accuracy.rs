@@ -71,11 +71,16 @@ pub struct Accuracy {
 
 /// Compare the f32 render of a SceneImage with its f64 render.
 pub fn compare_f32_to_f64(image: &[u8]) -> Result<Accuracy, ImageError> {
+    compare_to_f64::<f32>(image)
+}
+
+/// Compare a render in number type `T` with the f64 render.
+pub fn compare_to_f64<T: Real>(image: &[u8]) -> Result<Accuracy, ImageError> {
     let view = SceneView::new(image)?;
     let f = view.frame::<f32>();
     let (w, h) = (f.width as usize, f.height as usize);
     let reference = probe::<f64>(view);
-    let tested = probe::<f32>(view);
+    let tested = probe::<T>(view);
     let max = reference
         .rgb
         .iter()

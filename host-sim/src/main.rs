@@ -97,10 +97,13 @@ enum Cmd {
         #[arg(long)]
         image: Option<PathBuf>,
     },
-    /// Render a scene in f32 and f64 and report how far apart they are
+    /// Render a scene in a number format and in f64 and report how far apart they are
     Compare {
         #[command(flatten)]
         scene: SceneArgs,
+        /// The number format to measure: f32, or f32-fast (micromath's approximations)
+        #[arg(long, default_value = "f32")]
+        backend: String,
         /// Host threads (0 = all cores)
         #[arg(long, default_value_t = 0)]
         threads: usize,
@@ -337,17 +340,30 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
-        Cmd::Compare { scene, threads } => {
+        Cmd::Compare {
+            scene,
+            threads,
+            backend,
+        } => {
             let image = compile_scene(&scene)?;
+            let measure = match backend.as_str() {
+                "f32" => links_host::accuracy::compare_to_f64::<f32>,
+                "f32-fast" => links_host::accuracy::compare_to_f64::<links_core::num::FastF32>,
+                other => {
+                    return Err(format!(
+                        "unknown backend '{other}' (expected f32 or f32-fast)"
+                    ))
+                }
+            };
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .map_err(|e| e.to_string())?;
             let a = pool
-                .install(|| links_host::accuracy::compare_f32_to_f64(&image))
+                .install(|| measure(&image))
                 .map_err(|e| e.to_string())?;
             println!(
-                "{}: {}x{} f32 vs f64: PSNR {:.1} dB, max channel error {}/255, {:.3}% pixels off by > 1/255, {} NaN/inf pixels, {} hit-mask mismatches ({} off silhouettes)",
+                "{}: {}x{} {backend} vs f64: PSNR {:.1} dB, max channel error {}/255, {:.3}% pixels off by > 1/255, {} NaN/inf pixels, {} hit-mask mismatches ({} off silhouettes)",
                 scene.scene.display(),
                 a.width,
                 a.height,

@@ -231,6 +231,48 @@ mod tests {
     use super::*;
 
     #[test]
+    fn fast_f32_approximates_only_where_micromath_is_accurate_enough() {
+        let (a, b) = (FastF32(1.5), FastF32(-0.25));
+        assert_eq!(((a + b).0, (a * b).0, (a / b).0), (1.25, -0.375, -6.0));
+        let (mut worst_pow_mm, mut worst_acos, mut worst_atan2, mut worst_sqrt_mm) =
+            (0f64, 0f64, 0f64, 0f64);
+        for i in 1..1000 {
+            let c = i as f32 / 1000.0;
+            // Exact where micromath is not good enough: bit-identical to f32.
+            for n in [5.0f32, 20.0, 40.0, 120.0] {
+                assert_eq!(FastF32(c).powf(FastF32(n)).0, Real::powf(c, n));
+                let e = (c as f64).powf(n as f64);
+                if e > 1e-3 {
+                    let mm = <f32 as micromath::F32Ext>::powf(c, n) as f64;
+                    worst_pow_mm = worst_pow_mm.max(((mm - e) / e).abs());
+                }
+            }
+            assert_eq!(FastF32(c).sqrt().0, Real::sqrt(c));
+            let s = (c as f64).sqrt();
+            worst_sqrt_mm =
+                worst_sqrt_mm.max(((<f32 as micromath::F32Ext>::sqrt(c) as f64 - s) / s).abs());
+            // Approximated: within the stated bounds.
+            let x = c * 2.0 - 1.0;
+            worst_acos = worst_acos.max((FastF32(x).acos().0 as f64 - (x as f64).acos()).abs());
+            for j in 0..20 {
+                let ang = j as f64 * 0.33;
+                let (y, xx) = (ang.sin() * c as f64, ang.cos() * c as f64);
+                let got = FastF32(y as f32).atan2(FastF32(xx as f32)).0 as f64;
+                worst_atan2 = worst_atan2.max((got - y.atan2(xx)).abs());
+            }
+        }
+        assert!(
+            worst_atan2 < 0.003 && worst_acos < 0.03,
+            "atan2 {worst_atan2}, acos {worst_acos}"
+        );
+        // Why powf and sqrt stay exact (the measurement behind the choice).
+        assert!(
+            worst_pow_mm > 0.5 && worst_sqrt_mm > 0.05,
+            "powf {worst_pow_mm}, sqrt {worst_sqrt_mm}"
+        );
+    }
+
+    #[test]
     fn abs_clears_only_the_sign() {
         assert_eq!(Real::abs(-2.5f32), 2.5);
         assert_eq!(Real::abs(-2.5f64), 2.5);
@@ -250,5 +292,123 @@ mod tests {
         assert_eq!(Real::sqrt(2.0f64), 2.0f64.sqrt());
         assert!((Real::powf(0.5f32, 10.0) - 0.5f32.powi(10)).abs() < 1e-7);
         assert!((Real::atan2(1.0f64, 1.0) - core::f64::consts::FRAC_PI_4).abs() < 1e-15);
+    }
+}
+
+/// `f32` with micromath's fast approximations where they are acceptable. Measured against
+/// f64 over their whole input range (`docs/numerics.md`): `atan2` is within 0.003 rad and
+/// `acos` within 0.029 rad (spherical texture coordinates: under 1% of the texture), so
+/// both are used; `powf` is off by up to 99.7% for Phong exponents of 5 to 120 (a highlight
+/// would vanish or flare) and `sqrt` by up to 6% (every normal and reflection would bend), so
+/// those stay exact (libm's `powf`; the FPU's square root). Everything else is IEEE `f32`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, PartialOrd)]
+pub struct FastF32(pub f32);
+
+macro_rules! fast_binop {
+    ($tr:ident, $f:ident, $atr:ident, $af:ident, $op:tt) => {
+        impl $tr for FastF32 {
+            type Output = Self;
+            #[inline(always)]
+            fn $f(self, o: Self) -> Self {
+                FastF32(self.0 $op o.0)
+            }
+        }
+        impl $atr for FastF32 {
+            #[inline(always)]
+            fn $af(&mut self, o: Self) {
+                self.0 = self.0 $op o.0;
+            }
+        }
+    };
+}
+fast_binop!(Add, add, AddAssign, add_assign, +);
+fast_binop!(Sub, sub, SubAssign, sub_assign, -);
+fast_binop!(Mul, mul, MulAssign, mul_assign, *);
+
+impl Div for FastF32 {
+    type Output = Self;
+    #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        FastF32(self.0 / o.0)
+    }
+}
+
+impl Neg for FastF32 {
+    type Output = Self;
+    #[inline(always)]
+    fn neg(self) -> Self {
+        FastF32(-self.0)
+    }
+}
+
+impl Real for FastF32 {
+    const NAME: &'static str = "f32-fast";
+    const ZERO: Self = FastF32(0.0);
+    const ONE: Self = FastF32(1.0);
+    const HALF: Self = FastF32(0.5);
+    const TWO: Self = FastF32(2.0);
+    const MAX: Self = FastF32(f32::MAX);
+    const PI: Self = FastF32(core::f32::consts::PI);
+
+    #[inline(always)]
+    fn from_f32(v: f32) -> Self {
+        FastF32(v)
+    }
+    #[inline(always)]
+    fn from_f64(v: f64) -> Self {
+        FastF32(v as f32)
+    }
+    #[inline(always)]
+    fn from_i32(v: i32) -> Self {
+        FastF32(v as f32)
+    }
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self.0 as f64
+    }
+    #[inline(always)]
+    fn to_f32(self) -> f32 {
+        self.0
+    }
+    #[inline(always)]
+    fn epsilon() -> Self {
+        FastF32(f32::EPSILON * 0.5)
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        FastF32(sqrt_f32(self.0))
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        FastF32(Real::abs(self.0))
+    }
+    #[inline(always)]
+    fn floor(self) -> Self {
+        FastF32(libm::floorf(self.0))
+    }
+    #[inline(always)]
+    fn powf(self, e: Self) -> Self {
+        FastF32(libm::powf(self.0, e.0))
+    }
+    #[inline(always)]
+    fn atan2(self, x: Self) -> Self {
+        // Fully qualified: on the host, std's exact inherent methods would win otherwise.
+        FastF32(<f32 as micromath::F32Ext>::atan2(self.0, x.0))
+    }
+    #[inline(always)]
+    fn acos(self) -> Self {
+        FastF32(<f32 as micromath::F32Ext>::acos(self.0))
+    }
+    #[inline(always)]
+    fn is_finite(self) -> bool {
+        self.0.is_finite()
+    }
+    #[inline(always)]
+    fn next_up(self) -> Self {
+        FastF32(self.0.next_up())
+    }
+    #[inline(always)]
+    fn next_down(self) -> Self {
+        FastF32(self.0.next_down())
     }
 }
