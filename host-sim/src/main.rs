@@ -14,6 +14,20 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
+/// `println!` that ends the program quietly when stdout is closed (`links ... | head`).
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write;
+        if let Err(e) = writeln!(std::io::stdout().lock(), $($arg)*) {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                std::process::exit(0);
+            }
+            eprintln!("error: cannot write to stdout: {e}");
+            std::process::exit(1);
+        }
+    }};
+}
+
 #[derive(Parser)]
 #[command(
     name = "links",
@@ -317,17 +331,17 @@ fn run(cli: Cli) -> Result<(), String> {
             let bytes = compile_scene(&scene)?;
             let view = SceneView::new(&bytes).map_err(|e| e.to_string())?;
             let f = view.frame::<f32>();
-            println!(
+            outln!(
                 "{}: SceneImage {} bytes ({}x{})",
                 scene.scene.display(),
                 bytes.len(),
                 f.width,
                 f.height
             );
-            println!("  {:<12} {:>8} {:>10}", "section", "records", "bytes");
+            outln!("  {:<12} {:>8} {:>10}", "section", "records", "bytes");
             for s in Section::ALL {
                 if view.count(s) > 0 {
-                    println!(
+                    outln!(
                         "  {:<12} {:>8} {:>10}",
                         s.name(),
                         view.count(s),
@@ -362,7 +376,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let a = pool
                 .install(|| measure(&image))
                 .map_err(|e| e.to_string())?;
-            println!(
+            outln!(
                 "{}: {}x{} {backend} vs f64: PSNR {:.1} dB, max channel error {}/255, {:.3}% pixels off by > 1/255, {} NaN/inf pixels, {} hit-mask mismatches ({} off silhouettes)",
                 scene.scene.display(),
                 a.width,
@@ -397,8 +411,8 @@ fn run(cli: Cli) -> Result<(), String> {
             let command = std::env::args().skip(1).collect::<Vec<_>>().join(" ");
             let doc =
                 links_host::ablation_doc::render(&report, &scene.display().to_string(), &command);
-            println!("{}", report.table());
-            println!(
+            outln!("{}", report.table());
+            outln!(
                 "refractive / non-refractive (type 1): {:.2}x",
                 report.refractive_ratio()
             );
@@ -410,7 +424,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let image = compile_scene(&plain_args(&scene))?;
             let text =
                 cli_cluster::nodes_study(&image, &output, &|s| eprintln!("simulating {s} ..."))?;
-            println!("{text}");
+            outln!("{text}");
             eprintln!("wrote {}/nodes.csv and nodes.svg", output.display());
             Ok(())
         }
@@ -425,7 +439,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 &output,
                 &|s| eprintln!("simulating {s} ..."),
             )?;
-            println!("{text}");
+            outln!("{text}");
             eprintln!("wrote {}/divisions*.csv and .svg", output.display());
             Ok(())
         }
@@ -440,23 +454,26 @@ fn run(cli: Cli) -> Result<(), String> {
                 CycleModel::CORTEX_M4F_F32.cycles_per_instruction,
             )
             .map_err(|e| format!("{}: {e}", csv.display()))?;
-            println!(
+            outln!(
                 "fitted instructions per operation ({target}, {} frames):",
                 samples.iter().filter(|s| s.target == target).count()
             );
             for (name, w) in cost::FEATURES.iter().zip(fitted.weights()) {
-                println!("  {name:<18} {w:>9.1}");
+                outln!("  {name:<18} {w:>9.1}");
             }
-            println!(
+            outln!(
                 "\n{:<28} {:>12} {:>12} {:>12}",
-                "frame", "measured", "fitted", "committed"
+                "frame",
+                "measured",
+                "fitted",
+                "committed"
             );
             let committed = cost::prediction_ratios(&CycleModel::CORTEX_M4F_F32, &samples, &target);
             for ((s, r), (_, rc)) in cost::prediction_ratios(&fitted, &samples, &target)
                 .iter()
                 .zip(&committed)
             {
-                println!(
+                outln!(
                     "{:<28} {:>12} {:>11.1}% {:>11.1}%",
                     format!("{} {}", s.scene, s.techniques),
                     s.instructions,
@@ -471,7 +488,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let written = links_host::gen::write_bundled_assets(&dir)
                 .map_err(|e| format!("{}: {e}", dir.display()))?;
             for p in written {
-                println!("wrote {}", p.display());
+                outln!("wrote {}", p.display());
             }
             Ok(())
         }
