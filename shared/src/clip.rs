@@ -116,8 +116,9 @@ impl RowClip {
         true
     }
 
-    /// X clipping: move the sweep to column `x` (columns must not decrease within a run) and
-    /// return the active leaves' node indices through `out` order: tree order.
+    /// X clipping: move the sweep to column `x` (columns must not decrease within a run).
+    /// Returns false (and changes nothing) without a Y-clipped row or when `x` goes back;
+    /// the active leaves are then read with [`Self::active_leaf`], in tree order.
     pub fn advance(&mut self, x: u16, compares: &mut u64) -> bool {
         if self.row.is_none() || self.last_x.is_some_and(|l| x < l) {
             return false;

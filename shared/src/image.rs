@@ -399,7 +399,7 @@ pub struct SceneView<'a> {
 /// A little-endian u32 at `at`, or 0 outside `b` (never the case in a validated image).
 #[inline(always)]
 fn rd_u32(b: &[u8], at: usize) -> u32 {
-    match b.get(at..at + 4) {
+    match at.checked_add(4).and_then(|end| b.get(at..end)) {
         Some(&[b0, b1, b2, b3]) => u32::from_le_bytes([b0, b1, b2, b3]),
         _ => 0,
     }
@@ -511,7 +511,12 @@ impl<'a> SceneView<'a> {
             return Err(ImageError::MissingFrame);
         }
         let frame = self.frame::<f32>();
-        if frame.max_depth > MAX_DEPTH_LIMIT || frame.width == 0 || frame.height == 0 {
+        // Pixel coordinates are u16 in screen rectangles and clipping.
+        let side = 1..=u16::MAX as u32;
+        if frame.max_depth > MAX_DEPTH_LIMIT
+            || !side.contains(&frame.width)
+            || !side.contains(&frame.height)
+        {
             return Err(badv(Section::Frame, 0));
         }
         let nmat = self.count(Section::Materials);
@@ -542,6 +547,10 @@ impl<'a> SceneView<'a> {
             }
         }
         let nnodes = self.count(Section::Nodes);
+        // One tree: node 0 is the root and its subtree is the whole list.
+        if nnodes == 0 || self.node_skip(0) != nnodes {
+            return Err(bad(Section::Nodes, 0));
+        }
         for i in 0..nnodes {
             let at = self.rec(Section::Nodes, i);
             let skip = self.u(at + 24);
@@ -560,6 +569,22 @@ impl<'a> SceneView<'a> {
                 if r.index >= n || skip != i + 1 {
                     return Err(bad(Section::Nodes, i));
                 }
+            }
+        }
+        // Subtrees nest: every child's subtree ends within its parent's (else a walk could
+        // visit nodes along exponentially many paths). O(n): each node is one child.
+        for i in 0..nnodes {
+            if self.node_is_leaf(i) {
+                continue;
+            }
+            let end = self.node_skip(i);
+            let mut c = i + 1;
+            while c < end {
+                let next = self.node_skip(c);
+                if next > end {
+                    return Err(bad(Section::Nodes, c));
+                }
+                c = next;
             }
         }
         let nrects = self.count(Section::Rects);
@@ -600,19 +625,24 @@ impl<'a> SceneView<'a> {
         Ok(())
     }
 
+    /// Byte offset of record `i` of section `s` (saturating: an impossible index reads
+    /// nothing rather than wrapping onto other bytes).
     #[inline(always)]
     fn rec(&self, s: Section, i: u32) -> usize {
-        self.table[s as usize].0 as usize + i as usize * s.record_size()
+        (self.table[s as usize].0 as usize)
+            .saturating_add((i as usize).saturating_mul(s.record_size()))
     }
 
-    /// Record `i` of section `s` (N = its record size); zeros if out of range, which a
-    /// validated image never is.
+    /// Record `i` of section `s` (N = its record size); all zeros when `i` is not a record
+    /// of the section, which indices taken from a validated image never are.
     #[inline(always)]
     fn record<const N: usize>(&self, s: Section, i: u32) -> Record<N> {
-        let at = self.rec(s, i);
         let mut r = [0u8; N];
-        if let Some(src) = self.bytes.get(at..at + N) {
-            r.copy_from_slice(src);
+        if i < self.table[s as usize].1 {
+            let at = self.rec(s, i);
+            if let Some(src) = at.checked_add(N).and_then(|end| self.bytes.get(at..end)) {
+                r.copy_from_slice(src);
+            }
         }
         Record(r)
     }
@@ -931,5 +961,84 @@ pub mod writer {
             out[8..12].copy_from_slice(&len.to_le_bytes());
             out
         }
+    }
+}
+
+#[cfg(all(test, feature = "std"))]
+mod tests {
+    use super::writer::ImageWriter;
+    use super::*;
+
+    /// A minimal image: a frame, one material, and the given nodes as (skip, shape word).
+    fn image(width: u32, nodes: &[(u32, u32)]) -> std::vec::Vec<u8> {
+        let mut w = ImageWriter::new();
+        w.push(Section::Frame)
+            .1
+            .u(width)
+            .u(8)
+            .fs(&[-1.0, 1.0, 0.1, 0.1])
+            .fs(&[0.0; 6])
+            .u(2)
+            .u(0);
+        w.push(Section::Materials)
+            .1
+            .fs(&[0.5; 12])
+            .u(NONE)
+            .u(0)
+            .fs(&[1.0, 1.0]);
+        w.push(Section::Triangles)
+            .1
+            .fs(&[0.0, 0.0, 1.0, 1.0, 0.0, 1.0, 0.0, 1.0, 1.0])
+            .u(0)
+            .u(NONE)
+            .u(NONE);
+        for &(skip, shape) in nodes {
+            w.push(Section::Nodes)
+                .1
+                .fs(&[-1.0, -1.0, -1.0, 1.0, 1.0, 1.0])
+                .u(skip)
+                .u(shape);
+        }
+        w.finish()
+    }
+
+    #[test]
+    fn a_well_formed_tree_is_accepted() {
+        let img = image(8, &[(3, NONE), (3, NONE), (3, 0)]);
+        assert!(SceneView::new(&img).is_ok());
+    }
+
+    #[test]
+    fn trees_that_could_mislead_a_walk_are_rejected() {
+        let nodes_error = |r: Result<SceneView<'_>, ImageError>| matches!(r, Err(ImageError::BadReference { section, .. }) if section == Section::Nodes as u8);
+        // No nodes at all: node 0 would be read from the header.
+        assert!(nodes_error(SceneView::new(&image(8, &[]))));
+        // Two top-level trees: closest-hit walks only node 0's.
+        assert!(nodes_error(SceneView::new(&image(8, &[(1, NONE), (2, 0)]))));
+        // A child's subtree ending beyond its parent's (exponential walks).
+        assert!(nodes_error(SceneView::new(&image(
+            8,
+            &[(5, NONE), (3, NONE), (4, NONE), (4, 0), (5, 0)]
+        ))));
+    }
+
+    #[test]
+    fn frames_wider_than_the_u16_pixel_range_are_rejected() {
+        assert!(SceneView::new(&image(65535, &[(1, NONE)])).is_ok());
+        assert!(matches!(
+            SceneView::new(&image(65536, &[(1, NONE)])),
+            Err(ImageError::BadValue { .. })
+        ));
+    }
+
+    #[test]
+    fn records_out_of_range_read_as_zeros_not_other_bytes() {
+        let img = image(8, &[(1, NONE)]);
+        let v = SceneView::new(&img).unwrap();
+        // There are no ellipsoids: the section offset is 0 (the header) but nothing is read.
+        let e = v.ellipsoid::<f32>(0);
+        assert_eq!(e.material, 0);
+        assert_eq!(e.shape.center, Vec3::zero());
+        assert_eq!(v.triangle::<f32>(u32::MAX).material, 0);
     }
 }

@@ -58,10 +58,11 @@ pub trait Real:
     fn acos(self) -> Self;
     fn is_finite(self) -> bool;
 
-    /// Round towards the neighbour value away from zero (used to make error bounds
-    /// conservative); a float moves one ulp, a fixed-point format one step.
+    /// The next representable value towards +infinity (a float: one ulp; a fixed-point
+    /// format: one step). `offset_ray_origin` relies on the direction: it pushes a
+    /// coordinate up when its offset is positive and down when negative.
     fn next_up(self) -> Self;
-    /// One ulp down.
+    /// The next representable value towards -infinity.
     fn next_down(self) -> Self;
 
     #[inline]

@@ -189,22 +189,31 @@ impl<T: Real> Nearest<T> {
             t_max,
         }
     }
-    /// Upper bound for tests still worth making: a hit at exactly the current distance
-    /// may still win the tie, so one ulp beyond it.
+    /// Upper bound for tests still worth making: a hit at the current distance may still
+    /// win the tie, so a little beyond it; the exact winner is decided in `offer`.
     #[inline]
     fn limit(&self) -> T {
         match &self.hit {
-            Some(h) => h.t.next_up(),
+            // Relative slack: a shape lying in its box's face (a flat box) can compute its
+            // hit a few ulps before the box's computed entry, and must still be tested.
+            Some(h) => h.t * (T::ONE + T::err_gamma(16)),
             None => self.t_max,
         }
     }
-    /// Whether a box entered at `t` lies wholly behind the nearest hit.
+    /// Whether a box entered at `t` lies wholly behind the nearest hit (with the same slack).
     #[inline]
     fn beyond(&self, t: T) -> bool {
-        self.hit.as_ref().is_some_and(|h| t > h.t)
+        self.hit
+            .as_ref()
+            .is_some_and(|h| t * (T::ONE - T::err_gamma(16)) > h.t)
     }
     #[inline]
     fn offer(&mut self, h: Hit<T>, node: u32) {
+        // A non-finite distance (from non-finite geometry) never wins: it would compare
+        // false against everything and make the answer depend on test order.
+        if !h.t.is_finite() {
+            return;
+        }
         let better = match &self.hit {
             None => true,
             Some(b) => h.t < b.t || (h.t == b.t && node < self.node),
@@ -350,9 +359,9 @@ impl<'a, T: Real> Tracer<'a, T> {
         near.hit
     }
 
-    /// Nearest shape along `ray` in (0, t_max): walk the node list, skipping the subtree of
-    /// every box the ray misses (LINKS-1 4.2). The list is in depth-first order with a skip
-    /// index per node, so the walk needs no stack.
+    /// Nearest shape along `ray` in (0, t_max): walk the node tree nearest-first, skipping
+    /// the subtree of every box the ray misses (LINKS-1 4.2) or enters beyond the nearest
+    /// hit so far; a small fixed stack holds the children still to visit.
     fn closest_hit(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
         if !self.techniques.bounding_boxes {
             return self.closest_hit_plain(ray, t_max);
@@ -738,7 +747,7 @@ impl<'a, T: Real> Tracer<'a, T> {
                         s * s * (T::from_i32(3) - T::TWO * s)
                     };
                     let shape = if l.exponent > T::ZERO {
-                        cos_axis.powf(l.exponent)
+                        cos_axis.max(T::ZERO).powf(l.exponent)
                     } else {
                         T::ONE
                     };

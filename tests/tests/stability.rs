@@ -220,6 +220,88 @@ fn no_nan_in_any_bundled_scene<T: Real>() {
     assert!(n >= 6);
 }
 
+/// Two overlapping coplanar triangles in separate leaves with flat boxes: every technique
+/// must pick the same one as the plain walk (ties go to the lower node). Found by review:
+/// a flat box's computed entry can lie an ulp beyond the triangle's computed hit.
+fn coplanar_overlaps_resolve_like_the_plain_walk<T: Real>() {
+    use links_core::render::Techniques;
+    let tri = |x: f64, m: u32| Shape::Triangle {
+        v: [[x - 3.0, -2.0, -3.0], [x + 3.0, -2.0, -3.0], [x, 3.0, -3.0]],
+        normals: None,
+        uv: None,
+        material: m,
+    };
+    let mut s = scene(64, 64, 90.0, vec![tri(-0.5, 1), tri(0.5, 2)]);
+    s.ambient = [1.0; 3];
+    s.materials.push(matte("red", [1.0, 0.0, 0.0]));
+    s.materials.push(matte("green", [0.0, 1.0, 0.0]));
+    for h in [
+        links_core::dm::MeshHierarchy::Flat,
+        links_core::dm::MeshHierarchy::Sah,
+    ] {
+        let opts = links_core::dm::CompileOptions {
+            mesh_hierarchy: h,
+            ..Default::default()
+        };
+        let img = links_core::dm::compile(&s, &opts).unwrap().bytes;
+        let plain = render_all_with::<T>(&img, Techniques::PAPER_TYPE_4).0;
+        for t in [
+            Techniques::ALL,
+            Techniques::PAPER_TYPE_1,
+            Techniques::PAPER_TYPE_2,
+            Techniques::PAPER_TYPE_3,
+        ] {
+            let got = render_all_with::<T>(&img, t).0;
+            let off = got.iter().zip(&plain).filter(|(a, b)| a != b).count();
+            assert_eq!(
+                off,
+                0,
+                "{} {h:?} {t:?}: {off} values differ from the plain walk",
+                T::NAME
+            );
+        }
+    }
+}
+
+/// A spot light wider than 180° total with a fractional exponent: points behind it see a
+/// negative cosine, which `powf` would turn into NaN and blacken the whole pixel.
+fn wide_spot_with_fractional_exponent_stays_finite<T: Real>() {
+    let mut s = scene(
+        16,
+        16,
+        120.0,
+        vec![Shape::Box {
+            min: [-20.0, -20.0, -12.0],
+            max: [20.0, 20.0, -10.0],
+            material: 1,
+        }],
+    );
+    s.ambient = [0.2; 3];
+    s.materials.push(matte("wall", [0.8; 3]));
+    s.lights = vec![Light::Spot {
+        pos: [0.0, 0.0, -9.0],
+        dir: [0.0, 0.0, 1.0],
+        color: [1.0; 3],
+        inner_deg: 30.0,
+        outer_deg: 150.0,
+        exponent: 1.5,
+    }];
+    let img = image_of(&s);
+    let mut tracer = Tracer::<T>::new(SceneView::new(&img).unwrap());
+    for y in 0..16 {
+        for x in 0..16 {
+            let c = tracer.pixel(x, y);
+            assert!(c.is_finite(), "{} ({x},{y}): {c:?}", T::NAME);
+            // The wall faces away from the spot: only ambient light, never black.
+            assert!(
+                (c.x.to_f64() - 0.16).abs() < 1e-5,
+                "{} ({x},{y}): {c:?}",
+                T::NAME
+            );
+        }
+    }
+}
+
 macro_rules! per_backend {
     ($($case:ident),*) => {
         mod f32_backend {
@@ -235,5 +317,7 @@ per_backend!(
     slab_parallel_and_edge_rays,
     grazing_rays_on_spheres_and_ellipsoids,
     eye_inside_an_object,
-    no_nan_in_any_bundled_scene
+    no_nan_in_any_bundled_scene,
+    coplanar_overlaps_resolve_like_the_plain_walk,
+    wide_spot_with_fractional_exponent_stays_finite
 );

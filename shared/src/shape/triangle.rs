@@ -44,6 +44,8 @@ impl<T: Real> Triangle<T> {
     }
 
     /// Intersect for t in (0, t_max). Two-sided.
+    // The negated comparisons below are deliberate: they reject NaN.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     pub fn intersect(&self, ray: &Ray<T>, t_max: T) -> Option<TriHit<T>> {
         // Translate to the ray origin, permute so the largest direction component is z.
         let mut p0 = self.p[0] - ray.origin;
@@ -79,7 +81,8 @@ impl<T: Real> Triangle<T> {
             return None;
         }
         let det = e0 + e1 + e2;
-        if det == T::ZERO {
+        // Written to reject NaN too (non-finite vertices or direction).
+        if !(det.abs() > T::ZERO) {
             return None;
         }
 
@@ -110,7 +113,7 @@ impl<T: Real> Triangle<T> {
         let delta_t = T::from_i32(3)
             * (T::err_gamma(3) * max_e * max_zt + delta_e * max_zt + delta_z * max_e)
             * inv_det.abs();
-        if t <= delta_t {
+        if !(t > delta_t) {
             return None;
         }
         Some(TriHit {
@@ -190,5 +193,39 @@ mod tests {
                 + b.intersect(&r, f32::MAX).is_some() as u32;
             assert_eq!(n, 1, "y = {y}");
         }
+    }
+}
+
+#[cfg(test)]
+mod nan_tests {
+    use super::*;
+
+    #[test]
+    fn non_finite_input_never_reports_a_hit() {
+        let t = Triangle {
+            p: [
+                Vec3::new(f32::NAN, -1.0, 3.0),
+                Vec3::new(1.0, -1.0, 3.0),
+                Vec3::new(0.0, 1.0, 3.0),
+            ],
+        };
+        let r = Ray::new(Vec3::zero(), Vec3::new(0.0f32, 0.0, 1.0));
+        assert!(t.intersect(&r, f32::MAX).is_none());
+        let ok = Triangle {
+            p: [
+                Vec3::new(-1.0f32, -1.0, 3.0),
+                Vec3::new(1.0, -1.0, 3.0),
+                Vec3::new(0.0, 1.0, 3.0),
+            ],
+        };
+        // A zero direction and huge coordinates whose products overflow.
+        assert!(ok
+            .intersect(&Ray::new(Vec3::zero(), Vec3::zero()), f32::MAX)
+            .is_none());
+        let huge = Triangle {
+            p: ok.p.map(|p| p * 1e25),
+        };
+        let h = huge.intersect(&Ray::new(Vec3::zero(), Vec3::new(0.0, 0.0, 1.0)), f32::MAX);
+        assert!(h.is_none_or(|h| h.t.is_finite()));
     }
 }
