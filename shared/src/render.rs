@@ -21,6 +21,11 @@ use crate::shape::boxshape::BoxHit;
 use crate::shape::ellipsoid::EllipsoidHit;
 use core::fmt;
 
+/// Most recursive rays one pixel may spawn (reflection and transmission, two per surface):
+/// far above what any sane scene needs (a depth-6 glass scene needs at most 254), it bounds
+/// the work a hostile image can ask for per pixel.
+pub const SECONDARY_RAYS_PER_PIXEL: u32 = 4096;
+
 /// Most surfaces a shadow ray or a straight-through ray may cross before it gives up (the
 /// light is then treated as blocked, the straight ray as ending in the background).
 pub const MAX_CROSSINGS: u32 = 64;
@@ -264,6 +269,8 @@ pub struct Tracer<'a, T: Real> {
     frame: Frame<T>,
     techniques: Techniques,
     clip: RowClip,
+    /// Recursive (reflected, refracted, straight) rays the current pixel may still spawn.
+    secondary_left: u32,
     pub stats: Stats,
 }
 
@@ -280,6 +287,7 @@ impl<'a, T: Real> Tracer<'a, T> {
             frame,
             techniques,
             clip: RowClip::new(),
+            secondary_left: SECONDARY_RAYS_PER_PIXEL,
             stats: Stats::default(),
         }
     }
@@ -320,6 +328,7 @@ impl<'a, T: Real> Tracer<'a, T> {
     /// Colour of the primary ray through pixel (x, y), linear RGB.
     pub fn pixel(&mut self, x: u32, y: u32) -> Vec3<T> {
         self.stats.primary_rays += 1;
+        self.secondary_left = SECONDARY_RAYS_PER_PIXEL;
         let ray = self.primary_ray(x, y);
         let hit = if self.clip.row() == Some(y.min(u16::MAX as u32) as u16) {
             self.closest_hit_clipped(&ray, x)
@@ -866,7 +875,14 @@ impl<'a, T: Real> Tracer<'a, T> {
 
         let entering = surf.ng.dot(ray.dir) < T::ZERO;
         let n = if entering { surf.ns } else { -surf.ns };
-        let can_recurse = depth < self.frame.max_depth && depth < MAX_DEPTH_LIMIT;
+        let can_recurse =
+            depth < self.frame.max_depth && depth < MAX_DEPTH_LIMIT && self.secondary_left >= 2;
+        if can_recurse {
+            // Reserve both branches: a pixel's ray tree is at most 2^(depth+1) rays, and
+            // the budget keeps a hostile image (everything mirror and glass, depth 16) from
+            // taking minutes per pixel; past it, rays end as at the depth cap.
+            self.secondary_left -= 2;
+        }
         let cos_v = n.dot(view).clamp01();
 
         let rc = schlick(m.reflect, m.reflect_edge, cos_v);

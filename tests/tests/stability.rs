@@ -302,6 +302,68 @@ fn wide_spot_with_fractional_exponent_stays_finite<T: Real>() {
     }
 }
 
+/// Glass spheres between two mirrors at depth 16: the ray tree would be 2^17 rays per pixel;
+/// the per-pixel budget bounds it, and the colour stays finite.
+fn deep_mirror_and_glass_trees_are_bounded<T: Real>() {
+    use links_core::render::SECONDARY_RAYS_PER_PIXEL;
+    let mut shapes = vec![
+        Shape::Box {
+            min: [-30.0, -30.0, -41.0],
+            max: [30.0, 30.0, -40.0],
+            material: 1,
+        },
+        Shape::Box {
+            min: [-30.0, -30.0, 1.0],
+            max: [30.0, 30.0, 2.0],
+            material: 1,
+        },
+    ];
+    for k in 0..4 {
+        shapes.push(Shape::Ellipsoid {
+            center: [0.0, 0.0, -8.0 - 8.0 * k as f64],
+            radii: [3.0; 3],
+            rotate_deg: [0.0; 3],
+            cut: None,
+            material: 2,
+        });
+    }
+    let mut s = scene(3, 3, 20.0, shapes);
+    s.max_depth = 16;
+    s.ambient = [0.1; 3];
+    s.materials.push(Material {
+        name: "mirror".into(),
+        diffuse: [0.1; 3],
+        reflect: 1.0,
+        reflect_edge: 1.0,
+        ..Material::default()
+    });
+    s.materials.push(Material {
+        name: "glass".into(),
+        diffuse: [0.0; 3],
+        reflect: 0.5,
+        reflect_edge: 0.5,
+        transmit: [0.9; 3],
+        ior: 1.5,
+        ..Material::default()
+    });
+    let img = image_of(&s);
+    let mut tracer = Tracer::<T>::new(SceneView::new(&img).unwrap());
+    let c = tracer.pixel(1, 1);
+    let st = tracer.stats;
+    assert!(c.is_finite(), "{}: {c:?}", T::NAME);
+    let recursive = st.reflect_rays + st.refract_rays;
+    assert!(
+        recursive > 1000,
+        "{}: the scene really is deep ({recursive} rays)",
+        T::NAME
+    );
+    assert!(
+        recursive <= SECONDARY_RAYS_PER_PIXEL as u64,
+        "{}: {recursive} recursive rays",
+        T::NAME
+    );
+}
+
 macro_rules! per_backend {
     ($($case:ident),*) => {
         mod f32_backend {
@@ -319,5 +381,6 @@ per_backend!(
     eye_inside_an_object,
     no_nan_in_any_bundled_scene,
     coplanar_overlaps_resolve_like_the_plain_walk,
-    wide_spot_with_fractional_exponent_stays_finite
+    wide_spot_with_fractional_exponent_stays_finite,
+    deep_mirror_and_glass_trees_are_bounded
 );
