@@ -243,6 +243,8 @@ struct Nc {
     last_rc_seq: u16,
     /// Scene state to report (sequenced).
     status: Option<SceneState>,
+    /// The RC broadcast [`Down::Wake`]: post a `Poll` to be handed re-issued work.
+    wake: bool,
     stopped: bool,
     report: NodeReport,
 }
@@ -423,6 +425,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
         exchanges: 0,
         last_rc_seq: 0,
         status: None,
+        wake: false,
         stopped: false,
         report: *report,
     };
@@ -483,9 +486,12 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                 nc.resend = 2;
             }
         }
+        let woken = core::mem::take(&mut nc.wake)
+            && nc.cursor.is_none()
+            && nc.queue.iter().any(|q| q.is_none());
         if posted {
             nc.report.frames_posted += 1;
-        } else if nc.unacked() > 0 {
+        } else if nc.unacked() > 0 || woken {
             let n = wire::encode(nc.next_seq, nc.last_rc_seq, &Up::Poll, &mut poll).unwrap_or(0);
             link.post(&poll[..n])?;
             nc.report.polls += 1;
@@ -667,6 +673,7 @@ fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>) {
             nc.status = Some(nc.bank_state(b));
         }
         Down::Stop => nc.stopped = true,
+        Down::Wake => nc.wake = true,
     }
 }
 

@@ -10,6 +10,16 @@
 //! it has received from that node (`ack`). Animation: frame `f`'s scene goes to node bank
 //! `f % 2` while frame `f - 1` renders; its jobs are handed out as soon as frame `f - 1`'s are
 //! all issued, to nodes that have reported the scene ready.
+//!
+//! The DM stage: a [`SceneSource`] may produce scenes over time ([`SceneSource::produced`]);
+//! frame `f` is broadcast only once it exists.
+//!
+//! Node failure: a node holding jobs that the RC has not exchanged with for
+//! [`RootConfig::timeout_us`] (checked only while no ready line on its bus is up, so bus
+//! congestion is never mistaken for silence) is declared dead; its jobs stay in its slot as
+//! orphans, are handed (with fresh ids) to the next live nodes that ask, and every bus
+//! broadcasts [`Down::Wake`] so idle nodes ask. A "dead" node that speaks again is live again
+//! and the time-out doubles (it was too short: this bounds the work lost to false alarms).
 
 use crate::image::SceneView;
 use crate::link::{LinkError, NodeId, RootBus};
@@ -20,7 +30,7 @@ use core::fmt;
 use core::future::Future;
 use core::pin::Pin;
 use core::task::{Context, Poll, Waker};
-use embassy_futures::select::{select, Either};
+use embassy_futures::select::{select4, Either4};
 
 /// Most buses (concurrent [`run_bus`] tasks) one RC drives.
 pub const MAX_BUSES: usize = 8;
@@ -29,8 +39,38 @@ pub const MAX_BUSES: usize = 8;
 pub const MAX_NODES: usize = 256;
 
 /// The scene image of each animation frame (the DM's output).
+#[allow(async_fn_in_trait)]
 pub trait SceneSource {
     fn scene(&self, frame: u16) -> Option<&[u8]>;
+    /// Whether the DM has produced frame `frame`'s scene yet (it runs ahead of the RC, one
+    /// frame at a time). Default: every scene exists from the start.
+    fn produced(&self, _frame: u16) -> bool {
+        true
+    }
+    /// Resolves once [`SceneSource::produced`] holds for `frame`. Implement it together
+    /// with `produced`.
+    async fn wait_produced(&self, _frame: u16) {}
+}
+
+/// The RC's time base, for node time-outs (hardware: a timer; simulator: virtual time).
+#[allow(async_fn_in_trait)]
+pub trait RootClock {
+    /// Microseconds since the start.
+    fn now_us(&self) -> u64;
+    /// Resolves once `now_us() >= t`.
+    async fn at_us(&self, t: u64);
+}
+
+/// A clock that never advances: time-outs never fire (an RC without a timer).
+pub struct NoClock;
+
+impl RootClock for NoClock {
+    fn now_us(&self) -> u64 {
+        0
+    }
+    async fn at_us(&self, _t: u64) {
+        core::future::pending::<()>().await
+    }
 }
 
 impl<T: AsRef<[u8]>> SceneSource for [T] {
@@ -56,6 +96,17 @@ pub struct RootConfig {
     pub policy: Policy,
     pub nodes: u16,
     pub frames: u16,
+    /// A node holding jobs that has not been heard from for this long (µs) is declared dead
+    /// and its jobs are re-issued; 0 = never. It must exceed the longest run a node renders
+    /// between two exchanges ([`RootConfig::DEFAULT_TIMEOUT_US`]).
+    pub timeout_us: u64,
+}
+
+impl RootConfig {
+    /// 0.5 s: a live node rendering photo1 at 512x480 at 168 MHz is silent for at most
+    /// 0.15-0.2 s (its longest run), a 2.5x margin; a false alarm doubles the time-out
+    /// (see docs/cluster.md).
+    pub const DEFAULT_TIMEOUT_US: u64 = 500_000;
 }
 
 /// Why the RC cannot run.
@@ -119,6 +170,12 @@ pub struct RootReport {
     pub polls: u32,
     /// Node frames accepted in sequence.
     pub accepted: u64,
+    /// Nodes declared dead (silent for the time-out while holding jobs).
+    pub timeouts: u32,
+    /// Jobs of dead nodes handed to other nodes.
+    pub reissued: u32,
+    /// Nodes declared dead that spoke again (and were taken back).
+    pub revived: u32,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -131,6 +188,10 @@ struct NodeSlot {
     repair: Option<(u16, [u32; wire::MAX_CHUNKS / 32])>,
     /// The chunk re-sent in the exchange in progress.
     repairing: Option<u32>,
+    /// When the RC last exchanged with the node (µs).
+    heard_us: u64,
+    /// Declared dead: its jobs are orphans waiting to be re-issued.
+    dead: bool,
 }
 
 impl NodeSlot {
@@ -140,6 +201,8 @@ impl NodeSlot {
         ready_upto: None,
         repair: None,
         repairing: None,
+        heard_us: 0,
+        dead: false,
     };
     fn ready_for(&self, frame: u16) -> bool {
         self.ready_upto.is_some_and(|r| r >= frame)
@@ -169,6 +232,11 @@ pub struct RootState {
     complete: u16,
     next_job: u32,
     report: RootReport,
+    /// Nodes declared dead so far (each bus broadcasts `Wake` when this grows).
+    deaths: u16,
+    /// The time-out in force (µs): starts at `cfg.timeout_us`, doubles whenever a node
+    /// declared dead speaks again (it was too short).
+    timeout_us: u64,
     /// Bus tasks waiting for the end (woken when the last frame completes).
     finish_wakers: [Option<Waker>; MAX_BUSES],
 }
@@ -234,6 +302,8 @@ impl RootState {
             complete: 0,
             next_job: 0,
             report: RootReport::default(),
+            deaths: 0,
+            timeout_us: cfg.timeout_us,
             finish_wakers: [const { None }; MAX_BUSES],
         })
     }
@@ -295,6 +365,113 @@ impl RootState {
         }
     }
 
+    /// Nodes declared dead so far.
+    pub fn deaths(&self) -> u16 {
+        self.deaths
+    }
+
+    /// Note an exchange with `node` at `now_us`; a node declared dead is live again.
+    pub fn heard(&mut self, node: NodeId, now_us: u64) {
+        if let Some(slot) = self.nodes.get_mut(node as usize) {
+            slot.heard_us = now_us;
+            if slot.dead {
+                slot.dead = false;
+                self.report.revived += 1;
+                self.timeout_us = self.timeout_us.saturating_mul(2);
+            }
+        }
+    }
+
+    fn nodes_in(&self, first: NodeId, count: u16) -> core::ops::Range<usize> {
+        let end = (first as usize + count as usize).min(self.cfg.nodes as usize);
+        (first as usize).min(end)..end
+    }
+
+    /// When the first live node of `first..first + count` holding jobs times out (µs).
+    pub fn next_deadline(&self, first: NodeId, count: u16) -> Option<u64> {
+        if self.timeout_us == 0 {
+            return None;
+        }
+        self.nodes[self.nodes_in(first, count)]
+            .iter()
+            .filter(|s| !s.dead && s.jobs.iter().any(|j| j.is_some()))
+            .map(|s| s.heard_us.saturating_add(self.timeout_us))
+            .min()
+    }
+
+    /// Declare dead every live node of `first..first + count` that holds jobs and has been
+    /// silent for the time-out at `now_us`. Call only while none of them has its ready line
+    /// up. Returns how many died.
+    pub fn expire(&mut self, first: NodeId, count: u16, now_us: u64) -> u16 {
+        if self.timeout_us == 0 {
+            return 0;
+        }
+        let mut died = 0;
+        let timeout = self.timeout_us;
+        let range = self.nodes_in(first, count);
+        for slot in &mut self.nodes[range] {
+            if !slot.dead
+                && slot.jobs.iter().any(|j| j.is_some())
+                && now_us >= slot.heard_us.saturating_add(timeout)
+            {
+                slot.dead = true;
+                slot.repair = None;
+                slot.repairing = None;
+                died += 1;
+            }
+        }
+        self.deaths = self.deaths.saturating_add(died);
+        self.report.timeouts += died as u32;
+        died
+    }
+
+    /// A job held by a dead node, as (node, queue index), oldest frame first.
+    fn orphan(&self) -> Option<(usize, usize)> {
+        let mut best: Option<(usize, usize, u16)> = None;
+        for (n, slot) in self.nodes[..self.cfg.nodes as usize].iter().enumerate() {
+            if !slot.dead {
+                continue;
+            }
+            for (k, j) in slot.jobs.iter().enumerate() {
+                if let Some(j) = j {
+                    if best.is_none_or(|(_, _, f)| j.frame < f) {
+                        best = Some((n, k, j.frame));
+                    }
+                }
+            }
+        }
+        best.map(|(n, k, _)| (n, k))
+    }
+
+    /// Hand one orphaned job to `node` (a fresh id, so the node takes it). Returns whether
+    /// it did.
+    fn adopt(&mut self, node: NodeId) -> bool {
+        let Some((d, k)) = self.orphan() else {
+            return false;
+        };
+        let slot = &self.nodes[node as usize];
+        let Some(job) = self.nodes[d].jobs[k] else {
+            return false;
+        };
+        let Some(free) = slot.jobs.iter().position(|j| j.is_none()) else {
+            return false;
+        };
+        if slot.dead || !slot.ready_for(job.frame) {
+            return false;
+        }
+        self.nodes[d].jobs[k] = None;
+        if self.nodes[d].jobs[0].is_none() {
+            self.nodes[d].jobs.swap(0, 1);
+        }
+        self.nodes[node as usize].jobs[free] = Some(Job {
+            id: self.next_job,
+            ..job
+        });
+        self.next_job += 1;
+        self.report.reissued += 1;
+        true
+    }
+
     /// Move the schedule on to the next frame if the current one is all issued and the
     /// next one's progress slot is free.
     fn advance_schedule(&mut self) {
@@ -330,6 +507,10 @@ impl RootState {
             if held >= JOB_QUEUE || (held > 0 && !self.sched.may_prefetch()) {
                 return;
             }
+            if self.deaths > 0 && self.adopt(node) {
+                continue;
+            }
+            let slot = &self.nodes[node as usize];
             let frame = self.sched_frame;
             if !slot.ready_for(frame) || self.sched.exhausted() {
                 return;
@@ -507,9 +688,10 @@ impl RootState {
 
 /// Drive one bus until every frame is complete, then broadcast `Stop`. `index` numbers the
 /// bus tasks (0..[`MAX_BUSES`]) sharing `root`.
-pub async fn run_bus<B: RootBus, S: SceneSource + ?Sized, P: PixelSink>(
+pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: PixelSink>(
     index: usize,
     bus: &mut B,
+    clock: &C,
     root: &RefCell<RootState>,
     scenes: &S,
     sink: &RefCell<P>,
@@ -520,29 +702,58 @@ pub async fn run_bus<B: RootBus, S: SceneSource + ?Sized, P: PixelSink>(
     let mut bframe: u16 = 0;
     let mut boffset: Option<u32> = Some(0);
     let mut bcrc: Option<(u16, u32)> = None;
+    // Deaths this bus has broadcast `Wake` for.
+    let mut woken: u16 = 0;
+    let (first, count) = bus.nodes();
     loop {
         if root.borrow().finished() {
             let n = wire::encode(0, 0, &Down::Stop, &mut tx).unwrap_or(0);
             bus.broadcast(&tx[..n]).await?;
             return Ok(root.borrow().report());
         }
-        let node = match bus.ready() {
-            Some(n) => Some(n),
-            None if root.borrow().may_broadcast(bframe) => None,
-            None => {
+        let mut ready = bus.ready();
+        if ready.is_none() {
+            root.borrow_mut().expire(first, count, clock.now_us());
+            // A node died (on any bus): idle nodes must be told to ask for its work.
+            if root.borrow().deaths() > woken {
+                woken = root.borrow().deaths();
+                let n = wire::encode(0, 0, &Down::Wake, &mut tx).unwrap_or(0);
+                bus.broadcast(&tx[..n]).await?;
+                root.borrow_mut().report.broadcasts += 1;
+                continue;
+            }
+            let can_send = root.borrow().may_broadcast(bframe);
+            if !(can_send && scenes.produced(bframe)) {
+                let deadline = root.borrow().next_deadline(first, count);
+                let timer = async {
+                    match deadline {
+                        Some(t) => clock.at_us(t).await,
+                        None => core::future::pending::<()>().await,
+                    }
+                };
+                let dm = async {
+                    if can_send {
+                        scenes.wait_produced(bframe).await
+                    } else {
+                        core::future::pending::<()>().await
+                    }
+                };
                 let end = Finished { root, slot: index };
-                match select(bus.wait_ready(), end).await {
-                    Either::First(n) => Some(n),
-                    Either::Second(()) => continue,
+                match select4(bus.wait_ready(), end, timer, dm).await {
+                    Either4::First(n) => ready = Some(n),
+                    _ => continue,
                 }
             }
-        };
-        match node {
+        }
+        match ready {
             Some(node) => {
+                // Its ready line is up: the node is alive.
+                root.borrow_mut().heard(node, clock.now_us());
                 let n = root.borrow_mut().reply(node, scenes, &mut tx);
                 let got = bus.exchange(node, &tx[..n], &mut rx).await?;
                 let mut r = root.borrow_mut();
                 r.report.exchanges += 1;
+                r.heard(node, clock.now_us());
                 r.take(node, &rx[..got.min(rx.len())], &mut *sink.borrow_mut());
             }
             None => {

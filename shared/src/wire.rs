@@ -23,7 +23,7 @@ use core::fmt;
 use serde::{Deserialize, Serialize};
 
 /// Protocol version carried in every frame.
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;
 /// Most pixels in one [`Up::Pixels`] message (one full 512-pixel scanline).
 pub const MAX_RUN: usize = 512;
 /// Bytes of scene image in one broadcast chunk.
@@ -145,6 +145,9 @@ pub enum Down<'a> {
     SceneEnd { frame: u16, len: u32, crc: u32 },
     /// No more work: the node may stop.
     Stop,
+    /// Broadcast after the RC declared a node dead: work is waiting to be re-issued, so an
+    /// idle node with a free job slot posts a [`Up::Poll`] to be handed some.
+    Wake,
 }
 
 /// NC -> RC messages.
@@ -359,6 +362,7 @@ mod tests {
                 crc: 0xdead_beef,
             },
             Down::Stop,
+            Down::Wake,
         ];
         for d in downs {
             roundtrip(d, &mut [0u8; MAX_FRAME]);
@@ -468,13 +472,16 @@ mod tests {
     fn wrong_version_and_garbage_are_errors_not_panics() {
         let mut buf = [0u8; 64];
         let n = encode(0, 0, &Down::Stop, &mut buf).unwrap();
-        buf[0] = 2;
-        let crc = CRC32.checksum(&buf[..n - 4]).to_le_bytes();
-        buf[n - 4..n].copy_from_slice(&crc);
-        assert_eq!(
-            decode::<Down>(&buf[..n]),
-            Err(WireError::Version { found: 2 })
-        );
+        // The next version, and version 1 (before `Down::Wake`).
+        for v in [PROTOCOL_VERSION + 1, 1] {
+            buf[0] = v;
+            let crc = CRC32.checksum(&buf[..n - 4]).to_le_bytes();
+            buf[n - 4..n].copy_from_slice(&crc);
+            assert_eq!(
+                decode::<Down>(&buf[..n]),
+                Err(WireError::Version { found: v })
+            );
+        }
         // Valid CRC over bytes that are no message.
         let mut g = [PROTOCOL_VERSION, 0, 0, 99, 0, 0, 0, 0];
         let crc = CRC32.checksum(&g[..4]).to_le_bytes();

@@ -6,8 +6,8 @@ use links_core::dm::{compile, CompileOptions};
 use links_core::node::NodeConfig;
 use links_core::sched::{Policy, Shape};
 use links_core::wire::{self, Down, SCENE_CHUNK};
-use links_host::cluster::star::Faults;
-use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimReport};
+use links_host::cluster::star::{Faults, NodeDeath};
+use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimError, SimReport};
 use links_host::frame::{render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::path::Path;
@@ -409,7 +409,7 @@ mod hostile_bus {
     use super::*;
     use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
     use links_core::node::{run_node, NodeReport, RealTime, Tracing};
-    use links_core::root::{run_bus, RootConfig, RootState};
+    use links_core::root::{run_bus, NoClock, RootConfig, RootState};
     use links_core::wire::{Job, Region, SceneState, Up};
     use links_tests::Rng;
     use std::cell::RefCell;
@@ -671,6 +671,7 @@ mod hostile_bus {
                 policy: Policy::DECREASING,
                 nodes: 4,
                 frames: 2,
+                timeout_us: 0,
             };
             let root =
                 RefCell::new(RootState::new(cfg, &[img.clone(), img.clone()][..]).expect("valid"));
@@ -680,7 +681,15 @@ mod hostile_bus {
                 left: 3000,
             };
             drive(async {
-                let r = run_bus(0, &mut bus, &root, &[img.clone(), img.clone()][..], &sink).await;
+                let r = run_bus(
+                    0,
+                    &mut bus,
+                    &NoClock,
+                    &root,
+                    &[img.clone(), img.clone()][..],
+                    &sink,
+                )
+                .await;
                 assert_eq!(
                     r.err(),
                     Some(links_core::root::RootError::Link(LinkError::Aborted))
@@ -693,4 +702,180 @@ mod hostile_bus {
             );
         }
     }
+}
+
+/// The DM stage: with a DM slower than the cluster, frames come out at the DM's pace; with
+/// a fast one, only the start moves.
+#[test]
+fn a_slow_dm_sets_the_frame_interval_and_a_fast_one_changes_nothing() {
+    use links_host::cluster::steady_state_interval;
+    let img = image("photo1.ron", 64, 60);
+    let cfg = SimConfig {
+        nodes: 8,
+        ..SimConfig::default()
+    };
+    let render = steady_state_interval(&img, &cfg, 8).expect("simulates");
+    let single = simulate_frame(&img, &cfg).expect("simulates").time_s;
+    assert!(render > 0.0 && render < single, "{render} vs {single}");
+
+    // Slow DM: twice the single-frame time, so frames never overlap. The interval is the
+    // DM's to within a few bus bytes (job ids and sequence numbers are varints and grow).
+    let dm = 2.0 * single;
+    let slow = SimConfig {
+        dm_s_per_frame: dm,
+        ..cfg.clone()
+    };
+    let interval = steady_state_interval(&img, &slow, 8).expect("simulates");
+    assert!((interval - dm).abs() < 1e-5, "{interval} vs DM {dm}");
+    let scenes = [img.clone(), img.clone(), img.clone()];
+    let r = simulate(
+        &scenes,
+        &SimConfig {
+            keep_frames: true,
+            ..slow.clone()
+        },
+    )
+    .expect("simulates");
+    let want = reference(&img);
+    assert!(r.frames.iter().all(|f| *f == want));
+    // Each frame starts when the DM delivers it and takes one single-frame time (to within
+    // the few µs by which the protocol's exchange pattern differs from frame to frame).
+    for (f, t) in r.frame_done_s.iter().enumerate() {
+        let expect = (f + 1) as f64 * dm + single;
+        assert!((t - expect).abs() < 1e-5, "frame {f}: {t} vs {expect}");
+    }
+
+    // Fast DM: a tenth of the interval; the whole run shifts by one DM time.
+    let fast = SimConfig {
+        dm_s_per_frame: render / 10.0,
+        ..cfg.clone()
+    };
+    let interval = steady_state_interval(&img, &fast, 8).expect("simulates");
+    assert!((interval - render).abs() < 1e-9, "{interval} vs {render}");
+    let t = simulate_frame(&img, &fast).expect("simulates").time_s;
+    assert!((t - single - render / 10.0).abs() < 1e-9, "{t} vs {single}");
+}
+
+fn with_deaths(
+    img: &[u8],
+    nodes: u16,
+    buses: u16,
+    deaths: &[(u16, f64)],
+    timeout: f64,
+) -> SimReport {
+    run(
+        img,
+        SimConfig {
+            nodes,
+            buses,
+            node_timeout_s: timeout,
+            deaths: deaths
+                .iter()
+                .map(|&(node, at_s)| NodeDeath { node, at_s })
+                .collect(),
+            ..SimConfig::default()
+        },
+    )
+}
+
+#[test]
+fn work_of_a_node_that_dies_is_reissued() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let t0 = run(
+        &img,
+        SimConfig {
+            nodes: 8,
+            ..SimConfig::default()
+        },
+    )
+    .time_s;
+    let timeout = t0 / 4.0;
+    // Mid-frame.
+    let r = with_deaths(&img, 8, 1, &[(3, t0 / 2.0)], timeout);
+    assert!(r.frames[0] == want);
+    assert_eq!((r.root.timeouts, r.root.revived), (1, 0));
+    assert!(r.root.reissued >= 1, "{:?}", r.root);
+    assert!(
+        r.time_s > t0 && r.time_s < t0 + 2.0 * timeout,
+        "{} vs {t0}",
+        r.time_s
+    );
+    assert_eq!(r.root.bad_frames, 0);
+    // The last node, late in the frame, on the second of two buses (its `Wake` and the
+    // re-issue cross buses).
+    let r = with_deaths(&img, 8, 2, &[(7, 0.8 * t0)], timeout);
+    assert!(r.frames[0] == want);
+    assert_eq!((r.root.timeouts, r.root.revived), (1, 0));
+    assert!(r.root.reissued >= 1, "{:?}", r.root);
+    // All but one, at staggered times, on three buses.
+    let deaths: Vec<(u16, f64)> = (1..6).map(|n| (n, t0 * (0.1 + 0.1 * n as f64))).collect();
+    let r = with_deaths(&img, 6, 3, &deaths, timeout);
+    assert!(r.frames[0] == want);
+    // Node 1 died during the scene broadcast, before it held a job: nothing to re-issue,
+    // so it is never timed out. The other four held jobs.
+    assert_eq!(r.node_reports[1].pixels, 0);
+    assert_eq!((r.root.timeouts, r.root.revived), (4, 0));
+    assert!(r.root.reissued >= 4, "{:?}", r.root);
+    // The survivor rendered everything no one else finished: about 6x its share.
+    assert!(r.time_s > 3.0 * t0, "{} vs {t0}", r.time_s);
+    // Every node dead: the simulation reports the stall, nothing panics.
+    let all: Vec<(u16, f64)> = (0..4).map(|n| (n, t0 / 2.0)).collect();
+    let e = simulate_frame(
+        &img,
+        &SimConfig {
+            nodes: 4,
+            node_timeout_s: timeout,
+            deaths: all
+                .iter()
+                .map(|&(node, at_s)| NodeDeath { node, at_s })
+                .collect(),
+            ..SimConfig::default()
+        },
+    );
+    assert!(matches!(e, Err(SimError::Exec(_))), "{e:?}");
+}
+
+#[test]
+fn a_death_during_an_animation_and_false_alarms_keep_every_frame_exact() {
+    let a = image("photo1.ron", 64, 60);
+    let b = image("reflections.ron", 64, 60);
+    let scenes = [a.clone(), b.clone(), a.clone()];
+    let cfg = SimConfig {
+        nodes: 8,
+        keep_frames: true,
+        ..SimConfig::default()
+    };
+    let t = simulate(&scenes, &cfg).expect("simulates").frame_done_s;
+    let r = simulate(
+        &scenes,
+        &SimConfig {
+            node_timeout_s: t[0] / 4.0,
+            deaths: vec![NodeDeath {
+                node: 2,
+                at_s: (t[0] + t[1]) / 2.0,
+            }],
+            ..cfg.clone()
+        },
+    )
+    .expect("simulates");
+    let (ra, rb) = (reference(&a), reference(&b));
+    assert!(r.frames[0] == ra && r.frames[1] == rb && r.frames[2] == ra);
+    assert_eq!((r.root.timeouts, r.root.revived), (1, 0));
+    // A time-out far shorter than a run: live nodes are declared dead, speak again, and
+    // the time-out doubles until the alarms stop. Work is lost, no pixel is wrong.
+    let r = simulate(
+        &scenes,
+        &SimConfig {
+            node_timeout_s: 1e-5,
+            ..cfg
+        },
+    )
+    .expect("simulates");
+    assert!(r.frames[0] == ra && r.frames[1] == rb && r.frames[2] == ra);
+    assert!(
+        r.root.revived > 0 && r.root.revived == r.root.timeouts,
+        "{:?}",
+        r.root
+    );
 }

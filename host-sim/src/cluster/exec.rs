@@ -141,3 +141,16 @@ pub fn run(
         }
     }
 }
+
+/// The RC's time base in virtual time (microseconds, rounded down), for node time-outs.
+pub struct VirtualClock(pub SharedClock);
+
+impl links_core::root::RootClock for VirtualClock {
+    fn now_us(&self) -> u64 {
+        self.0.borrow().now / 1_000_000
+    }
+
+    async fn at_us(&self, t: u64) {
+        Delay::new(&self.0, t.saturating_mul(1_000_000)).await
+    }
+}

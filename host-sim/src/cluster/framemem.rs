@@ -14,6 +14,11 @@ pub const FRAME_MEMORY_SIDE: usize = 1024;
 
 pub struct FrameMemory {
     banks: [Vec<u8>; 2],
+    /// The newest frame written into each bank.
+    holds: [Option<u16>; 2],
+    /// Runs of a frame older than the one its bank now holds (from a node declared dead
+    /// that delivered late), dropped.
+    pub stale: u64,
     /// Pixel runs written, pixels written, frames rejected by CRC.
     pub runs: u64,
     pub pixels: u64,
@@ -31,6 +36,8 @@ impl FrameMemory {
         let n = FRAME_MEMORY_SIDE * FRAME_MEMORY_SIDE * 3;
         Self {
             banks: [vec![0; n], vec![0; n]],
+            holds: [None; 2],
+            stale: 0,
             runs: 0,
             pixels: 0,
             bad_frames: 0,
@@ -43,6 +50,14 @@ impl FrameMemory {
         let (x, y) = (x as usize, y as usize);
         if y >= FRAME_MEMORY_SIDE || x >= FRAME_MEMORY_SIDE {
             return;
+        }
+        let b = (frame % 2) as usize;
+        match self.holds[b] {
+            Some(h) if h > frame => {
+                self.stale += 1;
+                return;
+            }
+            _ => self.holds[b] = Some(frame),
         }
         let n = (rgb.len() / 3).min(FRAME_MEMORY_SIDE - x);
         let at = (y * FRAME_MEMORY_SIDE + x) * 3;

@@ -2,6 +2,7 @@
 //! over an emulated SPI star in deterministic virtual time.
 //!
 //! - [`exec`]: the discrete-event executor (virtual time, fixed poll order).
+//! - [`dm`]: the DM stage (each frame's scene appears after a fixed DM time per frame).
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`sweep`]: the Fig. 5.1 / 5.2 analogs (node-count and division sweeps), CSV and charts.
@@ -10,6 +11,7 @@
 //! configured core clock. A simulation is single-threaded and its results depend only on its
 //! inputs; sweeps run independent simulations on several host threads.
 
+pub mod dm;
 pub mod exec;
 pub mod framemem;
 pub mod star;
@@ -31,7 +33,7 @@ use links_core::root::{
 };
 use links_core::sched::Policy;
 use links_core::wire;
-use star::{BusCounters, BusTiming, Faults, SimBus, SimNodeLink, Star};
+use star::{BusCounters, BusTiming, Faults, NodeDeath, SimBus, SimNodeLink, Star};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::fmt;
@@ -61,6 +63,14 @@ pub struct SimConfig {
     pub clock_hz: f64,
     pub model: CycleModel,
     pub faults: Faults,
+    /// Nodes that die (stop answering) during the run.
+    pub deaths: Vec<NodeDeath>,
+    /// The RC declares a node holding jobs dead after this long without an exchange (s) and
+    /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
+    pub node_timeout_s: f64,
+    /// DM time per frame (s): frame `f`'s scene exists from `(f + 1) · dm_s_per_frame` on.
+    /// Default 0: every scene is compiled before the run (see docs/cluster.md).
+    pub dm_s_per_frame: f64,
     pub collect: Collect,
     /// Node options (run-length coded pixel runs).
     pub node: NodeConfig,
@@ -81,6 +91,9 @@ impl Default for SimConfig {
             clock_hz: DEFAULT_CLOCK_HZ,
             model: CycleModel::default(),
             faults: Faults::default(),
+            deaths: Vec::new(),
+            node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
+            dm_s_per_frame: 0.0,
             collect: Collect::Snoop,
             node: NodeConfig::default(),
             keep_frames: false,
@@ -282,8 +295,9 @@ pub fn simulate_frame(image: &[u8], cfg: &SimConfig) -> Result<SimReport, SimErr
 }
 
 /// Simulate the cluster rendering an animation: `scenes[f]` is frame `f`'s SceneImage (the
-/// DM's output, prepared ahead). Frame `f + 1`'s scene is broadcast into the nodes' second
-/// bank while frame `f` renders.
+/// DM's output; it becomes available at `(f + 1) · cfg.dm_s_per_frame`, see [`dm`]). Frame
+/// `f + 1`'s scene is broadcast into the nodes' second bank while frame `f` renders. Nodes in
+/// `cfg.deaths` stop answering at their time; the RC re-issues their work.
 pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimReport, SimError> {
     if cfg.nodes == 0 || cfg.nodes as usize > links_core::root::MAX_NODES {
         return Err(SimError::Config(format!("{} nodes (1 to 256)", cfg.nodes)));
@@ -299,12 +313,32 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
             "clock and bit rate must be positive".into(),
         ));
     }
+    let times = [cfg.node_timeout_s, cfg.dm_s_per_frame];
+    if times
+        .iter()
+        .any(|t| !(t.is_finite() && *t >= 0.0 && *t < 1e6))
+    {
+        return Err(SimError::Config(
+            "time-out and DM time must be finite, >= 0 and < 1e6 s".into(),
+        ));
+    }
+    if let Some(d) = cfg
+        .deaths
+        .iter()
+        .find(|d| d.node >= cfg.nodes || !(d.at_s.is_finite() && d.at_s >= 0.0))
+    {
+        return Err(SimError::Config(format!(
+            "node {} cannot die at {} s",
+            d.node, d.at_s
+        )));
+    }
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
     let rc = RootConfig {
         policy: cfg.policy,
         nodes: cfg.nodes,
         frames,
+        timeout_us: (cfg.node_timeout_s * 1e6).round() as u64,
     };
     let root = RefCell::new(RootState::new(rc, scenes).map_err(SimError::Root)?);
     let (width, height) = root.borrow().size();
@@ -326,6 +360,11 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let fm = Rc::new(RefCell::new(FrameMemory::new()));
     let snoop = (cfg.collect == Collect::Snoop).then(|| fm.clone());
     let star = Star::new(&clock, cfg.nodes, cfg.buses, cfg.timing, cfg.faults, snoop);
+    for d in &cfg.deaths {
+        star.borrow_mut()
+            .kill_at(d.node, (d.at_s * 1e12).round() as Ps);
+    }
+    let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
     let buses = star.borrow().bus_count();
     let sink = RefCell::new(match cfg.collect {
         Collect::Snoop => Sink::None,
@@ -341,12 +380,13 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
 
     let mut tasks: Vec<Option<Task<'_>>> = Vec::new();
     {
-        let (root, sink, bus_results) = (&root, &sink, &bus_results);
+        let (root, sink, bus_results, dm) = (&root, &sink, &bus_results, &dm);
         for b in 0..buses {
             let star = star.clone();
+            let rc_clock = exec::VirtualClock(clock.clone());
             tasks.push(Some(Box::pin(async move {
                 let mut bus = SimBus::new(&star, b);
-                let r = run_bus(b, &mut bus, root, scenes, sink).await;
+                let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
                 bus_results.borrow_mut()[b] = Some(r);
             })));
         }

@@ -1,5 +1,5 @@
-//! The emulated SPI star: buses, chip-selects, ready lines, DMA banks, fault injection, and
-//! the snooping pixel collector feeding the frame memory.
+//! The emulated SPI star: buses, chip-selects, ready lines, DMA banks, fault injection (bit
+//! flips, node deaths), and the snooping pixel collector feeding the frame memory.
 //!
 //! Timing of one transfer on a bus: `overhead` (handshake: ready-line interrupt, chip-select
 //! set-up, DMA arming on both sides) + `(header + body) · 8 / bit_rate`, where an exchange's
@@ -58,6 +58,14 @@ pub struct Faults {
     pub random: Option<u64>,
 }
 
+/// Fault injection: node `node` dies (stops answering for good) at `at_s` seconds of
+/// virtual time.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeDeath {
+    pub node: NodeId,
+    pub at_s: f64,
+}
+
 /// Traffic counters of one bus.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct BusCounters {
@@ -110,6 +118,9 @@ pub struct Star {
     rng: u64,
     /// The pixel collector listening on every bus's MISO line.
     snoop: Option<Rc<RefCell<FrameMemory>>>,
+    /// When each node dies (stops answering: its ready line stays low, it takes no
+    /// transfer and posts nothing); `Ps::MAX` = never.
+    dead_at: Vec<Ps>,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -152,7 +163,22 @@ impl Star {
             bcast_victim: 0,
             rng: faults.random.unwrap_or(1).max(1),
             snoop,
+            dead_at: vec![Ps::MAX; nodes as usize],
         }))
+    }
+
+    /// Node `node` dies at virtual time `at` (fault injection).
+    pub fn kill_at(&mut self, node: NodeId, at: Ps) {
+        if let Some(d) = self.dead_at.get_mut(node as usize) {
+            *d = at;
+        }
+    }
+
+    /// Whether `node` has died by now.
+    pub fn is_dead(&self, node: usize) -> bool {
+        self.dead_at
+            .get(node)
+            .is_some_and(|&d| self.clock.borrow().now >= d)
     }
 
     pub fn bus_count(&self) -> usize {
@@ -215,6 +241,9 @@ impl SimNodeLink {
 impl NodeLink for SimNodeLink {
     fn post(&mut self, frame: &[u8]) -> Result<(), LinkError> {
         let mut s = self.star.borrow_mut();
+        if s.is_dead(self.id) {
+            return Ok(());
+        }
         if s.nodes[self.id].tx.is_some() {
             return Err(LinkError::Busy);
         }
@@ -226,6 +255,9 @@ impl NodeLink for SimNodeLink {
     async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError> {
         let (exchanged, frame) = PollFn(|| {
             let mut s = self.star.borrow_mut();
+            if s.is_dead(self.id) {
+                return None;
+            }
             let got = s.nodes[self.id].inbox.pop_front();
             if got.is_some() {
                 s.touch();
@@ -291,7 +323,7 @@ impl RootBus for SimBus {
         let b = &s.buses[self.bus];
         (0..b.count)
             .map(|i| b.first + (b.next_scan + i) % b.count)
-            .find(|&n| s.nodes[n as usize].tx.is_some())
+            .find(|&n| s.nodes[n as usize].tx.is_some() && !s.is_dead(n as usize))
     }
 
     async fn wait_ready(&mut self) -> NodeId {
@@ -351,6 +383,9 @@ impl RootBus for SimBus {
         c.broadcast_bytes += frame.len() as u64;
         let every = s.faults.broadcast_every;
         for n in first..first + count {
+            if s.is_dead(n as usize) {
+                continue;
+            }
             let mut f = frame.to_vec();
             // One receiver per hit, in turn, sees the corruption.
             let victim = s.bcast_victim % count as usize == (n - first) as usize;

@@ -1,0 +1,47 @@
+//! The DM stage of the animation pipeline: the machine that compiles each frame's
+//! SceneImage runs ahead of the RC, one frame at a time, taking a fixed `per_frame` of
+//! virtual time per frame; frame `f`'s scene exists from `(f + 1) · per_frame` on and the RC
+//! may not broadcast it before. The scenes themselves are compiled before the simulation
+//! (the DM's output is a pure function of its input); only their availability is timed.
+
+use super::exec::{Delay, Ps, SharedClock};
+use links_core::root::SceneSource;
+
+/// Scenes that appear in virtual time.
+pub struct DmStage<'a, S> {
+    scenes: &'a [S],
+    clock: SharedClock,
+    per_frame: Ps,
+}
+
+impl<'a, S: AsRef<[u8]>> DmStage<'a, S> {
+    /// `per_frame` picoseconds of DM time per frame (0: every scene exists at time 0).
+    pub fn new(scenes: &'a [S], clock: &SharedClock, per_frame: Ps) -> Self {
+        Self {
+            scenes,
+            clock: clock.clone(),
+            per_frame,
+        }
+    }
+
+    /// When frame `frame`'s scene exists.
+    pub fn produced_at(&self, frame: u16) -> Ps {
+        self.per_frame.saturating_mul(frame as Ps + 1)
+    }
+}
+
+impl<S: AsRef<[u8]>> SceneSource for DmStage<'_, S> {
+    fn scene(&self, frame: u16) -> Option<&[u8]> {
+        self.scenes.get(frame as usize).map(|s| s.as_ref())
+    }
+
+    fn produced(&self, frame: u16) -> bool {
+        self.per_frame == 0 || self.clock.borrow().now >= self.produced_at(frame)
+    }
+
+    async fn wait_produced(&self, frame: u16) {
+        if !self.produced(frame) {
+            Delay::new(&self.clock, self.produced_at(frame)).await;
+        }
+    }
+}
