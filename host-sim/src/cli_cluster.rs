@@ -32,6 +32,18 @@ pub fn parse_policy(s: &str) -> Result<Policy, String> {
     }
 }
 
+/// Parse `NODE@SECONDS` (a node that stops answering at that virtual time).
+pub fn parse_death(s: &str) -> Result<crate::cluster::star::NodeDeath, String> {
+    let bad = || format!("'{s}': expected NODE@SECONDS, e.g. 10@0.3");
+    let (node, at) = s.split_once('@').ok_or_else(bad)?;
+    let node = node.trim().parse().map_err(|_| bad())?;
+    let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
+    if !(at_s.is_finite() && at_s >= 0.0) {
+        return Err(bad());
+    }
+    Ok(crate::cluster::star::NodeDeath { node, at_s })
+}
+
 /// A cluster configuration from the command line's settings.
 pub fn config(nodes: u16, buses: u16, bit_rate_mhz: f64, policy: Policy) -> SimConfig {
     let mut cfg = SimConfig {

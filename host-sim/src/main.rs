@@ -102,6 +102,15 @@ enum Cmd {
         /// Sub-screen policy (cluster only): decreasing, static, fixed=N, fixed-rect=N
         #[arg(long, default_value = "decreasing")]
         policy: String,
+        /// DM time per frame in ms: frame f's scene exists at (f+1) x this (cluster only)
+        #[arg(long, default_value_t = 0.0)]
+        dm_ms: f64,
+        /// A node that stops answering: NODE@SECONDS of virtual time (repeatable; cluster only)
+        #[arg(long = "kill", value_name = "NODE@SECONDS")]
+        kills: Vec<String>,
+        /// How long the RC waits for a silent node holding work before re-issuing it, in ms
+        #[arg(long, default_value_t = 500.0)]
+        timeout_ms: f64,
     },
     /// Compile a scene and print its SceneImage size by section
     Info {
@@ -221,6 +230,9 @@ fn run(cli: Cli) -> Result<(), String> {
             buses,
             bit_rate_mhz,
             policy,
+            dm_ms,
+            kills,
+            timeout_ms,
         } => {
             if matches!(precision, PrecisionArg::F64) {
                 return Err(
@@ -233,12 +245,21 @@ fn run(cli: Cli) -> Result<(), String> {
                 ));
             }
             let image = compile_scene(&scene)?;
-            let cfg = cli_cluster::config(
+            let mut cfg = cli_cluster::config(
                 nodes,
                 buses,
                 bit_rate_mhz,
                 cli_cluster::parse_policy(&policy)?,
             );
+            if !(dm_ms.is_finite() && dm_ms >= 0.0 && timeout_ms.is_finite() && timeout_ms > 0.0) {
+                return Err("--dm-ms must be >= 0 and --timeout-ms > 0".into());
+            }
+            cfg.dm_s_per_frame = dm_ms * 1e-3;
+            cfg.node_timeout_s = timeout_ms * 1e-3;
+            cfg.deaths = kills
+                .iter()
+                .map(|k| cli_cluster::parse_death(k))
+                .collect::<Result<_, _>>()?;
             let start = std::time::Instant::now();
             let r = cli_cluster::render(&image, &cfg)?;
             let rep = &r.report;

@@ -509,10 +509,12 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
     } else {
         simulate_frame(
             image,
+            // The reference: the same settings on one node that never fails.
             &SimConfig {
                 nodes: 1,
                 buses: 1,
                 keep_frames: false,
+                deaths: Vec::new(),
                 ..cfg
             },
         )?
