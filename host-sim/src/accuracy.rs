@@ -3,8 +3,41 @@
 //! infinite colours, and hit-mask mismatches: pixels whose primary ray hit another shape).
 
 use crate::frame::psnr;
+use links_core::fixed_image::{to_fixed, FixedError};
 use links_core::image::{ImageError, SceneView, ShapeRef};
-use links_core::num::Real;
+use links_core::num::{Real, Storage};
+use std::fmt;
+
+/// Why a comparison couldn't run.
+#[derive(Debug)]
+pub enum AccuracyError {
+    Image(ImageError),
+    /// The scene doesn't fit the fixed-point format.
+    Fixed(FixedError),
+}
+
+impl fmt::Display for AccuracyError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            AccuracyError::Image(e) => write!(f, "{e}"),
+            AccuracyError::Fixed(e) => write!(f, "scene does not fit fixed point: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for AccuracyError {}
+
+impl From<ImageError> for AccuracyError {
+    fn from(e: ImageError) -> Self {
+        AccuracyError::Image(e)
+    }
+}
+
+impl From<FixedError> for AccuracyError {
+    fn from(e: FixedError) -> Self {
+        AccuracyError::Fixed(e)
+    }
+}
 use links_core::render::{to_rgb8, Tracer};
 use rayon::prelude::*;
 
@@ -70,17 +103,25 @@ pub struct Accuracy {
 }
 
 /// Compare the f32 render of a SceneImage with its f64 render.
-pub fn compare_f32_to_f64(image: &[u8]) -> Result<Accuracy, ImageError> {
+pub fn compare_f32_to_f64(image: &[u8]) -> Result<Accuracy, AccuracyError> {
     compare_to_f64::<f32>(image)
 }
 
 /// Compare a render in number type `T` with the f64 render.
-pub fn compare_to_f64<T: Real>(image: &[u8]) -> Result<Accuracy, ImageError> {
+/// `image` is the DM's f32 image; a fixed-point `T` renders the DM's Q16.16 rewrite of it
+/// (an error when the scene doesn't fit the format).
+pub fn compare_to_f64<T: Real>(image: &[u8]) -> Result<Accuracy, AccuracyError> {
     let view = SceneView::new(image)?;
     let f = view.frame::<f32>();
     let (w, h) = (f.width as usize, f.height as usize);
     let reference = probe::<f64>(view);
-    let tested = probe::<T>(view);
+    let tested = match T::STORAGE {
+        Storage::F32 => probe::<T>(view),
+        Storage::Q16_16 => {
+            let fixed = to_fixed(image)?;
+            probe::<T>(SceneView::new(&fixed.bytes)?)
+        }
+    };
     let max = reference
         .rgb
         .iter()

@@ -2,7 +2,9 @@
 //! spread over host threads. Rows are independent and the statistics are sums, so the image
 //! and the counts never depend on the thread count.
 
+use links_core::fixed_image::{to_fixed, FixedError};
 use links_core::image::{ImageError, SceneView};
+use links_core::num::Fx;
 use links_core::num::Real;
 use links_core::render::{render_run, Stats, Tracer};
 use rayon::prelude::*;
@@ -15,6 +17,8 @@ pub enum Precision {
     #[default]
     F32,
     F64,
+    /// Q16.16 fixed point on an image the DM rescaled to fit the format.
+    Fixed,
 }
 
 impl Precision {
@@ -22,6 +26,7 @@ impl Precision {
         match self {
             Precision::F32 => "f32",
             Precision::F64 => "f64",
+            Precision::Fixed => "q16.16",
         }
     }
 }
@@ -32,7 +37,10 @@ impl std::str::FromStr for Precision {
         match s {
             "f32" => Ok(Precision::F32),
             "f64" => Ok(Precision::F64),
-            other => Err(format!("unknown precision '{other}' (expected f32 or f64)")),
+            "fixed" | "q16.16" => Ok(Precision::Fixed),
+            other => Err(format!(
+                "unknown precision '{other}' (expected f32, f64 or fixed)"
+            )),
         }
     }
 }
@@ -50,6 +58,7 @@ pub struct FrameImage {
 #[derive(Debug)]
 pub enum FrameError {
     Image(ImageError),
+    Fixed(FixedError),
     Threads(String),
 }
 
@@ -57,6 +66,7 @@ impl fmt::Display for FrameError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             FrameError::Image(e) => write!(f, "{e}"),
+            FrameError::Fixed(e) => write!(f, "scene does not fit fixed point: {e}"),
             FrameError::Threads(e) => write!(f, "cannot start render threads: {e}"),
         }
     }
@@ -64,14 +74,22 @@ impl fmt::Display for FrameError {
 
 impl std::error::Error for FrameError {}
 
-/// Render every pixel of a SceneImage. `threads` = 0 uses all cores; `progress` is called
-/// once per finished scanline (from any thread).
+/// Render every pixel of an f32 SceneImage (the fixed-point backend renders the DM's Q16.16
+/// rewrite of it). `threads` = 0 uses all cores; `progress` is called once per finished
+/// scanline (from any thread).
 pub fn render_frame(
     image: &[u8],
     precision: Precision,
     threads: usize,
     progress: &(dyn Fn() + Sync),
 ) -> Result<FrameImage, FrameError> {
+    let fixed;
+    let image = if precision == Precision::Fixed {
+        fixed = to_fixed(image).map_err(FrameError::Fixed)?;
+        &fixed.bytes[..]
+    } else {
+        image
+    };
     let view = SceneView::new(image).map_err(FrameError::Image)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
@@ -81,6 +99,7 @@ pub fn render_frame(
     let (rgb, stats) = pool.install(|| match precision {
         Precision::F32 => rows::<f32>(view, progress),
         Precision::F64 => rows::<f64>(view, progress),
+        Precision::Fixed => rows::<Fx>(view, progress),
     });
     let f = view.frame::<f32>();
     Ok(FrameImage {

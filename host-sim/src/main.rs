@@ -43,6 +43,8 @@ struct Cli {
 enum PrecisionArg {
     F32,
     F64,
+    /// Q16.16 fixed point (the DM rescales the scene to fit)
+    Fixed,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -124,7 +126,8 @@ enum Cmd {
     Compare {
         #[command(flatten)]
         scene: SceneArgs,
-        /// The number format to measure: f32, or f32-fast (micromath's approximations)
+        /// The number format to measure: f32, f32-fast (micromath's approximations) or fixed
+        /// (Q16.16)
         #[arg(long, default_value = "f32")]
         backend: String,
         /// Host threads (0 = all cores)
@@ -234,9 +237,9 @@ fn run(cli: Cli) -> Result<(), String> {
             kills,
             timeout_ms,
         } => {
-            if matches!(precision, PrecisionArg::F64) {
+            if !matches!(precision, PrecisionArg::F32) {
                 return Err(
-                    "the cluster's nodes compute in f32: drop --precision f64 or --nodes".into(),
+                    "the cluster's nodes compute in f32: drop --precision or --nodes".into(),
                 );
             }
             if !(1..=256).contains(&nodes) {
@@ -312,6 +315,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let precision = match precision {
                 PrecisionArg::F32 => Precision::F32,
                 PrecisionArg::F64 => Precision::F64,
+                PrecisionArg::Fixed => Precision::Fixed,
             };
             let frame = render_frame(&image, precision, threads, &|| bar.inc(1))
                 .map_err(|e| e.to_string())?;
@@ -384,9 +388,10 @@ fn run(cli: Cli) -> Result<(), String> {
             let measure = match backend.as_str() {
                 "f32" => links_host::accuracy::compare_to_f64::<f32>,
                 "f32-fast" => links_host::accuracy::compare_to_f64::<links_core::num::FastF32>,
+                "fixed" | "q16.16" => links_host::accuracy::compare_to_f64::<links_core::num::Fx>,
                 other => {
                     return Err(format!(
-                        "unknown backend '{other}' (expected f32 or f32-fast)"
+                        "unknown backend '{other}' (expected f32, f32-fast or fixed)"
                     ))
                 }
             };

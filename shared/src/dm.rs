@@ -588,7 +588,8 @@ impl Dm<'_> {
             .fs(&d.background)
             .fs(&d.ambient)
             .u(max_depth)
-            .u(flags);
+            .u(flags)
+            .fs(&[1.0]);
 
         for (i, t) in d.textures.iter().enumerate() {
             if t.width == 0 || t.height == 0 || t.rgb.len() != (t.width * t.height * 3) as usize {

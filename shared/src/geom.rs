@@ -61,9 +61,16 @@ impl<T: Real> Vec3<T> {
     /// Unit vector, or `None` when the length is zero or not finite.
     #[inline]
     pub fn try_normalize(self) -> Option<Self> {
-        let l = self.length();
+        // Fixed point: scale a short vector up first (exactly, by a power of two) so its
+        // length keeps its significant bits.
+        let v = if T::ABSOLUTE_ROUNDING {
+            self * T::unit_scale(self.max_abs())
+        } else {
+            self
+        };
+        let l = v.length();
         if l > T::ZERO && l.is_finite() {
-            Some(self * l.recip())
+            Some(v * l.recip())
         } else {
             None
         }
@@ -88,6 +95,10 @@ impl<T: Real> Vec3<T> {
     #[inline]
     pub fn max(self, o: Self) -> Self {
         Self::new(self.x.max(o.x), self.y.max(o.y), self.z.max(o.z))
+    }
+    #[inline]
+    pub fn max_abs(self) -> T {
+        self.abs().max_component()
     }
     #[inline]
     pub fn max_component(self) -> T {

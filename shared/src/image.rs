@@ -4,13 +4,13 @@
 //! from those bytes through [`SceneView`]: nothing is copied or allocated, each record is
 //! decoded into registers when it is used. Only sections the scene uses take space.
 //!
-//! ## Layout (version 2, all little-endian, every section 4-byte aligned)
+//! ## Layout (version 3, all little-endian, every section 4-byte aligned)
 //! ```text
 //! offset size
 //!  0     4    magic "LNK1"
-//!  4     2    version (2)
-//!  6     1    number format of stored scalars (0 = f32)
-//!  7     1    reserved (0)
+//!  4     2    version (3)
+//!  6     1    number format of stored scalars ([`Storage`]: 0 = f32, 1 = Q16.16)
+//!  7     1    scale exponent k (i8; 0 for f32): stored lengths are view lengths * 2^k
 //!  8     4    total length in bytes
 //! 12     4    reserved (0)
 //! 16   8*14   section table: (offset u32, record count u32) for each [`Section`]
@@ -20,14 +20,14 @@
 //! `u` = u32. Indices that may be absent use [`NONE`].
 
 use crate::geom::{Aabb, Mat3, Vec3};
-use crate::num::Real;
+use crate::num::{Real, Storage};
 use crate::shape::boxshape::BoxShape;
 use crate::shape::ellipsoid::{CutPlane, Ellipsoid};
 use crate::shape::triangle::Triangle;
 use core::fmt;
 
 pub const MAGIC: [u8; 4] = *b"LNK1";
-pub const VERSION: u16 = 2;
+pub const VERSION: u16 = 3;
 /// "No index" marker.
 pub const NONE: u32 = u32::MAX;
 pub const HEADER_SIZE: usize = 16 + 8 * SECTION_COUNT;
@@ -112,8 +112,10 @@ impl Section {
 }
 
 /// width u, height u, x0 f, y0 f, dx f, dy f, background f[3], ambient f[3], max_depth u,
-/// flags u (bit 0: non-refractive transparency everywhere; bit 1: no shadows).
-pub const FRAME_SIZE: usize = 4 * 14;
+/// flags u (bit 0: non-refractive transparency everywhere; bit 1: no shadows), dz f (the z
+/// of every primary direction: 1 in f32 images; the fixed-point DM scales x0, y0, dx, dy and
+/// dz by one power of two so a pixel step keeps its precision).
+pub const FRAME_SIZE: usize = 4 * 15;
 /// diffuse f[3], specular f, specular_edge f, shininess f, reflect f, reflect_edge f,
 /// transmit f[3], ior f, texture u, target u, scale f[2].
 pub const MATERIAL_SIZE: usize = 4 * 16;
@@ -228,16 +230,40 @@ impl ShapeRef {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum ImageError {
-    TooShort { len: u32 },
+    TooShort {
+        len: u32,
+    },
     BadMagic,
-    UnsupportedVersion { found: u16 },
-    UnsupportedFormat { found: u8 },
-    LengthMismatch { header: u32, actual: u32 },
-    SectionOutOfBounds { section: u8 },
-    Misaligned { section: u8 },
+    UnsupportedVersion {
+        found: u16,
+    },
+    UnsupportedFormat {
+        found: u8,
+    },
+    LengthMismatch {
+        header: u32,
+        actual: u32,
+    },
+    SectionOutOfBounds {
+        section: u8,
+    },
+    Misaligned {
+        section: u8,
+    },
     MissingFrame,
-    BadReference { section: u8, record: u32 },
-    BadValue { section: u8, record: u32 },
+    BadReference {
+        section: u8,
+        record: u32,
+    },
+    BadValue {
+        section: u8,
+        record: u32,
+    },
+    /// The image stores scalars in another format than the number type reads.
+    WrongNumberType {
+        image: Storage,
+        wanted: Storage,
+    },
 }
 
 impl fmt::Display for ImageError {
@@ -279,6 +305,13 @@ impl fmt::Display for ImageError {
                     name(section)
                 )
             }
+            ImageError::WrongNumberType { image, wanted } => write!(
+                f,
+                "scene image stores {} scalars but the renderer reads {} (compile the scene \
+                 for the backend's format)",
+                image.name(),
+                wanted.name()
+            ),
         }
     }
 }
@@ -290,11 +323,12 @@ impl core::error::Error for ImageError {}
 pub struct Frame<T> {
     pub width: u32,
     pub height: u32,
-    /// Direction to pixel (x, y)'s centre: (x0 + (x + ½) dx, y0 - (y + ½) dy, 1).
+    /// Direction to pixel (x, y)'s centre: (x0 + (x + ½) dx, y0 - (y + ½) dy, dz).
     pub x0: T,
     pub y0: T,
     pub dx: T,
     pub dy: T,
+    pub dz: T,
     pub background: Vec3<T>,
     pub ambient: Vec3<T>,
     pub max_depth: u32,
@@ -394,6 +428,7 @@ pub struct BlobGroupRec<T> {
 pub struct SceneView<'a> {
     bytes: &'a [u8],
     table: [(u32, u32); SECTION_COUNT],
+    storage: Storage,
 }
 
 /// A little-endian u32 at `at`, or 0 outside `b` (never the case in a validated image).
@@ -418,7 +453,7 @@ impl<const N: usize> Record<N> {
     }
     #[inline(always)]
     fn f<T: Real>(&self, o: usize) -> T {
-        T::from_f32(f32::from_bits(self.u(o)))
+        T::from_stored(self.u(o))
     }
     #[inline(always)]
     fn v3<T: Real>(&self, o: usize) -> Vec3<T> {
@@ -448,7 +483,10 @@ impl<'a> SceneView<'a> {
         if version != VERSION {
             return Err(ImageError::UnsupportedVersion { found: version });
         }
-        if bytes[6] != 0 {
+        let Some(storage) = Storage::from_u8(bytes[6]) else {
+            return Err(ImageError::UnsupportedFormat { found: bytes[6] });
+        };
+        if storage == Storage::F32 && bytes[7] != 0 {
             return Err(ImageError::UnsupportedFormat { found: bytes[6] });
         }
         let total = rd_u32(bytes, 8);
@@ -472,15 +510,47 @@ impl<'a> SceneView<'a> {
             }
             table[i] = (off, count);
         }
-        let view = Self { bytes, table };
+        let view = Self {
+            bytes,
+            table,
+            storage,
+        };
         view.check_references()?;
         Ok(view)
     }
 
-    /// Unit round-off of the stored scalars (f32): error bounds of quantities the DM
-    /// rounded separately (a matrix and its inverse) are multiples of it.
+    /// Unit round-off of the stored scalars: error bounds of quantities the DM rounded
+    /// separately (a matrix and its inverse) are multiples of it. For Q16.16 it is one step
+    /// relative to 1 (the DM scales a scene so its coordinates are well above 1).
     pub fn storage_epsilon<T: Real>(&self) -> T {
-        T::from_f32(f32::EPSILON * 0.5)
+        match self.storage {
+            Storage::F32 => T::from_f32(f32::EPSILON * 0.5),
+            Storage::Q16_16 => T::from_f32(1.0 / 65536.0),
+        }
+    }
+
+    /// How this image stores its scalars.
+    pub fn storage(&self) -> Storage {
+        self.storage
+    }
+
+    /// The power of two the DM scaled the scene's lengths by (0 for f32 images): a length
+    /// in the image is the view-space length times 2^scale_exponent.
+    pub fn scale_exponent(&self) -> i8 {
+        self.bytes[7] as i8
+    }
+
+    /// Whether number type `T` reads this image's scalars: an image is rendered by the
+    /// backends of its own storage format only.
+    pub fn check_storage<T: Real>(&self) -> Result<(), ImageError> {
+        if T::STORAGE == self.storage {
+            Ok(())
+        } else {
+            Err(ImageError::WrongNumberType {
+                image: self.storage,
+                wanted: T::STORAGE,
+            })
+        }
     }
 
     /// The raw bytes (for sending over the link).
@@ -652,7 +722,7 @@ impl<'a> SceneView<'a> {
     }
     #[inline(always)]
     fn f<T: Real>(&self, at: usize) -> T {
-        T::from_f32(f32::from_bits(rd_u32(self.bytes, at)))
+        T::from_stored(rd_u32(self.bytes, at))
     }
     #[inline]
     fn v3<T: Real>(&self, at: usize) -> Vec3<T> {
@@ -668,6 +738,7 @@ impl<'a> SceneView<'a> {
             y0: self.f(at + 12),
             dx: self.f(at + 16),
             dy: self.f(at + 20),
+            dz: self.f(at + 56),
             background: self.v3(at + 24),
             ambient: self.v3(at + 36),
             max_depth: self.u(at + 48),
@@ -979,7 +1050,8 @@ mod tests {
             .fs(&[-1.0, 1.0, 0.1, 0.1])
             .fs(&[0.0; 6])
             .u(2)
-            .u(0);
+            .u(0)
+            .fs(&[1.0]);
         w.push(Section::Materials)
             .1
             .fs(&[0.5; 12])

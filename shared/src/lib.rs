@@ -20,6 +20,9 @@ pub mod clip;
 pub mod desc;
 #[cfg(feature = "std")]
 pub mod dm;
+pub mod fixed;
+#[cfg(feature = "std")]
+pub mod fixed_image;
 pub mod geom;
 pub mod image;
 pub mod link;

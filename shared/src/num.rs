@@ -12,6 +12,36 @@
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
+/// Number format of the scalars in a SceneImage (header byte 6).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum Storage {
+    /// IEEE binary32, what the float backends read (and widen for f64).
+    F32 = 0,
+    /// Q16.16 raw `i32`s of a scene scaled by a power of two (header byte 7 is the
+    /// exponent), what the fixed-point backend reads without any conversion.
+    Q16_16 = 1,
+}
+
+impl Storage {
+    pub fn from_u8(v: u8) -> Option<Storage> {
+        match v {
+            0 => Some(Storage::F32),
+            1 => Some(Storage::Q16_16),
+            _ => None,
+        }
+    }
+    pub const fn name(self) -> &'static str {
+        match self {
+            Storage::F32 => "f32",
+            Storage::Q16_16 => "q16.16",
+        }
+    }
+}
+
+pub use crate::fixed::Fx;
+
 /// A scalar the renderer can compute with.
 pub trait Real:
     Copy
@@ -39,12 +69,29 @@ pub trait Real:
     /// Largest finite value (used as "no hit yet").
     const MAX: Self;
     const PI: Self;
+    /// How a SceneImage stores scalars for this type (the image header's number format).
+    const STORAGE: Storage = Storage::F32;
+    /// Rounding is absolute (fixed point: half a step whatever the magnitude) rather than
+    /// relative (floating point). Short vectors then keep few significant bits, so
+    /// normalisation and cross products scale them up by [`Real::unit_scale`] first.
+    const ABSOLUTE_ROUNDING: bool = false;
 
     fn from_f32(v: f32) -> Self;
     fn from_f64(v: f64) -> Self;
     fn from_i32(v: i32) -> Self;
     fn to_f64(self) -> f64;
     fn to_f32(self) -> f32;
+    /// A power of two that brings `m` (> 0) up towards [0.5, 1) where the format can
+    /// represent it (never scales down); one for floats, which need no help.
+    #[inline(always)]
+    fn unit_scale(_m: Self) -> Self {
+        Self::ONE
+    }
+    /// A scalar as stored in a SceneImage of format [`Real::STORAGE`].
+    #[inline(always)]
+    fn from_stored(bits: u32) -> Self {
+        Self::from_f32(f32::from_bits(bits))
+    }
 
     /// Unit round-off: half the distance from 1.0 to the next representable value.
     /// Error bounds of intersection routines are multiples of it (pbrt's gamma(n)).

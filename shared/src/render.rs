@@ -322,7 +322,7 @@ impl<'a, T: Real> Tracer<'a, T> {
         let half = T::HALF;
         let dx = f.x0 + (T::from_i32(x as i32) + half) * f.dx;
         let dy = f.y0 - (T::from_i32(y as i32) + half) * f.dy;
-        Ray::new(Vec3::zero(), Vec3::new(dx, dy, T::ONE).normalize())
+        Ray::new(Vec3::zero(), Vec3::new(dx, dy, f.dz).normalize())
     }
 
     /// Colour of the primary ray through pixel (x, y), linear RGB.

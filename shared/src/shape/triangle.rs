@@ -40,7 +40,14 @@ impl<T: Real> Triangle<T> {
     /// Unnormalised geometric normal (p1 - p0) x (p2 - p0).
     #[inline]
     pub fn face_normal(&self) -> Vec3<T> {
-        (self.p[1] - self.p[0]).cross(self.p[2] - self.p[0])
+        let (a, b) = (self.p[1] - self.p[0], self.p[2] - self.p[0]);
+        if T::ABSOLUTE_ROUNDING {
+            // Fixed point: a small triangle's edges have few significant bits and their
+            // cross product fewer still; scale each edge up by a power of two (exact) first.
+            (a * T::unit_scale(a.max_abs())).cross(b * T::unit_scale(b.max_abs()))
+        } else {
+            a.cross(b)
+        }
     }
 
     /// Intersect for t in (0, t_max). Two-sided.

@@ -1,0 +1,440 @@
+//! The DM's last step for the fixed-point backend: an f32 SceneImage rewritten as Q16.16,
+//! scaled by the power of two that fits the scene into the format with the most precision
+//! left ("model no more than a scene needs").
+//!
+//! Why a scale and not another Q format: the tracer's intermediates are products of
+//! coordinate differences (triangle edge functions, dot products), so the format's range
+//! must hold about (2 * extent)^2 * 3. Scaling every length by 2^k so the largest coordinate
+//! is at most [`TARGET_EXTENT`] (32) keeps those below 12,288 of the format's 32,767, and
+//! leaves 16 + k fraction bits for the scene's own units: exactly the Q(15-k).(16+k) format
+//! a per-scene choice would pick, with one code path on the node. Powers of two scale
+//! floats exactly, and every quantity the tracer computes is scale-free (directions,
+//! normals, unit-frame coordinates of ellipsoids and boxes, kernel ratios of density
+//! spheres) except point-light falloff, whose colour is pre-multiplied by 2^2k.
+//!
+//! A scene is rejected, never wrapped: a value outside the format, or a detail smaller than
+//! [`MIN_DETAIL_STEPS`] steps after scaling (an ellipsoid axis, box half-size or ball radius
+//! the format can't resolve), is a [`FixedError`] naming the record.
+
+use crate::fixed::FRAC_BITS;
+use crate::image::{ImageError, SceneView, Section, HEADER_SIZE};
+use crate::num::Storage;
+use core::fmt;
+
+/// The largest view-space coordinate after scaling.
+pub const TARGET_EXTENT: f64 = 32.0;
+/// The largest primary-direction component after scaling (a direction is normalised, so
+/// its squares must fit: 3 * 32^2 is far inside the format).
+pub const TARGET_DIRECTION: f64 = 32.0;
+/// The smallest feature size, in steps of the format, a scene may have after scaling.
+pub const MIN_DETAIL_STEPS: f64 = 16.0;
+
+/// What a 4-byte word of a record holds, for the conversion.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Word {
+    /// An integer: copied.
+    U,
+    /// A scale-free scalar (colour, coefficient, direction, unit-frame value).
+    P,
+    /// A length: times 2^k, rounded to nearest.
+    L,
+    /// A bounding box's lower corner: times 2^k, rounded down (boxes must still contain
+    /// their shapes after rounding).
+    Lo,
+    /// A bounding box's upper corner: rounded up.
+    Hi,
+    /// An inverse length (a view-to-unit-frame matrix entry): times 2^-k.
+    I,
+    /// A light colour: times 2^2k when the light falls off with distance squared.
+    C,
+    /// A component of the primary directions (x0, y0, dx, dy, dz): times 2^j, the power
+    /// of two that brings the largest component to at most [`TARGET_DIRECTION`].
+    D,
+}
+
+use Word::*;
+
+const FRAME: [Word; 15] = [U, U, D, D, D, D, P, P, P, P, P, P, U, U, D];
+const MATERIAL: [Word; 16] = [P, P, P, P, P, P, P, P, P, P, P, P, U, U, P, P];
+const LIGHT: [Word; 14] = [U, C, C, C, L, L, L, P, P, P, P, P, P, U];
+const TEXTURE: [Word; 3] = [U, U, U];
+const NODE: [Word; 8] = [Lo, Lo, Lo, Hi, Hi, Hi, U, U];
+const TRIANGLE: [Word; 12] = [L, L, L, L, L, L, L, L, L, U, U, U];
+const NORMALS: [Word; 9] = [P; 9];
+const UVS: [Word; 6] = [P; 6];
+const ELLIPSOID: [Word; 27] = [
+    L, L, L, I, I, I, I, I, I, I, I, I, L, L, L, L, L, L, L, L, L, U, U, P, P, P, P,
+];
+const BOX: [Word; 22] = [
+    L, L, L, I, I, I, I, I, I, I, I, I, L, L, L, L, L, L, L, L, L, U,
+];
+const BLOB_GROUP: [Word; 5] = [U, U, P, U, U];
+const BALL: [Word; 5] = [L, L, L, L, P];
+const RECT: [Word; 2] = [U, U];
+
+/// The word layout of a section's records (`None` for raw bytes: texels).
+fn layout(s: Section) -> Option<&'static [Word]> {
+    Some(match s {
+        Section::Frame => &FRAME,
+        Section::Materials => &MATERIAL,
+        Section::Lights => &LIGHT,
+        Section::Textures => &TEXTURE,
+        Section::Texels => return None,
+        Section::Nodes => &NODE,
+        Section::Triangles => &TRIANGLE,
+        Section::Normals => &NORMALS,
+        Section::Uvs => &UVS,
+        Section::Ellipsoids => &ELLIPSOID,
+        Section::Boxes => &BOX,
+        Section::BlobGroups => &BLOB_GROUP,
+        Section::Balls => &BALL,
+        Section::Rects => &RECT,
+    })
+}
+
+/// Why a scene can't be expressed in Q16.16.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FixedError {
+    /// The input is not a valid f32 SceneImage.
+    Image(ImageError),
+    /// The scene has no finite extent to scale (empty or non-finite coordinates).
+    NoExtent,
+    /// A value doesn't fit the format even after scaling.
+    OutOfRange {
+        section: Section,
+        record: u32,
+        word: u32,
+        value: f64,
+    },
+    /// A feature is too small for the format at the scale the scene's extent allows.
+    DetailBelowPrecision {
+        section: Section,
+        record: u32,
+        /// The feature's size in steps of the format after scaling.
+        steps: f64,
+    },
+}
+
+impl fmt::Display for FixedError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            FixedError::Image(e) => write!(f, "{e}"),
+            FixedError::NoExtent => write!(f, "the scene has no finite extent to scale"),
+            FixedError::OutOfRange {
+                section,
+                record,
+                word,
+                value,
+            } => write!(
+                f,
+                "{} record {record}, word {word}: {value} does not fit Q16.16 (|x| < 32768) \
+                 at this scene's scale",
+                section.name()
+            ),
+            FixedError::DetailBelowPrecision {
+                section,
+                record,
+                steps,
+            } => write!(
+                f,
+                "{} record {record} is {steps:.1} steps of Q16.16 across at the scale the \
+                 scene's extent allows (at least {MIN_DETAIL_STEPS} needed): the scene spans \
+                 more orders of magnitude than the fixed-point format holds",
+                section.name()
+            ),
+        }
+    }
+}
+
+impl std::error::Error for FixedError {}
+
+impl From<ImageError> for FixedError {
+    fn from(e: ImageError) -> Self {
+        FixedError::Image(e)
+    }
+}
+
+/// A converted image and the scale chosen for it.
+#[derive(Clone, Debug)]
+pub struct FixedImage {
+    pub bytes: Vec<u8>,
+    /// Lengths were multiplied by 2^scale_exponent.
+    pub scale_exponent: i8,
+    /// Largest view-space coordinate of the scene (before scaling).
+    pub extent: f64,
+    /// The smallest feature the check measured, in steps of the format after scaling.
+    pub min_detail_steps: f64,
+}
+
+fn word_f32(b: &[u8], at: usize) -> f64 {
+    f32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]) as f64
+}
+
+/// The power of two that brings `extent` closest to [`TARGET_EXTENT`] from below.
+pub fn scale_exponent_for(extent: f64) -> Option<i8> {
+    if !(extent.is_finite() && extent > 0.0) {
+        return None;
+    }
+    let k = (TARGET_EXTENT / extent).log2().floor();
+    Some(k.clamp(-100.0, 100.0) as i8)
+}
+
+/// Rewrite an f32 SceneImage as Q16.16, choosing the scale from the scene's extent.
+pub fn to_fixed(image: &[u8]) -> Result<FixedImage, FixedError> {
+    let view = SceneView::new(image)?;
+    if view.storage() != Storage::F32 {
+        return Err(FixedError::Image(ImageError::UnsupportedFormat {
+            found: view.storage() as u8,
+        }));
+    }
+    // Extent: every length-valued word (coordinates, box corners, axes, radii).
+    let mut extent: f64 = 0.0;
+    for s in Section::ALL {
+        let Some(words) = layout(s) else { continue };
+        for r in 0..view.count(s) {
+            let base = record_offset(image, s, r);
+            for (w, kind) in words.iter().enumerate() {
+                if matches!(kind, L | Lo | Hi) {
+                    let v = word_f32(image, base + 4 * w);
+                    if !v.is_finite() {
+                        return Err(FixedError::NoExtent);
+                    }
+                    extent = extent.max(v.abs());
+                }
+            }
+        }
+    }
+    let k = scale_exponent_for(extent).ok_or(FixedError::NoExtent)?;
+    convert(image, &view, k, extent)
+}
+
+/// Rewrite with a given scale exponent (tests use it to probe the format's edges).
+pub fn to_fixed_with_scale(image: &[u8], k: i8) -> Result<FixedImage, FixedError> {
+    let view = SceneView::new(image)?;
+    convert(image, &view, k, f64::NAN)
+}
+
+/// 2^j for the frame's direction components: with x0 and dx stored as plain Q16.16, a
+/// pixel step of 0.002 would be rounded by 0.4% and the last column's ray bent by a pixel.
+fn direction_scale(image: &[u8], view: &SceneView<'_>) -> f64 {
+    let f = view.frame::<f32>();
+    let base = record_offset(image, Section::Frame, 0);
+    let w = |i: usize| word_f32(image, base + 4 * i);
+    let (x0, y0, dx, dy, dz) = (w(2), w(3), w(4), w(5), w(14));
+    let m = [
+        x0,
+        y0,
+        dz,
+        x0 + dx * f.width as f64,
+        y0 - dy * f.height as f64,
+    ]
+    .iter()
+    .fold(0f64, |m, v| m.max(v.abs()));
+    if m.is_finite() && m > 0.0 {
+        2f64.powi((TARGET_DIRECTION / m).log2().floor().clamp(-60.0, 60.0) as i32)
+    } else {
+        1.0
+    }
+}
+
+/// The same f32 image with every length multiplied by 2^k (exact in binary floating point).
+/// The tracer is meant to be scale-free, so a render of it must match the original's:
+/// the fixed-point conversion relies on that, and tests check it.
+pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
+    let view = SceneView::new(image)?;
+    let scale = 2f64.powi(k as i32);
+    let mut out = image.to_vec();
+    for s in Section::ALL {
+        let Some(words) = layout(s) else { continue };
+        for r in 0..view.count(s) {
+            let base = record_offset(image, s, r);
+            let falloff = is_falloff_light(image, s, base);
+            for (w, kind) in words.iter().enumerate() {
+                let at = base + 4 * w;
+                let v = word_f32(image, at);
+                let x = match kind {
+                    L | Lo | Hi => v * scale,
+                    I => v / scale,
+                    C if falloff => v * scale * scale,
+                    _ => continue,
+                };
+                out[at..at + 4].copy_from_slice(&(x as f32).to_le_bytes());
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Diagnostic: the f32 image with only the chosen kinds of words rounded to the Q16.16 grid
+/// they would have at scale 2^k (`kinds` holds letters: `L` lengths incl. box corners, `I`
+/// inverse lengths, `P` scale-free scalars, `D` primary directions, `C` light colours), so
+/// an f64 render shows which stored quantity limits the fixed-point backend's accuracy.
+pub fn quantize_in_f32(image: &[u8], k: i8, kinds: &str) -> Result<Vec<u8>, FixedError> {
+    let view = SceneView::new(image)?;
+    let fixed = to_fixed_with_scale(image, k)?;
+    let scale = 2f64.powi(k as i32);
+    let dir_scale = direction_scale(image, &view);
+    let mut out = image.to_vec();
+    for s in Section::ALL {
+        let Some(words) = layout(s) else { continue };
+        for r in 0..view.count(s) {
+            let base = record_offset(image, s, r);
+            let falloff = is_falloff_light(image, s, base);
+            for (w, kind) in words.iter().enumerate() {
+                let letter = match kind {
+                    U => continue,
+                    L | Lo | Hi => 'L',
+                    I => 'I',
+                    P => 'P',
+                    D => 'D',
+                    C => 'C',
+                };
+                if !kinds.contains(letter) {
+                    continue;
+                }
+                let at = base + 4 * w;
+                let q = i32::from_le_bytes([
+                    fixed.bytes[at],
+                    fixed.bytes[at + 1],
+                    fixed.bytes[at + 2],
+                    fixed.bytes[at + 3],
+                ]) as f64
+                    / 65536.0;
+                let v = match kind {
+                    L | Lo | Hi => q / scale,
+                    I => q * scale,
+                    D => q / dir_scale,
+                    C if falloff => q / (scale * scale),
+                    _ => q,
+                };
+                out[at..at + 4].copy_from_slice(&(v as f32).to_le_bytes());
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// A point light whose colour falls off with distance squared.
+fn is_falloff_light(image: &[u8], s: Section, base: usize) -> bool {
+    let u = |w: usize| {
+        let at = base + 4 * w;
+        u32::from_le_bytes([image[at], image[at + 1], image[at + 2], image[at + 3]])
+    };
+    s == Section::Lights && u(0) == 1 && u(13) != 0
+}
+
+fn record_offset(image: &[u8], s: Section, r: u32) -> usize {
+    let t = 16 + 8 * s as usize;
+    let off = u32::from_le_bytes([image[t], image[t + 1], image[t + 2], image[t + 3]]);
+    off as usize + r as usize * s.record_size()
+}
+
+fn convert(
+    image: &[u8],
+    view: &SceneView<'_>,
+    k: i8,
+    extent: f64,
+) -> Result<FixedImage, FixedError> {
+    let scale = 2f64.powi(k as i32);
+    let dir_scale = direction_scale(image, view);
+    let mut out = image.to_vec();
+    out[6] = Storage::Q16_16 as u8;
+    out[7] = k as u8;
+    let one = (1u64 << FRAC_BITS) as f64;
+    let mut min_detail = f64::INFINITY;
+    for s in Section::ALL {
+        let Some(words) = layout(s) else { continue };
+        for r in 0..view.count(s) {
+            let base = record_offset(image, s, r);
+            let falloff_light = is_falloff_light(image, s, base);
+            for (w, kind) in words.iter().enumerate() {
+                let at = base + 4 * w;
+                let v = word_f32(image, at);
+                let x = match kind {
+                    U => continue,
+                    P => v,
+                    L | Lo | Hi => v * scale,
+                    I => v / scale,
+                    C if falloff_light => v * scale * scale,
+                    C => v,
+                    D => v * dir_scale,
+                };
+                let steps = x * one;
+                let raw = match kind {
+                    Lo => steps.floor(),
+                    Hi => steps.ceil(),
+                    _ => steps.round(),
+                };
+                if !raw.is_finite() || raw.abs() > (i32::MAX - 1) as f64 {
+                    return Err(FixedError::OutOfRange {
+                        section: s,
+                        record: r,
+                        word: w as u32,
+                        value: if x.is_finite() { x } else { v },
+                    });
+                }
+                out[at..at + 4].copy_from_slice(&(raw as i32).to_le_bytes());
+            }
+            // Detail: the smallest axis of an ellipsoid or box (1 / largest row of its
+            // view-to-unit matrix) and a ball's radius, in steps after scaling.
+            let detail = match s {
+                Section::Ellipsoids | Section::Boxes => {
+                    let mut worst: f64 = 0.0;
+                    for row in 0..3 {
+                        let n2: f64 = (0..3)
+                            .map(|c| word_f32(image, base + 4 * (3 + 3 * row + c)).powi(2))
+                            .sum();
+                        worst = worst.max(n2.sqrt());
+                    }
+                    Some(scale / worst * one)
+                }
+                Section::Balls => Some(word_f32(image, base + 12).abs() * scale * one),
+                _ => None,
+            };
+            if let Some(steps) = detail {
+                min_detail = min_detail.min(steps);
+                if steps.is_nan() || steps < MIN_DETAIL_STEPS {
+                    return Err(FixedError::DetailBelowPrecision {
+                        section: s,
+                        record: r,
+                        steps,
+                    });
+                }
+            }
+        }
+    }
+    debug_assert!(out.len() >= HEADER_SIZE);
+    Ok(FixedImage {
+        bytes: out,
+        scale_exponent: k,
+        extent,
+        min_detail_steps: min_detail,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scale_fits_the_extent_with_most_precision() {
+        assert_eq!(scale_exponent_for(32.0), Some(0));
+        assert_eq!(scale_exponent_for(31.9), Some(0));
+        assert_eq!(scale_exponent_for(16.0), Some(1));
+        assert_eq!(scale_exponent_for(10.0), Some(1));
+        assert_eq!(scale_exponent_for(33.0), Some(-1));
+        assert_eq!(scale_exponent_for(1000.0), Some(-5));
+        assert_eq!(scale_exponent_for(0.001), Some(14));
+        assert_eq!(scale_exponent_for(0.0), None);
+        assert_eq!(scale_exponent_for(f64::INFINITY), None);
+    }
+
+    #[test]
+    fn layouts_cover_whole_records() {
+        for s in Section::ALL {
+            if let Some(words) = layout(s) {
+                assert_eq!(words.len() * 4, s.record_size(), "{}", s.name());
+            }
+        }
+    }
+}
