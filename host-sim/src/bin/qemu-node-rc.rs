@@ -6,8 +6,10 @@
 
 use clap::Parser;
 use links_core::dm::{compile, CompileOptions};
+use links_core::wire::{self, Down};
 use links_host::qemu_node::{
-    check_outcome, compare_transcripts, run_rc, simulated_frame, LocalNode, QemuNode, RcOutcome,
+    check_outcome, compare_transcripts, run_rc, simulated_frame, Event, LocalNode, QemuNode,
+    RcOutcome,
 };
 use links_host::scene_file::load_scene;
 use std::fs::{self, File, OpenOptions};
@@ -102,6 +104,15 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
     // in open() for ever), fails the run loudly.
     let watchdog = {
         let (child, done, err) = (child.clone(), done.clone(), err.clone());
+        // A work directory of our own making goes with us.
+        let scratch = a.work.is_none().then(|| work.to_path_buf());
+        let leave = move |msg: String| -> ! {
+            eprintln!("qemu-node-rc: error: {msg}");
+            if let Some(d) = &scratch {
+                let _ = fs::remove_dir_all(d);
+            }
+            std::process::exit(1)
+        };
         let limit = Duration::from_secs(a.timeout_s);
         std::thread::spawn(move || loop {
             std::thread::sleep(Duration::from_millis(50));
@@ -111,23 +122,22 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
             let mut c = child.lock().unwrap_or_else(|p| p.into_inner());
             if started.elapsed() > limit {
                 let _ = c.kill();
-                eprintln!(
-                    "qemu-node-rc: error: QEMU timed out after {} s (the node loop did not finish)\n{}",
+                let _ = c.wait();
+                leave(format!(
+                    "QEMU timed out after {} s (the node loop did not finish)\n{}",
                     limit.as_secs(),
                     tail(&err)
-                );
-                std::process::exit(1);
+                ));
             }
             if let Ok(Some(status)) = c.try_wait() {
                 // Give the RC a moment to read what QEMU wrote before it exited.
                 drop(c);
                 std::thread::sleep(Duration::from_secs(2));
                 if !done.load(Ordering::SeqCst) {
-                    eprintln!(
-                        "qemu-node-rc: error: QEMU exited ({status}) before the run ended\n{}",
+                    leave(format!(
+                        "QEMU exited ({status}) before the run ended\n{}",
                         tail(&err)
-                    );
-                    std::process::exit(1);
+                    ));
                 }
                 return;
             }
@@ -169,6 +179,28 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
     Ok((outcome, wall))
 }
 
+/// `Work` replies the node received once its scene was complete (each makes it validate the
+/// scene to check the jobs against the screen).
+fn work_after_scene(o: &RcOutcome) -> u64 {
+    let mut complete = false;
+    let mut n = 0;
+    for e in &o.transcript {
+        if let Event::Down { exchanged, frame } = e {
+            match wire::decode::<Down>(frame).map(|env| env.msg) {
+                Ok(Down::Scene {
+                    offset,
+                    total,
+                    data,
+                    ..
+                }) if offset as usize + data.len() == total as usize => complete = true,
+                Ok(Down::Work { .. }) if *exchanged && complete => n += 1,
+                _ => {}
+            }
+        }
+    }
+    n
+}
+
 fn run(a: Args) -> Result<(), String> {
     let desc = load_scene(&a.scene).map_err(|e| e.to_string())?;
     let opts = CompileOptions {
@@ -193,11 +225,26 @@ fn run(a: Args) -> Result<(), String> {
     let work = a.work.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!("links-qemu-node-{}", std::process::id()))
     });
+    let r = qemu_runs(&a, &image, &want, &host, &work);
+    if a.work.is_none() {
+        let _ = fs::remove_dir_all(&work);
+    }
+    r
+}
+
+/// The QEMU runs, each checked against the simulator's frame and the host node's run.
+fn qemu_runs(
+    a: &Args,
+    image: &[u8],
+    want: &[u8],
+    host: &RcOutcome,
+    work: &Path,
+) -> Result<(), String> {
     let mut first: Option<Vec<(String, u64)>> = None;
     for run in 1..=a.runs.max(1) {
-        let (q, wall) = qemu_run(&a, &image, &work)?;
-        check_outcome(&q, &want).map_err(|e| format!("QEMU node, run {run}: {e}"))?;
-        compare_transcripts(&q, &host).map_err(|e| format!("QEMU node, run {run}: {e}"))?;
+        let (q, wall) = qemu_run(a, image, work)?;
+        check_outcome(&q, want).map_err(|e| format!("QEMU node, run {run}: {e}"))?;
+        compare_transcripts(&q, host).map_err(|e| format!("QEMU node, run {run}: {e}"))?;
         let c = &q.end.counters;
         match &first {
             None => first = Some(c.clone()),
@@ -241,6 +288,25 @@ fn run(a: Args) -> Result<(), String> {
             total / pixels,
             (protocol + link) / pixels
         );
+        // Where the protocol instructions go, from unit costs the firmware measured after the
+        // loop (estimates: counts x unit costs).
+        let (validate, crc, scene_bytes) = (
+            get("unit_validate")?,
+            get("unit_scene_crc")?,
+            get("scene_bytes")?.max(1),
+        );
+        let validations = get("render_calls")? + work_after_scene(&q) + 1;
+        let crc_bytes = get("bytes_in")? + get("bytes_out")? + scene_bytes;
+        let v_est = validations * validate;
+        let c_est = crc_bytes * crc / scene_bytes;
+        println!(
+            "  of the protocol work, about: scene validation {v_est} ({:.1}%: SceneView::new of the {scene_bytes}-byte scene, {validate} instructions, {validations} times: once per run rendered, once per Work reply, once on arrival); CRC-32 {c_est} ({:.1}%: {crc_bytes} bytes at {:.1} per byte); the rest {} ({:.1}%: postcard, RLE, chunk copies, bookkeeping)",
+            pct(v_est),
+            pct(c_est),
+            crc as f64 / scene_bytes as f64,
+            protocol.saturating_sub(v_est + c_est),
+            pct(protocol.saturating_sub(v_est + c_est))
+        );
         println!("  QEMU wall time {wall:.2} s");
         println!(
             "RESULT scene={} w={} h={} pixels={pixels} transfers={} instr_total={total} instr_render={render} instr_protocol={protocol} instr_link={link} {}",
@@ -254,9 +320,6 @@ fn run(a: Args) -> Result<(), String> {
                 .collect::<Vec<_>>()
                 .join(" ")
         );
-    }
-    if a.work.is_none() {
-        let _ = fs::remove_dir_all(&work);
     }
     Ok(())
 }
