@@ -24,6 +24,7 @@
 #![no_main]
 
 use core::fmt::Write as _;
+use core::hint::black_box;
 use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m::peripheral::SYST;
@@ -33,7 +34,7 @@ use links_core::image::SceneView;
 use links_core::link::{Incoming, LinkError, NodeLink};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
 use links_core::render::{RenderError, Rgb8, Stats};
-use links_core::wire::{MAX_FRAME, MAX_SCENE};
+use links_core::wire::{CRC32, MAX_FRAME, MAX_SCENE};
 
 /// QEMU mps2: SysTick counts the 25 MHz clock; with `-icount shift=0` one instruction takes
 /// 1 ns, so one tick is 40 instructions.
@@ -293,13 +294,27 @@ fn main() -> ! {
     ));
     let total = (ticks() - t0) * INSTR_PER_TICK;
 
+    // Unit costs behind the loop's protocol work, measured on the scene now in bank 0 (its
+    // length is in its header): one validation (`SceneView::new`, which `run_node` does
+    // before every run it renders and on every `Work` reply) and one CRC-32 over the scene
+    // (which every frame's check costs per byte).
+    let len = u32::from_le_bytes([b0[8], b0[9], b0[10], b0[11]]).min(MAX_SCENE as u32) as usize;
+    let t1 = ticks();
+    let valid = black_box(SceneView::new(black_box(&b0[..len]))).is_ok();
+    let t2 = ticks();
+    black_box(CRC32.checksum(black_box(&b0[..len])));
+    let t3 = ticks();
+    let empty = ticks() - t3;
+    let validate = (t2 - t1).saturating_sub(empty) * INSTR_PER_TICK;
+    let scene_crc = (t3 - t2).saturating_sub(empty) * INSTR_PER_TICK;
+
     let mut t = Text {
         buf: [0; 2048],
         len: 0,
     };
     let _ = write!(
         t,
-        "instr_total={} instr_render={} instr_link={} render_calls={} records_in={} records_out={} bytes_in={} bytes_out={}\nresult={:?}\nreport={:?}",
+        "instr_total={} instr_render={} instr_link={} render_calls={} records_in={} records_out={} bytes_in={} bytes_out={} scene_bytes={} scene_valid={} unit_validate={} unit_scene_crc={}\nresult={:?}\nreport={:?}",
         total,
         renderer.instr,
         link.instr,
@@ -308,6 +323,10 @@ fn main() -> ! {
         link.records_out,
         link.bytes_in,
         link.bytes_out,
+        len,
+        valid as u8,
+        validate,
+        scene_crc,
         result,
         report
     );
