@@ -100,10 +100,11 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
         .map_err(|e| format!("cannot start {}: {e}", a.qemu))?;
     let child = Arc::new(Mutex::new(child));
     let done = Arc::new(AtomicBool::new(false));
+    let opened = Arc::new(AtomicBool::new(false));
     // The watchdog: a QEMU that hangs, or dies before opening the link (the RC would block
     // in open() for ever), fails the run loudly.
     let watchdog = {
-        let (child, done, err) = (child.clone(), done.clone(), err.clone());
+        let (child, done, opened, err) = (child.clone(), done.clone(), opened.clone(), err.clone());
         // A work directory of our own making goes with us.
         let scratch = a.work.is_none().then(|| work.to_path_buf());
         let leave = move |msg: String| -> ! {
@@ -130,10 +131,15 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
                 ));
             }
             if let Ok(Some(status)) = c.try_wait() {
-                // Give the RC a moment to read what QEMU wrote before it exited.
+                // Once the link is open the RC sees QEMU's end itself (end of file); before
+                // that it would wait in open() for ever. (A grace period: the opens may be
+                // just finishing.)
                 drop(c);
-                std::thread::sleep(Duration::from_secs(2));
-                if !done.load(Ordering::SeqCst) {
+                let t = Instant::now();
+                while !opened.load(Ordering::SeqCst) && t.elapsed() < Duration::from_secs(2) {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                if !opened.load(Ordering::SeqCst) {
                     leave(format!(
                         "QEMU exited ({status}) before the run ended\n{}",
                         tail(&err)
@@ -150,6 +156,7 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
             .open(&down)
             .map_err(|e| format!("{}: {e}", down.display()))?;
         let up = File::open(&up).map_err(|e| format!("{}: {e}", up.display()))?;
+        opened.store(true, Ordering::SeqCst);
         run_rc(image, QemuNode::new(BufReader::new(up), down))
     })();
     let status = loop {
