@@ -363,9 +363,13 @@ pub fn simulated_frame(image: &[u8]) -> Result<Vec<u8>, String> {
 }
 
 /// Every check of one run against the expected frame; the first failure, or Ok.
-pub fn check_outcome(o: &RcOutcome, want: &[u8]) -> Result<(), String> {
+/// `corrupted`: RC -> NC frames damaged on purpose ([`Corrupt`]): the node must count
+/// exactly these as bad, and the RC may then see re-sent duplicates (a lost acknowledgement),
+/// nothing else.
+pub fn check_outcome(o: &RcOutcome, want: &[u8], corrupted: u32) -> Result<(), String> {
     let r = &o.root;
-    if r.bad_frames > 0 || r.rejected > 0 || r.out_of_order > 0 {
+    let dup = if corrupted == 0 { r.out_of_order } else { 0 };
+    if r.bad_frames > 0 || r.rejected > 0 || dup > 0 {
         return Err(format!(
             "the RC could not use every node frame: {} failed CRC/decoding, {} rejected, {} out of order",
             r.bad_frames, r.rejected, r.out_of_order
@@ -374,10 +378,10 @@ pub fn check_outcome(o: &RcOutcome, want: &[u8]) -> Result<(), String> {
     if o.end.result != "Ok(())" {
         return Err(format!("the node loop failed: {}", o.end.result));
     }
-    for bad in ["bad_frames: 0", "bad_jobs: 0"] {
-        if !o.end.report.contains(bad) {
+    for want in [format!("bad_frames: {corrupted},"), "bad_jobs: 0,".into()] {
+        if !o.end.report.contains(&want) {
             return Err(format!(
-                "the node counted bad input (want {bad}): {}",
+                "the node's count of bad input is wrong (want {want}): {}",
                 o.end.report
             ));
         }
@@ -421,13 +425,51 @@ pub fn check_outcome(o: &RcOutcome, want: &[u8]) -> Result<(), String> {
 fn describe(e: &Event) -> String {
     match e {
         Event::Up(f) => match wire::decode::<Up>(f) {
-            Ok(env) => format!("NC -> RC {} bytes: {:?}", f.len(), env),
+            Ok(env) => {
+                let msg = match env.msg {
+                    Up::Pixels {
+                        job, y, x, rgb, done, ..
+                    } => format!("Pixels {{ job: {job}, y: {y}, x: {x}, {} pixels, done: {done} }}", rgb.len() / 3),
+                    Up::PixelsRle {
+                        job, y, x, len, data, done, ..
+                    } => format!(
+                        "PixelsRle {{ job: {job}, y: {y}, x: {x}, {len} pixels in {} bytes, done: {done} }}",
+                        data.len()
+                    ),
+                    m => format!("{m:?}"),
+                };
+                format!(
+                    "NC -> RC {} bytes, seq {} ack {}: {msg}",
+                    f.len(),
+                    env.seq,
+                    env.ack
+                )
+            }
             Err(err) => format!("NC -> RC {} bytes: {err}", f.len()),
         },
         Event::Down { exchanged, frame } => {
             let how = if *exchanged { "exchange" } else { "broadcast" };
             match wire::decode::<Down>(frame) {
-                Ok(env) => format!("RC -> NC {how} {} bytes: {:?}", frame.len(), env.msg),
+                Ok(env) => {
+                    let msg = match env.msg {
+                        Down::Scene {
+                            frame: f,
+                            offset,
+                            total,
+                            data,
+                            ..
+                        } => format!(
+                            "Scene {{ frame: {f}, offset: {offset}, total: {total}, {} bytes }}",
+                            data.len()
+                        ),
+                        m => format!("{m:?}"),
+                    };
+                    format!(
+                        "RC -> NC {how} {} bytes, ack {}: {msg}",
+                        frame.len(),
+                        env.ack
+                    )
+                }
                 Err(err) => format!("RC -> NC {how} {} bytes: {err}", frame.len()),
             }
         }
@@ -455,6 +497,52 @@ pub fn compare_transcripts(got: &RcOutcome, want: &RcOutcome) -> Result<(), Stri
         ));
     }
     Ok(())
+}
+
+/// A node whose link damages some of the RC's frames on the way in: one bit flipped in the
+/// middle of deliveries number `at` (0-based, broadcasts and exchange replies counted
+/// together), as a bus error would. The transcript keeps what the RC sent.
+pub struct Corrupt<N> {
+    pub inner: N,
+    pub at: Vec<usize>,
+    delivered: usize,
+    /// What each damaged frame was, in order.
+    pub hits: Vec<String>,
+}
+
+impl<N> Corrupt<N> {
+    pub fn new(inner: N, at: Vec<usize>) -> Self {
+        Self {
+            inner,
+            at,
+            delivered: 0,
+            hits: Vec::new(),
+        }
+    }
+}
+
+impl<N: NodeSide> NodeSide for Corrupt<N> {
+    fn settle(&mut self) -> Result<Settled, String> {
+        self.inner.settle()
+    }
+
+    fn deliver(&mut self, exchanged: bool, frame: &[u8]) -> Result<(), String> {
+        let i = self.delivered;
+        self.delivered += 1;
+        if !self.at.contains(&i) || frame.is_empty() {
+            return self.inner.deliver(exchanged, frame);
+        }
+        self.hits.push(format!(
+            "delivery {i}: {}",
+            describe(&Event::Down {
+                exchanged,
+                frame: frame.to_vec()
+            })
+        ));
+        let mut bad = frame.to_vec();
+        bad[frame.len() / 2] ^= 0x10;
+        self.inner.deliver(exchanged, &bad)
+    }
 }
 
 // --- the host's node ------------------------------------------------------------------------
@@ -717,7 +805,7 @@ mod tests {
         let img = image("photo1.ron", 24, 20);
         let want = simulated_frame(&img).unwrap();
         let a = run_rc(&img, LocalNode::new()).unwrap();
-        check_outcome(&a, &want).unwrap();
+        check_outcome(&a, &want, 0).unwrap();
         assert_eq!(a.root.pixels, 24 * 20);
         // The scene went out chunk by chunk, each once, and the last broadcast is the Stop.
         let bcasts: Vec<Down> = a
@@ -809,15 +897,15 @@ mod tests {
             f: flip_pixel,
         };
         let bad = run_rc(&img, node).unwrap();
-        let e = check_outcome(&bad, &want).unwrap_err();
+        let e = check_outcome(&bad, &want, 0).unwrap_err();
         assert!(e.contains("of 480 pixels differ"), "{e}");
         let e = compare_transcripts(&bad, &good).unwrap_err();
         assert!(e.contains("differs from the host node's"), "{e}");
         // And the RC's frame alone, one byte changed, fails too.
         let mut o = good.clone();
         o.frame[3 * 100 + 2] ^= 0x80;
-        assert!(check_outcome(&o, &want).is_err());
-        check_outcome(&good, &want).unwrap();
+        assert!(check_outcome(&o, &want, 0).is_err());
+        check_outcome(&good, &want, 0).unwrap();
     }
 
     #[test]
@@ -838,8 +926,29 @@ mod tests {
         // frame is counted and the check fails.
         let o = run_rc(&img, node).unwrap();
         assert_eq!(o.root.bad_frames, 1);
-        let e = check_outcome(&o, &want).unwrap_err();
+        let e = check_outcome(&o, &want, 0).unwrap_err();
         assert!(e.contains("1 failed CRC"), "{e}");
+    }
+
+    #[test]
+    fn damaged_rc_frames_are_counted_repaired_and_change_no_pixel() {
+        let img = image("photo1.ron", 24, 20);
+        let want = simulated_frame(&img).unwrap();
+        let good = run_rc(&img, LocalNode::new()).unwrap();
+        let downs = good
+            .transcript
+            .iter()
+            .filter(|e| matches!(e, Event::Down { .. }))
+            .count();
+        // A scene chunk, and a frame late in the run (an exchange reply: the repair only
+        // adds deliveries, so it exists).
+        let node = Corrupt::new(LocalNode::new(), vec![3, downs - 10]);
+        let o = run_rc(&img, node).unwrap();
+        check_outcome(&o, &want, 2).unwrap();
+        // The lost chunk came back as a repair; the count must match exactly.
+        assert!(o.root.repairs >= 1, "{:?}", o.root);
+        assert!(check_outcome(&o, &want, 1).is_err());
+        assert!(check_outcome(&o, &want, 0).is_err());
     }
 
     #[test]

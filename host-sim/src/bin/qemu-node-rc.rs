@@ -8,8 +8,8 @@ use clap::Parser;
 use links_core::dm::{compile, CompileOptions};
 use links_core::wire::{self, Down};
 use links_host::qemu_node::{
-    check_outcome, compare_transcripts, run_rc, simulated_frame, Event, LocalNode, QemuNode,
-    RcOutcome,
+    check_outcome, compare_transcripts, run_rc, simulated_frame, Corrupt, Event, LocalNode,
+    QemuNode, RcOutcome,
 };
 use links_host::scene_file::load_scene;
 use std::fs::{self, File, OpenOptions};
@@ -45,6 +45,11 @@ struct Args {
     work: Option<PathBuf>,
     #[arg(long, default_value = "qemu-system-arm")]
     qemu: String,
+    /// Flip one bit in these RC -> NC frames (0-based delivery numbers, comma-separated), on
+    /// the way into both the host node and the QEMU node: each must count exactly these as
+    /// bad frames, recover, and still return the simulator's pixels
+    #[arg(long, value_delimiter = ',')]
+    corrupt_down: Vec<usize>,
 }
 
 fn main() -> ExitCode {
@@ -157,7 +162,8 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
             .map_err(|e| format!("{}: {e}", down.display()))?;
         let up = File::open(&up).map_err(|e| format!("{}: {e}", up.display()))?;
         opened.store(true, Ordering::SeqCst);
-        run_rc(image, QemuNode::new(BufReader::new(up), down))
+        let node = QemuNode::new(BufReader::new(up), down);
+        run_rc(image, Corrupt::new(node, a.corrupt_down.clone()))
     })();
     let status = loop {
         let mut c = child.lock().unwrap_or_else(|p| p.into_inner());
@@ -222,8 +228,27 @@ fn run(a: Args) -> Result<(), String> {
     println!("qemu-node: {name}, SceneImage {} bytes", image.len());
 
     let want = simulated_frame(&image)?;
-    let host = run_rc(&image, LocalNode::new()).map_err(|e| format!("host node: {e}"))?;
-    check_outcome(&host, &want).map_err(|e| format!("host node: {e}"))?;
+    let host = run_rc(
+        &image,
+        Corrupt::new(LocalNode::new(), a.corrupt_down.clone()),
+    )
+    .map_err(|e| format!("host node: {e}"))?;
+    let downs: Vec<&Event> = host
+        .transcript
+        .iter()
+        .filter(|e| matches!(e, Event::Down { .. }))
+        .collect();
+    for &i in &a.corrupt_down {
+        let e = downs.get(i).ok_or_else(|| {
+            format!(
+                "--corrupt-down {i}: the run has only {} RC -> NC frames",
+                downs.len()
+            )
+        })?;
+        println!("  damaging RC -> NC frame {i} (one bit): {e}");
+    }
+    let corrupted = a.corrupt_down.len() as u32;
+    check_outcome(&host, &want, corrupted).map_err(|e| format!("host node: {e}"))?;
     println!(
         "  host node (run_node on the host) under the lock-step RC: {} transfers; frame equals the simulator's single-node render",
         host.transcript.len()
@@ -232,7 +257,7 @@ fn run(a: Args) -> Result<(), String> {
     let work = a.work.clone().unwrap_or_else(|| {
         std::env::temp_dir().join(format!("links-qemu-node-{}", std::process::id()))
     });
-    let r = qemu_runs(&a, &image, &want, &host, &work);
+    let r = qemu_runs(&a, &image, &want, &host, &work, corrupted);
     if a.work.is_none() {
         let _ = fs::remove_dir_all(&work);
     }
@@ -246,11 +271,12 @@ fn qemu_runs(
     want: &[u8],
     host: &RcOutcome,
     work: &Path,
+    corrupted: u32,
 ) -> Result<(), String> {
     let mut first: Option<Vec<(String, u64)>> = None;
     for run in 1..=a.runs.max(1) {
         let (q, wall) = qemu_run(a, image, work)?;
-        check_outcome(&q, want).map_err(|e| format!("QEMU node, run {run}: {e}"))?;
+        check_outcome(&q, want, corrupted).map_err(|e| format!("QEMU node, run {run}: {e}"))?;
         compare_transcripts(&q, host).map_err(|e| format!("QEMU node, run {run}: {e}"))?;
         let c = &q.end.counters;
         match &first {
@@ -284,8 +310,8 @@ fn qemu_runs(
             pixels
         );
         println!(
-            "  RC: {} exchanges, {} broadcasts, {} jobs, {} frames accepted, {} polls",
-            r.exchanges, r.broadcasts, r.jobs, r.accepted, r.polls
+            "  RC: {} exchanges, {} broadcasts, {} jobs, {} frames accepted, {} polls, {} scene chunks repaired, {} duplicates dropped; node: {} damaged frames counted",
+            r.exchanges, r.broadcasts, r.jobs, r.accepted, r.polls, r.repairs, r.out_of_order, corrupted
         );
         println!(
             "  node loop: {total} instructions = render {render} ({:.1}%) + protocol {protocol} ({:.1}%) + link I/O {link} ({:.1}%); {} per pixel, {} of them outside rendering",
