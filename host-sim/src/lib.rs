@@ -8,4 +8,5 @@ pub mod cluster;
 pub mod cost;
 pub mod frame;
 pub mod gen;
+pub mod qemu_node;
 pub mod scene_file;
