@@ -34,6 +34,9 @@ pub fn upload_command(
         return Err("--timeout-ms must be > 0".into());
     }
     let mut p = open_port(port, baud).map_err(|e| e.to_string())?;
+    // Bytes already waiting are no answers to this upload.
+    p.clear(serialport::ClearBuffer::Input)
+        .map_err(|e| format!("serial port {port}: {e}"))?;
     let b = bar(
         quiet,
         image.len() as u64,

@@ -907,3 +907,26 @@ fn errors_display_their_cause() {
     let e: &dyn core::error::Error = &SerialError::BadCrc;
     assert!(e.to_string().contains("CRC"));
 }
+
+#[test]
+fn sizes_quoted_in_the_docs() {
+    assert_eq!((MAX_TO_RC, MAX_TO_PC), (541, 798));
+    let mut buf = [0u8; 32];
+    let n = encode_packet(0, &ToPc::Ack { offset: 512 }, &mut buf).unwrap();
+    assert_eq!(n, 12);
+    let mut body = [0u8; 16];
+    let m = cobs::decode(&buf[1..n - 1], &mut body).unwrap();
+    assert_eq!(&body[..5], &[1, 0, 0, 0x80, 0x04]);
+    assert_eq!(m, 9);
+    // A full raw run of 256 pixels (small seq and coordinates).
+    let rgb: Vec<u8> = (0..3 * MAX_RUN).map(|i| 1 + (i % 200) as u8).collect();
+    let run = ToPc::Pixels {
+        frame: 0,
+        y: 5,
+        x: 0,
+        rgb: &rgb,
+    };
+    let mut buf = [0u8; MAX_TO_PC];
+    let n = encode_packet(3, &run, &mut buf).unwrap();
+    assert!((780..=790).contains(&n), "{n}");
+}
