@@ -54,6 +54,8 @@ pub struct SimRc {
     pub corrupt_runs: Vec<usize>,
     /// Announce a wrong frame CRC (flip its lowest bit) in every `FrameEnd`.
     pub wrong_crc: bool,
+    /// Corrupt the first `FrameEnd` on the line (the PC must notice the silence).
+    pub corrupt_first_end: bool,
 }
 
 impl SimRc {
@@ -73,6 +75,7 @@ impl SimRc {
             buf: [0; MAX_TO_PC],
             corrupt_runs: Vec::new(),
             wrong_crc: false,
+            corrupt_first_end: false,
         })
     }
 
@@ -91,6 +94,10 @@ impl SimRc {
             .streamer
             .end(&mut self.enc, &mut self.buf)
             .map_err(other)?;
+        if std::mem::take(&mut self.corrupt_first_end) {
+            corrupt(&mut self.buf[..n]);
+            return out.write_all(&self.buf[..n]);
+        }
         if self.wrong_crc {
             // Re-encode the same FrameEnd with its CRC off by one bit.
             let crc = self.streamer_crc() ^ 1;

@@ -116,6 +116,34 @@ fn clean_readback_needs_no_retransmission() {
 }
 
 #[test]
+fn a_lost_frame_end_is_asked_for_after_the_silence() {
+    let (mut master, mut slave, _) = pty();
+    let rgb: Vec<u8> = (0..3 * 300 * 7).map(|i| (i % 7) as u8 * 30).collect();
+    let mut rc = SimRc::new(1, 300, 7, rgb.clone()).unwrap();
+    rc.corrupt_first_end = true;
+    rc.corrupt_runs = vec![0];
+    let rc_thread = std::thread::spawn(move || {
+        rc.stream(&mut master)?;
+        master.set_timeout(Duration::from_millis(100))?;
+        rc.answer(&mut master, Duration::from_secs(30))
+    });
+    let opts = ReadbackOptions {
+        timeout: Duration::from_millis(300),
+        ..ReadbackOptions::default()
+    };
+    let start = Instant::now();
+    let r = readback(&mut slave, "pty", &opts, &|_| {}).unwrap();
+    assert!(
+        start.elapsed() >= Duration::from_millis(300),
+        "waited for the silence"
+    );
+    assert_eq!(r.rgb, rgb);
+    // The first run and the FrameEnd were corrupted: one Resend repairs both.
+    assert_eq!((r.bad_frames, r.resends), (2, 1));
+    assert_eq!(rc_thread.join().unwrap().unwrap().resends, 1);
+}
+
+#[test]
 fn upload_over_a_pty_arrives_intact_after_a_corrupted_chunk() {
     let desc = load_scene(&scene("photo1.ron")).unwrap();
     let opts = CompileOptions {
