@@ -138,9 +138,11 @@ fn a_lost_frame_end_is_asked_for_after_the_silence() {
         "waited for the silence"
     );
     assert_eq!(r.rgb, rgb);
-    // The first run and the FrameEnd were corrupted: one Resend repairs both.
-    assert_eq!((r.bad_frames, r.resends), (2, 1));
-    assert_eq!(rc_thread.join().unwrap().unwrap().resends, 1);
+    // The first run and the FrameEnd were corrupted: a Resend after the silence repairs
+    // both (more than one only if this machine stalls the RC thread for 300 ms).
+    assert_eq!(r.bad_frames, 2);
+    assert!(r.resends >= 1);
+    assert_eq!(rc_thread.join().unwrap().unwrap().resends, r.resends);
 }
 
 #[test]
@@ -169,7 +171,7 @@ fn upload_over_a_pty_arrives_intact_after_a_corrupted_chunk() {
         .args(["upload"])
         .arg(scene("photo1.ron"))
         .args(["--width", "64", "--height", "60", "--render", "1"])
-        .args(["--port", &name])
+        .args(["--port", &name, "--timeout-ms", "5000"])
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
