@@ -11,6 +11,7 @@
 //! - `desc` and `dm` (feature `std`): the scene description and the DM scene compiler.
 //! - [`wire`], [`link`], [`sched`], [`node`], [`root`]: the cluster (bus messages, the IMSU
 //!   link traits, sub-screen scheduling, the NC and RC behaviour).
+//! - [`serial`]: the PC <-> RC serial protocol (scene upload, frame readback).
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 // The one exception: the FPU square root in `num` (inline asm).
 #![deny(unsafe_code)]
@@ -31,5 +32,6 @@ pub mod num;
 pub mod render;
 pub mod root;
 pub mod sched;
+pub mod serial;
 pub mod shape;
 pub mod wire;
