@@ -3,6 +3,7 @@
 pub mod ablation;
 pub mod ablation_doc;
 pub mod accuracy;
+pub mod chart;
 pub mod cli_cluster;
 pub mod cli_serial;
 pub mod cluster;

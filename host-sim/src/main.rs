@@ -176,6 +176,9 @@ enum Cmd {
     /// Measurement sweeps
     #[command(subcommand)]
     Sweep(SweepCmd),
+    /// Charts of measured results
+    #[command(subcommand)]
+    Chart(ChartCmd),
     /// Fit the cycle model's weights to QEMU-measured frames (scripts/qemu-bench's CSV)
     Calibrate {
         /// CSV written by scripts/qemu-bench
@@ -190,6 +193,31 @@ enum Cmd {
         /// Output directory
         #[arg(long, default_value = "scenes/assets")]
         dir: PathBuf,
+    },
+}
+
+#[derive(Subcommand)]
+enum ChartCmd {
+    /// Speed (Cortex-M instructions per pixel) against accuracy (PSNR vs f64) for every
+    /// number backend and bundled scene; writes the SVG, a PNG and a CSV beside it, and the
+    /// table in docs/numerics.md
+    Accuracy {
+        /// The SVG to write (the PNG and CSV get the same name with their extension)
+        #[arg(short, long, default_value = "docs/accuracy.svg")]
+        output: PathBuf,
+        /// Instruction counts measured by scripts/qemu-bench
+        #[arg(long, default_value = "docs/cortex-m-bench.csv")]
+        bench: PathBuf,
+        /// Directory of the bundled scenes
+        #[arg(long, default_value = "scenes")]
+        scenes: PathBuf,
+        /// Document whose generated table section to replace ("" = none)
+        #[arg(long, default_value = "docs/numerics.md")]
+        doc: PathBuf,
+        #[arg(long, default_value_t = links_host::chart::WIDTH)]
+        width: u32,
+        #[arg(long, default_value_t = links_host::chart::HEIGHT)]
+        height: u32,
     },
 }
 
@@ -481,6 +509,59 @@ fn run(cli: Cli) -> Result<(), String> {
             if !quiet {
                 eprintln!("{line}");
             }
+            Ok(())
+        }
+        Cmd::Chart(ChartCmd::Accuracy {
+            output,
+            bench,
+            scenes,
+            doc,
+            width,
+            height,
+        }) => {
+            use links_host::chart;
+            let bench_csv = std::fs::read_to_string(&bench)
+                .map_err(|e| format!("{}: {e} (run scripts/qemu-bench first)", bench.display()))?;
+            let speed = chart::parse_bench(&bench_csv).map_err(|e| e.to_string())?;
+            let images =
+                chart::bundled_images(&scenes, width, height).map_err(|e| e.to_string())?;
+            eprintln!(
+                "measuring {} backends x {} scenes at {width}x{height} against f64 ...",
+                chart::BACKENDS.len(),
+                images.len()
+            );
+            let acc = chart::measure(&images).map_err(|e| e.to_string())?;
+            let pts = chart::points(&acc, &speed);
+            chart::write(
+                &output,
+                chart::svg(&pts).map_err(|e| e.to_string())?.as_bytes(),
+            )
+            .map_err(|e| e.to_string())?;
+            let png_path = output.with_extension("png");
+            chart::write(&png_path, &chart::png(&pts).map_err(|e| e.to_string())?)
+                .map_err(|e| e.to_string())?;
+            let csv_path = output.with_extension("csv");
+            chart::write(&csv_path, chart::csv(&acc, &speed).as_bytes())
+                .map_err(|e| e.to_string())?;
+            if !doc.as_os_str().is_empty() {
+                let text =
+                    std::fs::read_to_string(&doc).map_err(|e| format!("{}: {e}", doc.display()))?;
+                let new = chart::replace_table(&text, &chart::markdown(&acc, &speed))
+                    .map_err(|e| format!("{}: {e}", doc.display()))?;
+                chart::write(&doc, new.as_bytes()).map_err(|e| e.to_string())?;
+            }
+            outln!(
+                "{} points; wrote {}, {}, {}{}",
+                pts.len(),
+                output.display(),
+                png_path.display(),
+                csv_path.display(),
+                if doc.as_os_str().is_empty() {
+                    String::new()
+                } else {
+                    format!(" and the table in {}", doc.display())
+                }
+            );
             Ok(())
         }
         Cmd::Sweep(SweepCmd::Ablation {

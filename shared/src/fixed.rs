@@ -360,6 +360,24 @@ impl Real for Fx {
     const ABSOLUTE_ROUNDING: bool = true;
 
     #[inline]
+    fn dot3(a: [Fx; 3], b: [Fx; 3]) -> Fx {
+        if a[0].special()
+            || a[1].special()
+            || a[2].special()
+            || b[0].special()
+            || b[1].special()
+            || b[2].special()
+        {
+            return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        }
+        // Three exact 62-bit products fit an i64 sum; one rounding at the end.
+        let p = a[0].0 as i64 * b[0].0 as i64
+            + a[1].0 as i64 * b[1].0 as i64
+            + a[2].0 as i64 * b[2].0 as i64;
+        Fx::from_wide((p + (1 << (FRAC_BITS - 1))) >> FRAC_BITS)
+    }
+
+    #[inline]
     fn unit_scale(m: Fx) -> Fx {
         if m.0 <= 0 || m.special() {
             return Fx::ONE;
@@ -622,6 +640,23 @@ mod tests {
         assert!(worst_atan2 < 1e-4, "atan2 {worst_atan2}");
         assert!(worst_acos < 2e-3, "acos {worst_acos}");
         assert_eq!(fx(2.0).powf(fx(3.0)).to_f64(), 8.0);
+    }
+
+    #[test]
+    fn dot3_rounds_once_and_overflows_to_infinity() {
+        let third = Fx::from_raw(21_845); // ~1/3
+        let a = [third; 3];
+        let b = [Fx::from_raw(1); 3];
+        // Each product is 0.33 of a step (rounds to 0); the exact sum is 1 step.
+        assert_eq!(Fx::dot3(a, b).raw(), 1);
+        assert_eq!((a[0] * b[0] + a[1] * b[1] + a[2] * b[2]).raw(), 0);
+        let big = [fx(150.0); 3];
+        assert_eq!(Fx::dot3(big, big), Fx::INFINITY);
+        assert!(Fx::dot3([Fx::NAN, Fx::ONE, Fx::ONE], big).is_nan());
+        assert_eq!(
+            Fx::dot3([fx(2.0), fx(-3.0), fx(0.5)], [fx(1.0), fx(1.0), fx(4.0)]).to_f64(),
+            1.0
+        );
     }
 
     #[test]

@@ -40,7 +40,7 @@ impl<T: Real> Vec3<T> {
     }
     #[inline]
     pub fn dot(self, o: Self) -> T {
-        self.x * o.x + self.y * o.y + self.z * o.z
+        T::dot3([self.x, self.y, self.z], [o.x, o.y, o.z])
     }
     #[inline]
     pub fn cross(self, o: Self) -> Self {
