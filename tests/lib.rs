@@ -200,3 +200,22 @@ pub fn icosphere(subdivisions: u32, radius: f64, center: [f64; 3]) -> Mesh {
         groups: vec![],
     }
 }
+
+/// The image a backend renders: the f32 image itself, or the DM's Q16.16 rewrite of it for
+/// fixed point.
+pub fn for_backend<T: Real>(img: Vec<u8>) -> Vec<u8> {
+    match T::STORAGE {
+        links_core::num::Storage::F32 => img,
+        links_core::num::Storage::Q16_16 => {
+            links_core::fixed_image::to_fixed(&img)
+                .expect("scene fits Q16.16")
+                .bytes
+        }
+    }
+}
+
+/// The factor an image's lengths carry (2^k of a Q16.16 image; 1 for f32): view-space
+/// coordinates of a test scene times this are the coordinates the tracer sees.
+pub fn length_scale(img: &[u8]) -> f64 {
+    2f64.powi(SceneView::new(img).expect("valid image").scale_exponent() as i32)
+}

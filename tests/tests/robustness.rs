@@ -30,30 +30,33 @@ fn crossings<T: Real>(view: &SceneView<'_>, ray: &Ray<T>) -> usize {
 }
 
 fn edge_and_vertex_rays<T: Real>(n: usize, seed: u64) -> (usize, usize) {
-    let img = closed_mesh_image();
+    let img = for_backend::<T>(closed_mesh_image());
     let view = SceneView::new(&img).unwrap();
     let ntri = view.count(Section::Triangles);
-    let center = [0.3, -0.2, 12.0]; // view coordinates of the sphere centre
+    let ls = length_scale(&img);
+    let center = [0.3 * ls, -0.2 * ls, 12.0 * ls]; // view coordinates of the sphere centre
     let mut rng = Rng(seed);
     let mut tracer = Tracer::<T>::new(view);
     let (mut edge_rays, mut vertex_rays) = (0, 0);
     for k in 0..n {
-        let tri = view
-            .triangle::<f64>((rng.next_u64() % ntri as u64) as u32)
-            .tri;
+        let p = view
+            .triangle::<T>((rng.next_u64() % ntri as u64) as u32)
+            .tri
+            .p
+            .map(|v| Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64()));
         let a = (rng.next_u64() % 3) as usize;
         let target = if k % 4 == 0 {
             vertex_rays += 1;
-            tri.p[a]
+            p[a]
         } else {
             edge_rays += 1;
             let s = rng.f64();
-            tri.p[a] * (1.0 - s) + tri.p[(a + 1) % 3] * s
+            p[a] * (1.0 - s) + p[(a + 1) % 3] * s
         };
         // Come in from outside, within ~60° of the outward direction.
         let out = (target - Vec3::new(center[0], center[1], center[2])).normalize();
         let jitter = Vec3::from_f32(rng.unit().map(|v| v as f32)) * 0.8;
-        let from = target + (out + jitter).normalize() * 7.0;
+        let from = target + (out + jitter).normalize() * (7.0 * ls);
         let o = Vec3::new(
             T::from_f64(from.x),
             T::from_f64(from.y),
@@ -90,6 +93,11 @@ fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_f32(
 #[test]
 fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_f64() {
     edge_and_vertex_rays::<f64>(4000, 0x2545f4914f6cdd1d);
+}
+
+#[test]
+fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_q16_16() {
+    edge_and_vertex_rays::<links_core::num::Fx>(4000, 0x5851f42d4c957f2d);
 }
 
 /// Convex test objects, each alone in a scene, with a size for distance checks.
@@ -181,14 +189,16 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
             transform,
             children: vec![Node::Shape(shape)],
         })];
-        let img = image_of(&s);
+        let img = for_backend::<T>(image_of(&s));
         let view = SceneView::new(&img).unwrap();
         let mut tracer = Tracer::<T>::new(view);
-        let center = Vec3::new(T::from_f64(0.5), T::from_f64(0.2), T::from_f64(12.0));
+        let ls = T::from_f64(length_scale(&img));
+        let center = Vec3::new(T::from_f64(0.5), T::from_f64(0.2), T::from_f64(12.0)) * ls;
         let (mut hits, mut outward, mut inward) = (0, 0, 0);
         for k in 0..1500 {
-            let from = center + Vec3::from_f32(rng.unit().map(|v| v as f32)) * T::from_i32(20);
-            let aim = center + Vec3::from_f32(rng.unit().map(|v| v as f32 * 1.5));
+            let from =
+                center + Vec3::from_f32(rng.unit().map(|v| v as f32)) * (T::from_i32(20) * ls);
+            let aim = center + Vec3::from_f32(rng.unit().map(|v| v as f32 * 1.5)) * ls;
             let ray = Ray::new(from, (aim - from).normalize());
             let Some((_, surf)) = tracer.first_surface(&ray) else {
                 continue;
@@ -220,7 +230,7 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
                         && matches!(name, "box" | "mesh")
                         && (s2.ng - surf.ng).length() < T::from_f32(1e-4);
                     assert!(
-                        !same_flat_face && t > T::from_f32(1e-4),
+                        !same_flat_face && t > T::from_f32(1e-4) * ls,
                         "{} {name} ray {k}: inward ray hit its own surface at t = {t:?}",
                         T::NAME
                     );
@@ -247,4 +257,9 @@ fn spawned_rays_never_hit_their_own_surface_f32() {
 #[test]
 fn spawned_rays_never_hit_their_own_surface_f64() {
     respawned_rays_never_rehit::<f64>(11);
+}
+
+#[test]
+fn spawned_rays_never_hit_their_own_surface_q16_16() {
+    respawned_rays_never_rehit::<links_core::num::Fx>(13);
 }

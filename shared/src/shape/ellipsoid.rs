@@ -52,9 +52,19 @@ pub struct LocalSurface<T> {
 impl<T: Real> Ellipsoid<T> {
     /// First crossing in (0, t_max).
     pub fn intersect(&self, ray: &Ray<T>, t_max: T) -> Option<EllipsoidHit<T>> {
-        let o = self.m.mul_vec(ray.origin - self.center);
-        let d = self.m.mul_vec(ray.dir);
-        let a = d.length_sq();
+        let o_view = self.m.mul_vec(ray.origin - self.center);
+        let d_view = self.m.mul_vec(ray.dir);
+        // Fixed point: solve along the unit direction from the ray's closest approach to the
+        // centre, so every unit-frame quantity stays near 1: |o|² overflows Q16.16 once the
+        // eye is 181 radii away, and a = |d|² of a large ellipsoid keeps too few bits for a
+        // grazing ray's discriminant. t is mapped back to the ray's parameter below.
+        let (o, d, a, shift, speed) = if T::ABSOLUTE_ROUNDING {
+            let dn = d_view.normalize();
+            let s = -o_view.dot(dn);
+            (o_view + dn * s, dn, T::ONE, s, d_view.dot(dn))
+        } else {
+            (o_view, d_view, d_view.length_sq(), T::ZERO, T::ONE)
+        };
         let b = T::TWO * o.dot(d);
         let c = o.length_sq() - T::ONE;
         // Discriminant from the ray's closest approach (pbrt-v4): 4a(1 - |v|)(1 + |v|).
@@ -80,7 +90,13 @@ impl<T: Real> Ellipsoid<T> {
         }
         // Rounding bound of a root: the origin's distance to the surface is known to about
         // gamma(7)(|o|² + 1) in unit-frame units; dividing by the speed |d| gives t.
-        let t_err = T::err_gamma(7) * (o.length_sq() + T::ONE) / a.sqrt();
+        let mut t_err = T::err_gamma(7) * (o.length_sq() + T::ONE) / a.sqrt();
+        if T::ABSOLUTE_ROUNDING {
+            t0 = (t0 + shift) / speed;
+            t1 = (t1 + shift) / speed;
+            t_err = (t_err + T::err_gamma(4) * shift.abs()) / speed;
+        }
+        let (o, d) = (o_view, d_view);
         let valid = |t: T| t > t_err && t < t_max;
 
         match self.cut {
