@@ -167,3 +167,72 @@ fn cluster_render_gives_the_host_render_and_reports_virtual_time() {
     assert_eq!(bad.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("1 to 256"));
 }
+
+#[test]
+fn fixed_point_render_is_close_to_f64_and_compare_reports_it() {
+    let render = |precision: &str| {
+        let out = tmp(&format!("ellipsoids-{precision}.png"));
+        let o = links()
+            .args([
+                "render",
+                scene("ellipsoids.ron").to_str().unwrap(),
+                "--width",
+                "48",
+                "--height",
+                "45",
+                "--precision",
+                precision,
+                "-o",
+            ])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert!(
+            String::from_utf8_lossy(&o.stderr).contains(if precision == "fixed" {
+                "q16.16"
+            } else {
+                precision
+            })
+        );
+        decode_png_rgb(&std::fs::read(&out).unwrap()).unwrap().2
+    };
+    let (fixed, f64) = (render("fixed"), render("f64"));
+    let psnr = links_host::frame::psnr(&fixed, &f64);
+    assert!(psnr > 35.0 && psnr.is_finite(), "{psnr} dB");
+    let o = links()
+        .args([
+            "compare",
+            scene("ellipsoids.ron").to_str().unwrap(),
+            "--width",
+            "48",
+            "--height",
+            "45",
+            "--backend",
+            "fixed",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let line = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        line.contains("fixed vs f64: PSNR") && line.contains("0 NaN/inf pixels"),
+        "{line}"
+    );
+    // The cluster's nodes compute in f32: a clear refusal, not a silent f32 render.
+    let o = links()
+        .args([
+            "render",
+            scene("ellipsoids.ron").to_str().unwrap(),
+            "--nodes",
+            "2",
+            "--precision",
+            "fixed",
+            "-o",
+        ])
+        .arg(tmp("x.png"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("nodes compute in f32"));
+}
