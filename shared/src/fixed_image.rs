@@ -92,6 +92,32 @@ fn layout(s: Section) -> Option<&'static [Word]> {
     })
 }
 
+/// Every record that has a word layout: (section, record, byte offset, its words).
+fn records<'a>(
+    image: &'a [u8],
+    view: &'a SceneView<'_>,
+) -> impl Iterator<Item = (Section, u32, usize, &'static [Word])> + 'a {
+    Section::ALL.into_iter().flat_map(move |s| {
+        let words = layout(s);
+        (0..if words.is_some() { view.count(s) } else { 0 })
+            .map(move |r| (s, r, record_offset(image, s, r), words.unwrap_or(&[])))
+    })
+}
+
+/// What a word is multiplied by when the scene's lengths are scaled by `scale` and the
+/// camera's directions by `dir_scale` (`None` for an integer).
+fn factor(kind: Word, falloff_light: bool, scale: f64, dir_scale: f64) -> Option<f64> {
+    match kind {
+        U => None,
+        P => Some(1.0),
+        L | Lo | Hi => Some(scale),
+        I => Some(1.0 / scale),
+        C if falloff_light => Some(scale * scale),
+        C => Some(1.0),
+        D => Some(dir_scale),
+    }
+}
+
 /// Why a scene can't be expressed in Q16.16.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FixedError {
@@ -189,18 +215,14 @@ pub fn to_fixed(image: &[u8]) -> Result<FixedImage, FixedError> {
     }
     // Extent: every length-valued word (coordinates, box corners, axes, radii).
     let mut extent: f64 = 0.0;
-    for s in Section::ALL {
-        let Some(words) = layout(s) else { continue };
-        for r in 0..view.count(s) {
-            let base = record_offset(image, s, r);
-            for (w, kind) in words.iter().enumerate() {
-                if matches!(kind, L | Lo | Hi) {
-                    let v = word_f32(image, base + 4 * w);
-                    if !v.is_finite() {
-                        return Err(FixedError::NoExtent);
-                    }
-                    extent = extent.max(v.abs());
+    for (_, _, base, words) in records(image, &view) {
+        for (w, kind) in words.iter().enumerate() {
+            if matches!(kind, L | Lo | Hi) {
+                let v = word_f32(image, base + 4 * w);
+                if !v.is_finite() {
+                    return Err(FixedError::NoExtent);
                 }
+                extent = extent.max(v.abs());
             }
         }
     }
@@ -244,70 +266,13 @@ pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
     let view = SceneView::new(image)?;
     let scale = 2f64.powi(k as i32);
     let mut out = image.to_vec();
-    for s in Section::ALL {
-        let Some(words) = layout(s) else { continue };
-        for r in 0..view.count(s) {
-            let base = record_offset(image, s, r);
-            let falloff = is_falloff_light(image, s, base);
-            for (w, kind) in words.iter().enumerate() {
+    for (s, _, base, words) in records(image, &view) {
+        let falloff = is_falloff_light(image, s, base);
+        for (w, kind) in words.iter().enumerate() {
+            if let Some(f) = factor(*kind, falloff, scale, 1.0) {
                 let at = base + 4 * w;
-                let v = word_f32(image, at);
-                let x = match kind {
-                    L | Lo | Hi => v * scale,
-                    I => v / scale,
-                    C if falloff => v * scale * scale,
-                    _ => continue,
-                };
+                let x = word_f32(image, at) * f;
                 out[at..at + 4].copy_from_slice(&(x as f32).to_le_bytes());
-            }
-        }
-    }
-    Ok(out)
-}
-
-/// Diagnostic: the f32 image with only the chosen kinds of words rounded to the Q16.16 grid
-/// they would have at scale 2^k (`kinds` holds letters: `L` lengths incl. box corners, `I`
-/// inverse lengths, `P` scale-free scalars, `D` primary directions, `C` light colours), so
-/// an f64 render shows which stored quantity limits the fixed-point backend's accuracy.
-pub fn quantize_in_f32(image: &[u8], k: i8, kinds: &str) -> Result<Vec<u8>, FixedError> {
-    let view = SceneView::new(image)?;
-    let fixed = to_fixed_with_scale(image, k)?;
-    let scale = 2f64.powi(k as i32);
-    let dir_scale = direction_scale(image, &view);
-    let mut out = image.to_vec();
-    for s in Section::ALL {
-        let Some(words) = layout(s) else { continue };
-        for r in 0..view.count(s) {
-            let base = record_offset(image, s, r);
-            let falloff = is_falloff_light(image, s, base);
-            for (w, kind) in words.iter().enumerate() {
-                let letter = match kind {
-                    U => continue,
-                    L | Lo | Hi => 'L',
-                    I => 'I',
-                    P => 'P',
-                    D => 'D',
-                    C => 'C',
-                };
-                if !kinds.contains(letter) {
-                    continue;
-                }
-                let at = base + 4 * w;
-                let q = i32::from_le_bytes([
-                    fixed.bytes[at],
-                    fixed.bytes[at + 1],
-                    fixed.bytes[at + 2],
-                    fixed.bytes[at + 3],
-                ]) as f64
-                    / 65536.0;
-                let v = match kind {
-                    L | Lo | Hi => q / scale,
-                    I => q * scale,
-                    D => q / dir_scale,
-                    C if falloff => q / (scale * scale),
-                    _ => q,
-                };
-                out[at..at + 4].copy_from_slice(&(v as f32).to_le_bytes());
             }
         }
     }
@@ -342,64 +307,55 @@ fn convert(
     out[7] = k as u8;
     let one = (1u64 << FRAC_BITS) as f64;
     let mut min_detail = f64::INFINITY;
-    for s in Section::ALL {
-        let Some(words) = layout(s) else { continue };
-        for r in 0..view.count(s) {
-            let base = record_offset(image, s, r);
-            let falloff_light = is_falloff_light(image, s, base);
-            for (w, kind) in words.iter().enumerate() {
-                let at = base + 4 * w;
-                let v = word_f32(image, at);
-                let x = match kind {
-                    U => continue,
-                    P => v,
-                    L | Lo | Hi => v * scale,
-                    I => v / scale,
-                    C if falloff_light => v * scale * scale,
-                    C => v,
-                    D => v * dir_scale,
-                };
-                let steps = x * one;
-                let raw = match kind {
-                    Lo => steps.floor(),
-                    Hi => steps.ceil(),
-                    _ => steps.round(),
-                };
-                if !raw.is_finite() || raw.abs() > (i32::MAX - 1) as f64 {
-                    return Err(FixedError::OutOfRange {
-                        section: s,
-                        record: r,
-                        word: w as u32,
-                        value: if x.is_finite() { x } else { v },
-                    });
-                }
-                out[at..at + 4].copy_from_slice(&(raw as i32).to_le_bytes());
-            }
-            // Detail: the smallest axis of an ellipsoid or box (1 / largest row of its
-            // view-to-unit matrix) and a ball's radius, in steps after scaling.
-            let detail = match s {
-                Section::Ellipsoids | Section::Boxes => {
-                    let mut worst: f64 = 0.0;
-                    for row in 0..3 {
-                        let n2: f64 = (0..3)
-                            .map(|c| word_f32(image, base + 4 * (3 + 3 * row + c)).powi(2))
-                            .sum();
-                        worst = worst.max(n2.sqrt());
-                    }
-                    Some(scale / worst * one)
-                }
-                Section::Balls => Some(word_f32(image, base + 12).abs() * scale * one),
-                _ => None,
+    for (s, r, base, words) in records(image, view) {
+        let falloff_light = is_falloff_light(image, s, base);
+        for (w, kind) in words.iter().enumerate() {
+            let Some(f) = factor(*kind, falloff_light, scale, dir_scale) else {
+                continue;
             };
-            if let Some(steps) = detail {
-                min_detail = min_detail.min(steps);
-                if steps.is_nan() || steps < MIN_DETAIL_STEPS {
-                    return Err(FixedError::DetailBelowPrecision {
-                        section: s,
-                        record: r,
-                        steps,
-                    });
+            let at = base + 4 * w;
+            let v = word_f32(image, at);
+            let x = v * f;
+            let steps = x * one;
+            let raw = match kind {
+                Lo => steps.floor(),
+                Hi => steps.ceil(),
+                _ => steps.round(),
+            };
+            if !raw.is_finite() || raw.abs() > (i32::MAX - 1) as f64 {
+                return Err(FixedError::OutOfRange {
+                    section: s,
+                    record: r,
+                    word: w as u32,
+                    value: if x.is_finite() { x } else { v },
+                });
+            }
+            out[at..at + 4].copy_from_slice(&(raw as i32).to_le_bytes());
+        }
+        // Detail: the smallest axis of an ellipsoid or box (1 / largest row of its
+        // view-to-unit matrix) and a ball's radius, in steps after scaling.
+        let detail = match s {
+            Section::Ellipsoids | Section::Boxes => {
+                let mut worst: f64 = 0.0;
+                for row in 0..3 {
+                    let n2: f64 = (0..3)
+                        .map(|c| word_f32(image, base + 4 * (3 + 3 * row + c)).powi(2))
+                        .sum();
+                    worst = worst.max(n2.sqrt());
                 }
+                Some(scale / worst * one)
+            }
+            Section::Balls => Some(word_f32(image, base + 12).abs() * scale * one),
+            _ => None,
+        };
+        if let Some(steps) = detail {
+            min_detail = min_detail.min(steps);
+            if steps.is_nan() || steps < MIN_DETAIL_STEPS {
+                return Err(FixedError::DetailBelowPrecision {
+                    section: s,
+                    record: r,
+                    steps,
+                });
             }
         }
     }

@@ -22,7 +22,7 @@ pub mod desc;
 #[cfg(feature = "std")]
 pub mod dm;
 pub mod fixed;
-#[cfg(feature = "std")]
+#[cfg(any(test, feature = "std"))]
 pub mod fixed_image;
 pub mod geom;
 pub mod image;
