@@ -189,6 +189,14 @@ pub fn parse_bench(csv: &str) -> Result<Vec<BenchSpeed>, ChartError> {
     Ok(out)
 }
 
+/// Instructions per pixel of a backend x scene on a target, if measured.
+fn speed_of(speed: &[BenchSpeed], target: &str, a: &SceneAccuracy) -> Option<f64> {
+    speed
+        .iter()
+        .find(|s| s.target == target && s.backend == a.backend && s.scene == a.scene)
+        .map(|s| s.instructions_per_pixel)
+}
+
 /// One point of the chart.
 #[derive(Clone, Debug)]
 pub struct Point {
@@ -208,17 +216,14 @@ pub fn points(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> Vec<Point> {
     for (target, label) in TARGETS {
         for a in acc {
             let Ok(accuracy) = &a.accuracy else { continue };
-            let Some(s) = speed
-                .iter()
-                .find(|s| s.target == target && s.backend == a.backend && s.scene == a.scene)
-            else {
+            let Some(ipp) = speed_of(speed, target, a) else {
                 continue;
             };
             out.push(Point {
                 target: label,
                 backend: a.backend,
                 scene: a.scene.clone(),
-                instructions_per_pixel: s.instructions_per_pixel,
+                instructions_per_pixel: ipp,
                 psnr_db: accuracy.psnr_db.min(IDENTICAL_DB),
             });
         }
@@ -233,14 +238,8 @@ pub fn csv(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
         "scene,backend,width,height,psnr_db,max_channel_error,pct_off_by_more_than_1,non_finite_pixels,hit_mismatches,hit_mismatches_off_silhouette,instr_per_pixel_m4f,instr_per_pixel_m3,instr_per_pixel_m0,note\n",
     );
     for a in acc {
-        let ipp = |target: &str| {
-            speed
-                .iter()
-                .find(|s| s.target == target && s.backend == a.backend && s.scene == a.scene)
-                .map_or(String::new(), |s| {
-                    format!("{:.0}", s.instructions_per_pixel)
-                })
-        };
+        let ipp =
+            |target: &str| speed_of(speed, target, a).map_or(String::new(), |v| format!("{v:.0}"));
         match &a.accuracy {
             Ok(x) => {
                 let _ = writeln!(
@@ -289,12 +288,7 @@ pub fn markdown(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
     s.push_str("| scene | backend | PSNR (dB) | max error (/255) | pixels off > 1/255 | NaN/inf pixels | hit-mask mismatches (off silhouettes) | instr/pixel M4F | M3 | M0 |\n");
     s.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
     for a in acc {
-        let ipp = |target: &str| {
-            speed
-                .iter()
-                .find(|s| s.target == target && s.backend == a.backend && s.scene == a.scene)
-                .map_or("-".to_string(), |s| group(s.instructions_per_pixel))
-        };
+        let ipp = |target: &str| speed_of(speed, target, a).map_or("-".to_string(), group);
         match &a.accuracy {
             Ok(x) => {
                 let psnr = if x.psnr_db.is_infinite() {
