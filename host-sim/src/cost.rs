@@ -212,7 +212,9 @@ impl fmt::Display for CalibrationError {
 
 impl std::error::Error for CalibrationError {}
 
-/// Read the samples of `scripts/qemu-bench`'s CSV (`docs/cortex-m-bench.csv`).
+/// Read the `f32` samples of `scripts/qemu-bench`'s CSV (`docs/cortex-m-bench.csv`): the
+/// model is of f32 code, so rows of other number backends (column `backend`: `f32-fast`,
+/// `q16.16`) are left out; a file without that column holds f32 rows only.
 pub fn parse_samples(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
     let mut lines = csv
         .lines()
@@ -248,9 +250,17 @@ pub fn parse_samples(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
         "clip_compares",
     ];
     let idx: Vec<usize> = names.iter().map(|n| col(n)).collect::<Result<_, _>>()?;
+    let backend = col("backend").ok();
     let mut out = Vec::new();
     for (i, line) in lines {
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+        if let Some(b) = backend {
+            match cells.get(b) {
+                Some(&"f32") => {}
+                Some(_) => continue,
+                None => return Err(CalibrationError::ShortRow { line: i + 1 }),
+            }
+        }
         let cell = |k: usize| {
             cells
                 .get(idx[k])
@@ -519,6 +529,28 @@ mod tests {
         assert!(matches!(
             parse_samples("a,b\n1,2\n"),
             Err(CalibrationError::MissingColumn(_))
+        ));
+    }
+
+    #[test]
+    fn csv_keeps_the_f32_rows_only() {
+        let head = "target,backend,scene,techniques,pixels,instructions,primary_rays,shadow_rays,reflect_rays,refract_rays,straight_rays,box_tests,triangle_tests,ellipsoid_tests,box_shape_tests,blob_tests,blob_field_evals,shadings,clip_compares,clip_overflows,shadow_early_exits";
+        let csv = format!(
+            "{head}\n\
+             m4,f32,photo1,all,4,1000,4,2,1,0,0,30,5,0,1,0,0,3,20,0,1\n\
+             m4,q16.16,photo1,all,4,5000,4,2,1,0,0,30,5,0,1,0,0,3,20,0,1\n\
+             m4,f32-fast,photo1,all,4,990,4,2,1,0,0,30,5,0,1,0,0,3,20,0,1\n\
+             m4,f32,glass,all,4,2000,4,2,1,0,0,31,5,0,1,0,0,3,20,0,1\n"
+        );
+        let s = parse_samples(&csv).unwrap();
+        let got: Vec<(&str, u64)> = s
+            .iter()
+            .map(|s| (s.scene.as_str(), s.instructions))
+            .collect();
+        assert_eq!(got, [("photo1", 1000), ("glass", 2000)]);
+        assert!(matches!(
+            parse_samples(&format!("{head}\nm4\n")),
+            Err(CalibrationError::ShortRow { line: 2 })
         ));
     }
 
