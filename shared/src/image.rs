@@ -434,18 +434,23 @@ pub struct SceneView<'a> {
 /// A little-endian u32 at `at`, or 0 outside `b` (never the case in a validated image).
 #[inline(always)]
 fn rd_u32(b: &[u8], at: usize) -> u32 {
-    match at.checked_add(4).and_then(|end| b.get(at..end)) {
-        Some(&[b0, b1, b2, b3]) => u32::from_le_bytes([b0, b1, b2, b3]),
-        _ => 0,
+    // `get(at..)` then the first 4 bytes: one compare each, no overflow check of `at + 4`.
+    match b.get(at..).and_then(|r| r.first_chunk::<4>()) {
+        Some(&w) => u32::from_le_bytes(w),
+        None => 0,
     }
 }
 
-/// One fixed-size record, fetched with a single bounds check so the field reads below
-/// compile to plain loads (reading fields byte by byte with a check each cost ~240
-/// instructions per node on a Cortex-M4F, measured under QEMU; this ~40).
-struct Record<const N: usize>([u8; N]);
+/// Zeros standing in for a record outside its section (at least the largest record).
+static ZERO_RECORD: [u8; 128] = [0; 128];
 
-impl<const N: usize> Record<N> {
+/// One fixed-size record, borrowed in place after a single bounds check so the field reads
+/// below compile to plain loads (reading fields byte by byte with a check each cost ~240
+/// instructions per node on a Cortex-M4F, measured under QEMU; a copy of the record ~40;
+/// in place the loads alone).
+struct Record<'b, const N: usize>(&'b [u8; N]);
+
+impl<const N: usize> Record<'_, N> {
     #[inline(always)]
     fn u(&self, o: usize) -> u32 {
         let r = &self.0;
@@ -706,15 +711,20 @@ impl<'a> SceneView<'a> {
     /// Record `i` of section `s` (N = its record size); all zeros when `i` is not a record
     /// of the section, which indices taken from a validated image never are.
     #[inline(always)]
-    fn record<const N: usize>(&self, s: Section, i: u32) -> Record<N> {
-        let mut r = [0u8; N];
-        if i < self.table[s as usize].1 {
-            let at = self.rec(s, i);
-            if let Some(src) = at.checked_add(N).and_then(|end| self.bytes.get(at..end)) {
-                r.copy_from_slice(src);
+    fn record<const N: usize>(&self, s: Section, i: u32) -> Record<'a, N> {
+        let (off, count) = self.table[s as usize];
+        if i < count {
+            // In range of a validated section: `off + i * N` can't overflow, but the slice
+            // is checked anyway (one compare), so a bad table can only give zeros.
+            let at = (off as usize).wrapping_add((i as usize).wrapping_mul(N));
+            if let Some(src) = self.bytes.get(at..).and_then(|r| r.first_chunk::<N>()) {
+                return Record(src);
             }
         }
-        Record(r)
+        match ZERO_RECORD.first_chunk::<N>() {
+            Some(z) => Record(z),
+            None => panic!("record larger than ZERO_RECORD"),
+        }
     }
     #[inline(always)]
     fn u(&self, at: usize) -> u32 {
@@ -749,24 +759,24 @@ impl<'a> SceneView<'a> {
 
     /// Material `i` (`i` comes from a validated record).
     pub fn material<T: Real>(&self, i: u32) -> Material<T> {
-        let at = self.rec(Section::Materials, i);
+        let r = self.record::<MATERIAL_SIZE>(Section::Materials, i);
         Material {
-            diffuse: self.v3(at),
-            specular: self.f(at + 12),
-            specular_edge: self.f(at + 16),
-            shininess: self.f(at + 20),
-            reflect: self.f(at + 24),
-            reflect_edge: self.f(at + 28),
-            transmit: self.v3(at + 32),
-            ior: self.f(at + 44),
-            texture: self.u(at + 48),
-            target: match self.u(at + 52) {
+            diffuse: r.v3(0),
+            specular: r.f(12),
+            specular_edge: r.f(16),
+            shininess: r.f(20),
+            reflect: r.f(24),
+            reflect_edge: r.f(28),
+            transmit: r.v3(32),
+            ior: r.f(44),
+            texture: r.u(48),
+            target: match r.u(52) {
                 1 => MapTarget::Specular,
                 2 => MapTarget::Reflect,
                 3 => MapTarget::Transmit,
                 _ => MapTarget::Diffuse,
             },
-            scale: [self.f(at + 56), self.f(at + 60)],
+            scale: [r.f(56), r.f(60)],
         }
     }
 
@@ -775,20 +785,20 @@ impl<'a> SceneView<'a> {
     }
 
     pub fn light<T: Real>(&self, i: u32) -> Light<T> {
-        let at = self.rec(Section::Lights, i);
+        let r = self.record::<LIGHT_SIZE>(Section::Lights, i);
         Light {
-            kind: match self.u(at) {
+            kind: match r.u(0) {
                 1 => LightKind::Point,
                 2 => LightKind::Spot,
                 _ => LightKind::Directional,
             },
-            color: self.v3(at + 4),
-            pos: self.v3(at + 16),
-            dir: self.v3(at + 28),
-            cos_inner: self.f(at + 40),
-            cos_outer: self.f(at + 44),
-            exponent: self.f(at + 48),
-            falloff: self.u(at + 52) != 0,
+            color: r.v3(4),
+            pos: r.v3(16),
+            dir: r.v3(28),
+            cos_inner: r.f(40),
+            cos_outer: r.f(44),
+            exponent: r.f(48),
+            falloff: r.u(52) != 0,
         }
     }
 
@@ -828,13 +838,13 @@ impl<'a> SceneView<'a> {
     /// The skip index of node `i` (first node after its subtree), without decoding its box.
     #[inline]
     pub fn node_skip(&self, i: u32) -> u32 {
-        self.u(self.rec(Section::Nodes, i) + 24)
+        self.record::<NODE_SIZE>(Section::Nodes, i).u(24)
     }
 
     /// Whether node `i` is a leaf (holds a shape).
     #[inline]
     pub fn node_is_leaf(&self, i: u32) -> bool {
-        self.u(self.rec(Section::Nodes, i) + 28) != NONE
+        self.record::<NODE_SIZE>(Section::Nodes, i).u(28) != NONE
     }
 
     /// Whether the DM wrote screen rectangles (needed for Y/X clipping).
