@@ -428,7 +428,21 @@ pub struct BlobGroupRec<T> {
 pub struct SceneView<'a> {
     bytes: &'a [u8],
     table: [(u32, u32); SECTION_COUNT],
+    /// Each section's records (exactly count x record size bytes), so that fetching record
+    /// `i` is one compare of `i` against the count.
+    sections: Sections<'a>,
     storage: Storage,
+}
+
+#[derive(Clone, Copy)]
+struct Sections<'a>([&'a [u8]; SECTION_COUNT]);
+
+impl core::fmt::Debug for Sections<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_list()
+            .entries(self.0.iter().map(|s| s.len()))
+            .finish()
+    }
 }
 
 /// A little-endian u32 at `at`, or 0 outside `b` (never the case in a validated image).
@@ -502,6 +516,7 @@ impl<'a> SceneView<'a> {
             });
         }
         let mut table = [(0u32, 0u32); SECTION_COUNT];
+        let mut sections: [&[u8]; SECTION_COUNT] = [&[]; SECTION_COUNT];
         for (i, s) in Section::ALL.iter().enumerate() {
             let off = rd_u32(bytes, 16 + 8 * i);
             let count = rd_u32(bytes, 20 + 8 * i);
@@ -514,10 +529,15 @@ impl<'a> SceneView<'a> {
                 return Err(ImageError::Misaligned { section: i as u8 });
             }
             table[i] = (off, count);
+            if count > 0 {
+                // In bounds: checked just above.
+                sections[i] = &bytes[off as usize..(off as u64 + size) as usize];
+            }
         }
         let view = Self {
             bytes,
             table,
+            sections: Sections(sections),
             storage,
         };
         view.check_references()?;
@@ -712,14 +732,10 @@ impl<'a> SceneView<'a> {
     /// of the section, which indices taken from a validated image never are.
     #[inline(always)]
     fn record<const N: usize>(&self, s: Section, i: u32) -> Record<'a, N> {
-        let (off, count) = self.table[s as usize];
-        if i < count {
-            // In range of a validated section: `off + i * N` can't overflow, but the slice
-            // is checked anyway (one compare), so a bad table can only give zeros.
-            let at = (off as usize).wrapping_add((i as usize).wrapping_mul(N));
-            if let Some(src) = self.bytes.get(at..).and_then(|r| r.first_chunk::<N>()) {
-                return Record(src);
-            }
+        debug_assert_eq!(N, s.record_size());
+        let (records, _) = self.sections.0[s as usize].as_chunks::<N>();
+        if let Some(r) = records.get(i as usize) {
+            return Record(r);
         }
         match ZERO_RECORD.first_chunk::<N>() {
             Some(z) => Record(z),
