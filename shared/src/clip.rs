@@ -129,16 +129,18 @@ impl RowClip {
             return false;
         }
         self.last_x = Some(x);
+        // Counted in a local and added once: through the reference the 64-bit count was
+        // stored back on every compare.
+        let mut n_cmp = 1u32;
         // Drop leaves whose rectangle ended left of x (keeps ascending order); none did
         // while x is at most the smallest right edge.
-        *compares += 1;
         if x > self.min_hi {
             let mut kept = 0;
             let mut min_hi = u16::MAX;
             for k in 0..self.n_active {
                 let pos = self.active[k];
                 let hi = self.cols[pos as usize].1;
-                *compares += 1;
+                n_cmp += 1;
                 if hi >= x {
                     self.active[kept] = pos;
                     kept += 1;
@@ -153,13 +155,13 @@ impl RowClip {
             let key = self.by_x[self.next];
             let pos = (key & 0xffff) as u16;
             let lo = (key >> 16) as u16;
-            *compares += 1;
+            n_cmp += 1;
             if lo > x {
                 break;
             }
             self.next += 1;
             let hi = self.cols[pos as usize].1;
-            *compares += 1;
+            n_cmp += 1;
             if hi < x {
                 continue;
             }
@@ -169,11 +171,12 @@ impl RowClip {
             while at > 0 && self.active[at - 1] > pos {
                 self.active[at] = self.active[at - 1];
                 at -= 1;
-                *compares += 1;
+                n_cmp += 1;
             }
             self.active[at] = pos;
             self.n_active += 1;
         }
+        *compares += n_cmp as u64;
         true
     }
 
