@@ -25,12 +25,16 @@ pub struct RowClip {
     /// The rectangle columns of each leaf: (x_lo, x_hi).
     cols: [(u16, u16); CLIP_CAPACITY],
     n: usize,
-    /// Positions into `leaves`, sorted by (x_lo, position).
-    by_x: [u16; CLIP_CAPACITY],
+    /// `x_lo << 16 | position` of every leaf (positions into `leaves`), ascending: sorted
+    /// by (x_lo, position) as plain integers.
+    by_x: [u32; CLIP_CAPACITY],
     next: usize,
     /// Positions into `leaves` whose rectangle contains the current column, ascending.
     active: [u16; CLIP_CAPACITY],
     n_active: usize,
+    /// The smallest x_hi of the active leaves (`u16::MAX` when none): until the sweep passes
+    /// it, no active leaf ends and the drop pass is skipped.
+    min_hi: u16,
     row: Option<u16>,
     last_x: Option<u16>,
 }
@@ -51,6 +55,7 @@ impl RowClip {
             next: 0,
             active: [0; CLIP_CAPACITY],
             n_active: 0,
+            min_hi: u16::MAX,
             row: None,
             last_x: None,
         }
@@ -67,6 +72,7 @@ impl RowClip {
         self.last_x = None;
         self.n = 0;
         self.n_active = 0;
+        self.min_hi = u16::MAX;
         self.next = 0;
     }
 
@@ -105,12 +111,11 @@ impl RowClip {
             i += 1;
         }
         // Order for the X sweep: by left edge, ties by tree order (a total order, so the
-        // unstable sort is deterministic).
+        // unstable sort is deterministic), as one integer key per leaf.
         for k in 0..self.n {
-            self.by_x[k] = k as u16;
+            self.by_x[k] = (self.cols[k].0 as u32) << 16 | k as u32;
         }
-        let cols = &self.cols;
-        self.by_x[..self.n].sort_unstable_by_key(|&k| (cols[k as usize].0, k));
+        self.by_x[..self.n].sort_unstable();
         *compares += (self.n as u64) * (usize::BITS - self.n.leading_zeros()) as u64;
         self.row = Some(y);
         true
@@ -124,40 +129,54 @@ impl RowClip {
             return false;
         }
         self.last_x = Some(x);
-        // Drop leaves whose rectangle ended left of x (keeps ascending order).
-        let mut kept = 0;
-        for k in 0..self.n_active {
-            let pos = self.active[k];
-            *compares += 1;
-            if self.cols[pos as usize].1 >= x {
-                self.active[kept] = pos;
-                kept += 1;
+        // Counted in a local and added once: through the reference the 64-bit count was
+        // stored back on every compare.
+        let mut n_cmp = 1u32;
+        // Drop leaves whose rectangle ended left of x (keeps ascending order); none did
+        // while x is at most the smallest right edge.
+        if x > self.min_hi {
+            let mut kept = 0;
+            let mut min_hi = u16::MAX;
+            for k in 0..self.n_active {
+                let pos = self.active[k];
+                let hi = self.cols[pos as usize].1;
+                n_cmp += 1;
+                if hi >= x {
+                    self.active[kept] = pos;
+                    kept += 1;
+                    min_hi = min_hi.min(hi);
+                }
             }
+            self.n_active = kept;
+            self.min_hi = min_hi;
         }
-        self.n_active = kept;
         // Admit leaves whose rectangle starts at or before x.
         while self.next < self.n {
-            let pos = self.by_x[self.next];
-            let (lo, hi) = self.cols[pos as usize];
-            *compares += 1;
+            let key = self.by_x[self.next];
+            let pos = (key & 0xffff) as u16;
+            let lo = (key >> 16) as u16;
+            n_cmp += 1;
             if lo > x {
                 break;
             }
             self.next += 1;
-            *compares += 1;
+            let hi = self.cols[pos as usize].1;
+            n_cmp += 1;
             if hi < x {
                 continue;
             }
+            self.min_hi = self.min_hi.min(hi);
             // Sorted insert by position (tree order).
             let mut at = self.n_active;
             while at > 0 && self.active[at - 1] > pos {
                 self.active[at] = self.active[at - 1];
                 at -= 1;
-                *compares += 1;
+                n_cmp += 1;
             }
             self.active[at] = pos;
             self.n_active += 1;
         }
+        *compares += n_cmp as u64;
         true
     }
 

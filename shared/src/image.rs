@@ -428,24 +428,43 @@ pub struct BlobGroupRec<T> {
 pub struct SceneView<'a> {
     bytes: &'a [u8],
     table: [(u32, u32); SECTION_COUNT],
+    /// Each section's records (exactly count x record size bytes), so that fetching record
+    /// `i` is one compare of `i` against the count.
+    sections: Sections<'a>,
     storage: Storage,
+}
+
+#[derive(Clone, Copy)]
+struct Sections<'a>([&'a [u8]; SECTION_COUNT]);
+
+impl core::fmt::Debug for Sections<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_list()
+            .entries(self.0.iter().map(|s| s.len()))
+            .finish()
+    }
 }
 
 /// A little-endian u32 at `at`, or 0 outside `b` (never the case in a validated image).
 #[inline(always)]
 fn rd_u32(b: &[u8], at: usize) -> u32 {
-    match at.checked_add(4).and_then(|end| b.get(at..end)) {
-        Some(&[b0, b1, b2, b3]) => u32::from_le_bytes([b0, b1, b2, b3]),
-        _ => 0,
+    // `get(at..)` then the first 4 bytes: one compare each, no overflow check of `at + 4`.
+    match b.get(at..).and_then(|r| r.first_chunk::<4>()) {
+        Some(&w) => u32::from_le_bytes(w),
+        None => 0,
     }
 }
 
-/// One fixed-size record, fetched with a single bounds check so the field reads below
-/// compile to plain loads (reading fields byte by byte with a check each cost ~240
-/// instructions per node on a Cortex-M4F, measured under QEMU; this ~40).
-struct Record<const N: usize>([u8; N]);
+/// Zeros standing in for a record outside its section (at least the largest record).
+static ZERO_RECORD: [u8; 128] = [0; 128];
 
-impl<const N: usize> Record<N> {
+/// One fixed-size record, borrowed in place after a single bounds check so the field reads
+/// below compile to plain loads (reading fields byte by byte with a check each cost ~240
+/// instructions per node on a Cortex-M4F, measured under QEMU; a copy of the record ~40;
+/// in place the loads alone).
+struct Record<'b, const N: usize>(&'b [u8; N]);
+
+impl<const N: usize> Record<'_, N> {
     #[inline(always)]
     fn u(&self, o: usize) -> u32 {
         let r = &self.0;
@@ -497,6 +516,7 @@ impl<'a> SceneView<'a> {
             });
         }
         let mut table = [(0u32, 0u32); SECTION_COUNT];
+        let mut sections: [&[u8]; SECTION_COUNT] = [&[]; SECTION_COUNT];
         for (i, s) in Section::ALL.iter().enumerate() {
             let off = rd_u32(bytes, 16 + 8 * i);
             let count = rd_u32(bytes, 20 + 8 * i);
@@ -509,10 +529,15 @@ impl<'a> SceneView<'a> {
                 return Err(ImageError::Misaligned { section: i as u8 });
             }
             table[i] = (off, count);
+            if count > 0 {
+                // In bounds: checked just above.
+                sections[i] = &bytes[off as usize..(off as u64 + size) as usize];
+            }
         }
         let view = Self {
             bytes,
             table,
+            sections: Sections(sections),
             storage,
         };
         view.check_references()?;
@@ -706,15 +731,16 @@ impl<'a> SceneView<'a> {
     /// Record `i` of section `s` (N = its record size); all zeros when `i` is not a record
     /// of the section, which indices taken from a validated image never are.
     #[inline(always)]
-    fn record<const N: usize>(&self, s: Section, i: u32) -> Record<N> {
-        let mut r = [0u8; N];
-        if i < self.table[s as usize].1 {
-            let at = self.rec(s, i);
-            if let Some(src) = at.checked_add(N).and_then(|end| self.bytes.get(at..end)) {
-                r.copy_from_slice(src);
-            }
+    fn record<const N: usize>(&self, s: Section, i: u32) -> Record<'a, N> {
+        debug_assert_eq!(N, s.record_size());
+        let (records, _) = self.sections.0[s as usize].as_chunks::<N>();
+        if let Some(r) = records.get(i as usize) {
+            return Record(r);
         }
-        Record(r)
+        match ZERO_RECORD.first_chunk::<N>() {
+            Some(z) => Record(z),
+            None => panic!("record larger than ZERO_RECORD"),
+        }
     }
     #[inline(always)]
     fn u(&self, at: usize) -> u32 {
@@ -749,24 +775,24 @@ impl<'a> SceneView<'a> {
 
     /// Material `i` (`i` comes from a validated record).
     pub fn material<T: Real>(&self, i: u32) -> Material<T> {
-        let at = self.rec(Section::Materials, i);
+        let r = self.record::<MATERIAL_SIZE>(Section::Materials, i);
         Material {
-            diffuse: self.v3(at),
-            specular: self.f(at + 12),
-            specular_edge: self.f(at + 16),
-            shininess: self.f(at + 20),
-            reflect: self.f(at + 24),
-            reflect_edge: self.f(at + 28),
-            transmit: self.v3(at + 32),
-            ior: self.f(at + 44),
-            texture: self.u(at + 48),
-            target: match self.u(at + 52) {
+            diffuse: r.v3(0),
+            specular: r.f(12),
+            specular_edge: r.f(16),
+            shininess: r.f(20),
+            reflect: r.f(24),
+            reflect_edge: r.f(28),
+            transmit: r.v3(32),
+            ior: r.f(44),
+            texture: r.u(48),
+            target: match r.u(52) {
                 1 => MapTarget::Specular,
                 2 => MapTarget::Reflect,
                 3 => MapTarget::Transmit,
                 _ => MapTarget::Diffuse,
             },
-            scale: [self.f(at + 56), self.f(at + 60)],
+            scale: [r.f(56), r.f(60)],
         }
     }
 
@@ -775,20 +801,20 @@ impl<'a> SceneView<'a> {
     }
 
     pub fn light<T: Real>(&self, i: u32) -> Light<T> {
-        let at = self.rec(Section::Lights, i);
+        let r = self.record::<LIGHT_SIZE>(Section::Lights, i);
         Light {
-            kind: match self.u(at) {
+            kind: match r.u(0) {
                 1 => LightKind::Point,
                 2 => LightKind::Spot,
                 _ => LightKind::Directional,
             },
-            color: self.v3(at + 4),
-            pos: self.v3(at + 16),
-            dir: self.v3(at + 28),
-            cos_inner: self.f(at + 40),
-            cos_outer: self.f(at + 44),
-            exponent: self.f(at + 48),
-            falloff: self.u(at + 52) != 0,
+            color: r.v3(4),
+            pos: r.v3(16),
+            dir: r.v3(28),
+            cos_inner: r.f(40),
+            cos_outer: r.f(44),
+            exponent: r.f(48),
+            falloff: r.u(52) != 0,
         }
     }
 
@@ -828,13 +854,13 @@ impl<'a> SceneView<'a> {
     /// The skip index of node `i` (first node after its subtree), without decoding its box.
     #[inline]
     pub fn node_skip(&self, i: u32) -> u32 {
-        self.u(self.rec(Section::Nodes, i) + 24)
+        self.record::<NODE_SIZE>(Section::Nodes, i).u(24)
     }
 
     /// Whether node `i` is a leaf (holds a shape).
     #[inline]
     pub fn node_is_leaf(&self, i: u32) -> bool {
-        self.u(self.rec(Section::Nodes, i) + 28) != NONE
+        self.record::<NODE_SIZE>(Section::Nodes, i).u(28) != NONE
     }
 
     /// Whether the DM wrote screen rectangles (needed for Y/X clipping).

@@ -11,11 +11,14 @@
 //! Output (semihosting stdout): one `key=value` line per measurement, read by
 //! `scripts/qemu-bench`:
 //! - `CAL`: a loop of known length, checking the ticks-to-instructions factor;
-//! - `RUN`: a whole scene rendered run by run with one technique set (`Techniques::ALL` and
-//!   the paper's types 1-4), with the tracer's `Stats`, the pixels checked against the host's
-//!   render of the same image (`build.rs`; the same pixels for every technique set) and the
-//!   stats against the host's with the same techniques;
-//! - `OP`: micro-benchmarks of single operations in loops (net of an empty loop).
+//! - `RUN`: a whole scene rendered run by run in one backend (`f32`; `f32-fast`, f32 with
+//!   micromath's atan2/acos; `q16.16`, the `Fx` fixed-point format on the image rewritten as
+//!   Q16.16) with one technique set (`Techniques::ALL` and, in f32, the paper's types 1-4),
+//!   with the tracer's `Stats`, the pixels checked against the host's render of the same
+//!   image in the same backend (`build.rs`; the same pixels for every technique set) and the
+//!   stats against the host's with the same backend and techniques;
+//! - `OP`: micro-benchmarks of single operations in loops (net of an empty loop), in f32
+//!   and in Q16.16.
 //!
 //! Exits through semihosting: status 0 when every check passed.
 
@@ -30,7 +33,7 @@ use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hio};
 use links_core::geom::{Aabb, Ray, RayInv, Vec3};
 use links_core::image::{SceneView, Section};
-use links_core::num::Real;
+use links_core::num::{FastF32, Fx, Real};
 use links_core::render::{render_run, Rgb8, Stats, Techniques, Tracer};
 use links_core::shape::blob::BlobGroup;
 use links_core::shape::triangle::Triangle;
@@ -40,20 +43,44 @@ struct SceneData {
     name: &'static str,
     width: u32,
     height: u32,
-    image: &'static [u8],
-    /// The host's f32 render of `image`, RGB8 rows (the same for every technique set).
-    reference: &'static [u8],
-    /// The technique sets to render the scene with.
-    runs: &'static [TechRun],
+    /// The backends and technique sets to render the scene with.
+    runs: &'static [Run],
 }
 
-/// One technique set a scene is rendered with (see build.rs).
-struct TechRun {
+/// The number type a run renders with.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Backend {
+    F32,
+    /// f32 with micromath's atan2 and acos.
+    F32Fast,
+    /// Q16.16 fixed point, on the scene rewritten as Q16.16.
+    Fx,
+}
+
+impl Backend {
+    fn name(self) -> &'static str {
+        match self {
+            Backend::F32 => <f32 as Real>::NAME,
+            Backend::F32Fast => FastF32::NAME,
+            Backend::Fx => Fx::NAME,
+        }
+    }
+}
+
+/// One backend and technique set a scene is rendered with (see build.rs).
+struct Run {
+    backend: Backend,
     /// `all`, `type1` .. `type4`.
     name: &'static str,
     techniques: Techniques,
-    /// The host's operation counts for the whole frame with these techniques, as `{:?}` text.
+    /// The host's operation counts for the whole frame with this backend and these
+    /// techniques, as `{:?}` text.
     host_stats_debug: &'static str,
+    /// The SceneImage in the backend's storage format.
+    image: &'static [u8],
+    /// The host's render of `image` in this backend, RGB8 rows (the same for every
+    /// technique set).
+    reference: &'static [u8],
 }
 
 include!(concat!(env!("OUT_DIR"), "/scenes.rs"));
@@ -197,7 +224,7 @@ fn scene(name: &str) -> &'static SceneData {
 
 /// Render a whole frame run by run (one run = one scanline, as a node gets it).
 #[inline(never)]
-fn render_frame(tracer: &mut Tracer<'_, f32>, w: u32, h: u32, out: &mut [Rgb8]) {
+fn render_frame<R: Real>(tracer: &mut Tracer<'_, R>, w: u32, h: u32, out: &mut [Rgb8]) {
     for y in 0..h {
         let row = &mut out[(y * w) as usize..((y + 1) * w) as usize];
         render_run(tracer, y, 0, row).expect("run inside the frame");
@@ -205,11 +232,11 @@ fn render_frame(tracer: &mut Tracer<'_, f32>, w: u32, h: u32, out: &mut [Rgb8]) 
 }
 
 /// `GRID x GRID` primary rays spread over the frame, with their reciprocal directions.
-fn grid_rays(tracer: &Tracer<'_, f32>) -> [(Ray<f32>, RayInv<f32>); (GRID * GRID) as usize] {
+fn grid_rays<R: Real>(tracer: &Tracer<'_, R>) -> [(Ray<R>, RayInv<R>); (GRID * GRID) as usize] {
     let (w, h) = (tracer.frame().width, tracer.frame().height);
     let mut rays = [(
         Ray::new(Vec3::zero(), Vec3::zero()),
-        RayInv::new(Vec3::splat(1.0f32)),
+        RayInv::new(Vec3::splat(R::ONE)),
     ); (GRID * GRID) as usize];
     for j in 0..GRID {
         for i in 0..GRID {
@@ -222,7 +249,7 @@ fn grid_rays(tracer: &Tracer<'_, f32>) -> [(Ray<f32>, RayInv<f32>); (GRID * GRID
 
 /// The loops below with nothing inside: what each micro-benchmark subtracts.
 #[inline(never)]
-fn loop_empty<X>(items: &[X], rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
+fn loop_empty<X, R: Real>(items: &[X], rays: &[(Ray<R>, RayInv<R>)]) -> u32 {
     let mut acc = 0u32;
     for _ in rays {
         for it in items {
@@ -235,7 +262,7 @@ fn loop_empty<X>(items: &[X], rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
 }
 
 #[inline(never)]
-fn loop_empty_index(n: u32, rays: &[(Ray<f32>, RayInv<f32>)], reps: u32) -> u32 {
+fn loop_empty_index<R: Real>(n: u32, rays: &[(Ray<R>, RayInv<R>)], reps: u32) -> u32 {
     let mut acc = 0u32;
     for _ in 0..reps {
         for _ in rays {
@@ -250,11 +277,11 @@ fn loop_empty_index(n: u32, rays: &[(Ray<f32>, RayInv<f32>)], reps: u32) -> u32 
 }
 
 #[inline(never)]
-fn loop_aabb(boxes: &[Aabb<f32>], rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
+fn loop_aabb<R: Real>(boxes: &[Aabb<R>], rays: &[(Ray<R>, RayInv<R>)]) -> u32 {
     let mut hits = 0u32;
     for (r, inv) in rays {
         for b in boxes {
-            if black_box(b).hit(r, inv, f32::MAX) {
+            if black_box(b).hit(r, inv, R::MAX) {
                 hits += 1;
             }
         }
@@ -263,11 +290,11 @@ fn loop_aabb(boxes: &[Aabb<f32>], rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
 }
 
 #[inline(never)]
-fn loop_node(view: &SceneView<'_>, rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
+fn loop_node<R: Real>(view: &SceneView<'_>, rays: &[(Ray<R>, RayInv<R>)]) -> u32 {
     let mut hits = 0u32;
     for (r, inv) in rays {
         for i in 0..view.node_count() {
-            if black_box(view).node::<f32>(i).bounds.hit(r, inv, f32::MAX) {
+            if black_box(view).node::<R>(i).bounds.hit(r, inv, R::MAX) {
                 hits += 1;
             }
         }
@@ -276,11 +303,11 @@ fn loop_node(view: &SceneView<'_>, rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
 }
 
 #[inline(never)]
-fn loop_triangle(tris: &[Triangle<f32>], rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
+fn loop_triangle<R: Real>(tris: &[Triangle<R>], rays: &[(Ray<R>, RayInv<R>)]) -> u32 {
     let mut hits = 0u32;
     for (r, _) in rays {
         for t in tris {
-            if black_box(t).intersect(r, f32::MAX).is_some() {
+            if black_box(t).intersect(r, R::MAX).is_some() {
                 hits += 1;
             }
         }
@@ -289,14 +316,14 @@ fn loop_triangle(tris: &[Triangle<f32>], rays: &[(Ray<f32>, RayInv<f32>)]) -> u3
 }
 
 #[inline(never)]
-fn loop_triangle_rec(view: &SceneView<'_>, rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
+fn loop_triangle_rec<R: Real>(view: &SceneView<'_>, rays: &[(Ray<R>, RayInv<R>)]) -> u32 {
     let mut hits = 0u32;
     for (r, _) in rays {
         for i in 0..view.count(Section::Triangles) {
             if black_box(view)
-                .triangle::<f32>(i)
+                .triangle::<R>(i)
                 .tri
-                .intersect(r, f32::MAX)
+                .intersect(r, R::MAX)
                 .is_some()
             {
                 hits += 1;
@@ -307,14 +334,14 @@ fn loop_triangle_rec(view: &SceneView<'_>, rays: &[(Ray<f32>, RayInv<f32>)]) -> 
 }
 
 #[inline(never)]
-fn loop_ellipsoid(view: &SceneView<'_>, rays: &[(Ray<f32>, RayInv<f32>)]) -> u32 {
+fn loop_ellipsoid<R: Real>(view: &SceneView<'_>, rays: &[(Ray<R>, RayInv<R>)]) -> u32 {
     let mut hits = 0u32;
     for (r, _) in rays {
         for i in 0..view.count(Section::Ellipsoids) {
             if black_box(view)
-                .ellipsoid::<f32>(i)
+                .ellipsoid::<R>(i)
                 .shape
-                .intersect(r, f32::MAX)
+                .intersect(r, R::MAX)
                 .is_some()
             {
                 hits += 1;
@@ -325,15 +352,15 @@ fn loop_ellipsoid(view: &SceneView<'_>, rays: &[(Ray<f32>, RayInv<f32>)]) -> u32
 }
 
 #[inline(never)]
-fn loop_boxshape(view: &SceneView<'_>, rays: &[(Ray<f32>, RayInv<f32>)], reps: u32) -> u32 {
+fn loop_boxshape<R: Real>(view: &SceneView<'_>, rays: &[(Ray<R>, RayInv<R>)], reps: u32) -> u32 {
     let mut hits = 0u32;
     for _ in 0..reps {
         for (r, _) in rays {
             for i in 0..view.count(Section::Boxes) {
                 if black_box(view)
-                    .boxshape::<f32>(i)
+                    .boxshape::<R>(i)
                     .shape
-                    .intersect(r, f32::MAX)
+                    .intersect(r, R::MAX)
                     .is_some()
                 {
                     hits += 1;
@@ -355,11 +382,15 @@ impl Lcg {
 
 const BLOB_POINTS: u32 = 256;
 
-fn blob_points(lo: Vec3<f32>, hi: Vec3<f32>) -> [Vec3<f32>; BLOB_POINTS as usize] {
+fn blob_points<R: Real>(lo: Vec3<R>, hi: Vec3<R>) -> [Vec3<R>; BLOB_POINTS as usize] {
     let mut rng = Lcg(12345);
     let mut pts = [Vec3::zero(); BLOB_POINTS as usize];
     for p in pts.iter_mut() {
-        let (a, b, c) = (rng.unit(), rng.unit(), rng.unit());
+        let (a, b, c) = (
+            R::from_f32(rng.unit()),
+            R::from_f32(rng.unit()),
+            R::from_f32(rng.unit()),
+        );
         *p = Vec3::new(
             lo.x + (hi.x - lo.x) * a,
             lo.y + (hi.y - lo.y) * b,
@@ -371,16 +402,16 @@ fn blob_points(lo: Vec3<f32>, hi: Vec3<f32>) -> [Vec3<f32>; BLOB_POINTS as usize
 
 /// `field` of blob group `g` at each point, the balls decoded in place as the tracer does.
 #[inline(never)]
-fn loop_field(view: &SceneView<'_>, g: u32, pts: &[Vec3<f32>]) -> f32 {
-    let rec = view.blob_group::<f32>(g);
+fn loop_field<R: Real>(view: &SceneView<'_>, g: u32, pts: &[Vec3<R>]) -> R {
+    let rec = view.blob_group::<R>(g);
     let scene = *view;
     let group = BlobGroup {
         count: rec.count as usize,
-        ball: |k: usize| scene.ball::<f32>(rec.first + k as u32),
+        ball: |k: usize| scene.ball::<R>(rec.first + k as u32),
         kernel: rec.kernel,
         threshold: rec.threshold,
     };
-    let mut acc = 0.0f32;
+    let mut acc = R::ZERO;
     for p in pts {
         acc += black_box(&group).field(*p);
     }
@@ -388,8 +419,8 @@ fn loop_field(view: &SceneView<'_>, g: u32, pts: &[Vec3<f32>]) -> f32 {
 }
 
 #[inline(never)]
-fn loop_empty_points(pts: &[Vec3<f32>]) -> f32 {
-    let mut acc = 0.0f32;
+fn loop_empty_points<R: Real>(pts: &[Vec3<R>]) -> R {
+    let mut acc = R::ZERO;
     for p in pts {
         acc += black_box(p).x;
     }
@@ -477,9 +508,9 @@ fn sqrt_bench(o: &mut Out) -> bool {
     let n = SQRT_INPUTS as u64;
     let (_, empty) = count(|| loop_sqrt_none(&xs, &mut a));
     let (_, t) = count(|| loop_sqrt_real(&xs, &mut a));
-    op(o, "Real::sqrt_f32", n, 0, t, empty);
+    op(o, Backend::F32, "Real::sqrt_f32", n, 0, t, empty);
     let (_, t) = count(|| loop_sqrt_softlibm(&xs, &mut l));
-    op(o, "libm::sqrtf", n, 0, t, empty);
+    op(o, Backend::F32, "libm::sqrtf", n, 0, t, empty);
     let differ = |p: &[f32], q: &[f32]| {
         p.iter()
             .zip(q.iter())
@@ -492,12 +523,12 @@ fn sqrt_bench(o: &mut Out) -> bool {
         core::array::from_fn(|i| (i as f32 + 0.5) / SQRT_INPUTS as f32);
     let mut p = [0.0f32; SQRT_INPUTS];
     let (_, t) = count(|| loop_powf(&cosines, black_box(40.0), &mut p));
-    op(o, "Real::powf_f32_cos^40", n, 0, t, empty);
+    op(o, Backend::F32, "Real::powf_f32_cos^40", n, 0, t, empty);
     #[cfg(target_abi = "eabihf")]
     {
         let mut b = [0.0f32; SQRT_INPUTS];
         let (_, t) = count(|| loop_sqrt_vsqrt(&xs, &mut b));
-        op(o, "vsqrt.f32_inline_asm", n, 0, t, empty);
+        op(o, Backend::F32, "vsqrt.f32_inline_asm", n, 0, t, empty);
         let vsqrt_differ = differ(&b, &l);
         say!(
             o,
@@ -564,136 +595,38 @@ fn main() -> ! {
         overhead
     );
 
-    // Whole frames, run by run, with each technique set, checked against the host's render.
     let mut pixels = [[0u8; 3]; MAX_PIXELS];
+    // `--features profile` (scripts/qemu-profile): one frame only, photo1 primary rays +
+    // shading in f32, the window an instruction trace of QEMU is taken over.
+    #[cfg(feature = "profile")]
+    {
+        let s = scene("photo1-noshadow");
+        let r = &s.runs[0];
+        ok &= render_scene::<f32>(&mut o, s, r, &mut pixels, overhead);
+        say!(o, "END ok={}", ok);
+        debug::exit(if ok {
+            debug::EXIT_SUCCESS
+        } else {
+            debug::EXIT_FAILURE
+        });
+    }
+
+    // Whole frames, run by run, with each backend and technique set, checked against the
+    // host's render.
     for s in SCENES {
         for r in s.runs {
-            ok &= render_scene(&mut o, s, r, &mut pixels, overhead);
-        }
-    }
-
-    // Micro-benchmarks.
-    {
-        let s = scene("photo1");
-        let view = SceneView::new(s.image).expect("valid SceneImage");
-        let tracer = Tracer::<f32>::new(view);
-        let rays = grid_rays(&tracer);
-        let nr = rays.len() as u64;
-
-        let nodes = view.node_count();
-        let mut boxes = [Aabb {
-            min: Vec3::zero(),
-            max: Vec3::zero(),
-        }; 2048];
-        assert!(nodes as usize <= boxes.len());
-        for (i, b) in boxes.iter_mut().enumerate().take(nodes as usize) {
-            *b = view.node::<f32>(i as u32).bounds;
-        }
-        let boxes = &boxes[..nodes as usize];
-        let (_, empty) = count(|| loop_empty(boxes, &rays));
-        let (hits, t) = count(|| loop_aabb(boxes, &rays));
-        op(&mut o, "aabb_hit", nr * nodes as u64, hits, t, empty);
-        let (_, empty) = count(|| loop_empty_index(nodes, &rays, 1));
-        let (hits, t) = count(|| loop_node(&view, &rays));
-        op(
-            &mut o,
-            "node_decode+aabb_hit",
-            nr * nodes as u64,
-            hits,
-            t,
-            empty,
-        );
-
-        let ntri = view.count(Section::Triangles);
-        let mut tris = [Triangle {
-            p: [Vec3::zero(); 3],
-        }; 1024];
-        assert!(ntri as usize <= tris.len());
-        for (i, t) in tris.iter_mut().enumerate().take(ntri as usize) {
-            *t = view.triangle::<f32>(i as u32).tri;
-        }
-        let tris = &tris[..ntri as usize];
-        let (_, empty) = count(|| loop_empty(tris, &rays));
-        let (hits, t) = count(|| loop_triangle(tris, &rays));
-        op(
-            &mut o,
-            "triangle_intersect",
-            nr * ntri as u64,
-            hits,
-            t,
-            empty,
-        );
-        let (_, empty) = count(|| loop_empty_index(ntri, &rays, 1));
-        let (hits, t) = count(|| loop_triangle_rec(&view, &rays));
-        op(
-            &mut o,
-            "triangle_decode+intersect",
-            nr * ntri as u64,
-            hits,
-            t,
-            empty,
-        );
-
-        let nbox = view.count(Section::Boxes);
-        let reps = 16;
-        let (_, empty) = count(|| loop_empty_index(nbox, &rays, reps));
-        let (hits, t) = count(|| loop_boxshape(&view, &rays, reps));
-        op(
-            &mut o,
-            "boxshape_decode+intersect",
-            nr * (nbox * reps) as u64,
-            hits,
-            t,
-            empty,
-        );
-    }
-    {
-        let s = scene("ellipsoids");
-        let view = SceneView::new(s.image).expect("valid SceneImage");
-        let tracer = Tracer::<f32>::new(view);
-        let rays = grid_rays(&tracer);
-        let n = view.count(Section::Ellipsoids);
-        let (_, empty) = count(|| loop_empty_index(n, &rays, 1));
-        let (hits, t) = count(|| loop_ellipsoid(&view, &rays));
-        op(
-            &mut o,
-            "ellipsoid_decode+intersect",
-            rays.len() as u64 * n as u64,
-            hits,
-            t,
-            empty,
-        );
-    }
-    {
-        let s = scene("metaballs");
-        let view = SceneView::new(s.image).expect("valid SceneImage");
-        for g in 0..view.count(Section::BlobGroups) {
-            let rec = view.blob_group::<f32>(g);
-            let scene = view;
-            let group = BlobGroup {
-                count: rec.count as usize,
-                ball: |k: usize| scene.ball::<f32>(rec.first + k as u32),
-                kernel: rec.kernel,
-                threshold: rec.threshold,
+            ok &= match r.backend {
+                Backend::F32 => render_scene::<f32>(&mut o, s, r, &mut pixels, overhead),
+                Backend::F32Fast => render_scene::<FastF32>(&mut o, s, r, &mut pixels, overhead),
+                Backend::Fx => render_scene::<Fx>(&mut o, s, r, &mut pixels, overhead),
             };
-            let (lo, hi) = group.bounds();
-            let pts = blob_points(lo, hi);
-            let (_, empty) = count(|| loop_empty_points(&pts));
-            let (_, t) = count(|| loop_field(&view, g, &pts));
-            let net = t.saturating_sub(empty);
-            say!(
-                o,
-                "OP name=blob_field_eval group={} balls={} kernel={:?} n={} instr={} per_op={}.{:02}",
-                g,
-                rec.count,
-                rec.kernel,
-                BLOB_POINTS,
-                net,
-                net / BLOB_POINTS as u64,
-                (net % BLOB_POINTS as u64) * 100 / BLOB_POINTS as u64
-            );
         }
     }
+
+    // Micro-benchmarks, in f32 and in Q16.16 (f32-fast differs from f32 in atan2 and acos
+    // only, which these operations do not call).
+    micro::<f32>(&mut o, Backend::F32);
+    micro::<Fx>(&mut o, Backend::Fx);
 
     ok &= sqrt_bench(&mut o);
 
@@ -708,27 +641,171 @@ fn main() -> ! {
     }
 }
 
-/// Render scene `s` with the technique set `r`, check it against the host's render and print
-/// its `RUN` line; true when pixels and counts equal the host's.
-fn render_scene(
+/// The SceneImage of `s` in `backend`'s storage format (its `all` run's image).
+fn scene_view(s: &SceneData, backend: Backend) -> SceneView<'static> {
+    let r = s
+        .runs
+        .iter()
+        .find(|r| r.backend == backend)
+        .expect("build.rs renders the micro-benchmark scenes in every backend");
+    SceneView::new(r.image).expect("valid SceneImage")
+}
+
+/// Single operations in `R` (loops of one call, net of the empty loop) on photo1's nodes,
+/// triangles and boxes, the ellipsoids scene's ellipsoids and metaballs' density fields,
+/// each decoded in place from the SceneImage in `R`'s storage format.
+fn micro<R: Real>(o: &mut Out, backend: Backend) {
+    {
+        let view = scene_view(scene("photo1"), backend);
+        let tracer = Tracer::<R>::new(view);
+        let rays = grid_rays(&tracer);
+        let nr = rays.len() as u64;
+
+        let nodes = view.node_count();
+        let mut boxes = [Aabb {
+            min: Vec3::zero(),
+            max: Vec3::zero(),
+        }; 2048];
+        assert!(nodes as usize <= boxes.len());
+        for (i, b) in boxes.iter_mut().enumerate().take(nodes as usize) {
+            *b = view.node::<R>(i as u32).bounds;
+        }
+        let boxes = &boxes[..nodes as usize];
+        let (_, empty) = count(|| loop_empty(boxes, &rays));
+        let (hits, t) = count(|| loop_aabb(boxes, &rays));
+        op(o, backend, "aabb_hit", nr * nodes as u64, hits, t, empty);
+        let (_, empty) = count(|| loop_empty_index(nodes, &rays, 1));
+        let (hits, t) = count(|| loop_node(&view, &rays));
+        op(
+            o,
+            backend,
+            "node_decode+aabb_hit",
+            nr * nodes as u64,
+            hits,
+            t,
+            empty,
+        );
+
+        let ntri = view.count(Section::Triangles);
+        let mut tris = [Triangle {
+            p: [Vec3::zero(); 3],
+        }; 1024];
+        assert!(ntri as usize <= tris.len());
+        for (i, t) in tris.iter_mut().enumerate().take(ntri as usize) {
+            *t = view.triangle::<R>(i as u32).tri;
+        }
+        let tris = &tris[..ntri as usize];
+        let (_, empty) = count(|| loop_empty(tris, &rays));
+        let (hits, t) = count(|| loop_triangle(tris, &rays));
+        op(
+            o,
+            backend,
+            "triangle_intersect",
+            nr * ntri as u64,
+            hits,
+            t,
+            empty,
+        );
+        let (_, empty) = count(|| loop_empty_index(ntri, &rays, 1));
+        let (hits, t) = count(|| loop_triangle_rec(&view, &rays));
+        op(
+            o,
+            backend,
+            "triangle_decode+intersect",
+            nr * ntri as u64,
+            hits,
+            t,
+            empty,
+        );
+
+        let nbox = view.count(Section::Boxes);
+        let reps = 16;
+        let (_, empty) = count(|| loop_empty_index(nbox, &rays, reps));
+        let (hits, t) = count(|| loop_boxshape(&view, &rays, reps));
+        op(
+            o,
+            backend,
+            "boxshape_decode+intersect",
+            nr * (nbox * reps) as u64,
+            hits,
+            t,
+            empty,
+        );
+    }
+    {
+        let view = scene_view(scene("ellipsoids"), backend);
+        let tracer = Tracer::<R>::new(view);
+        let rays = grid_rays(&tracer);
+        let n = view.count(Section::Ellipsoids);
+        let (_, empty) = count(|| loop_empty_index(n, &rays, 1));
+        let (hits, t) = count(|| loop_ellipsoid(&view, &rays));
+        op(
+            o,
+            backend,
+            "ellipsoid_decode+intersect",
+            rays.len() as u64 * n as u64,
+            hits,
+            t,
+            empty,
+        );
+    }
+    {
+        let view = scene_view(scene("metaballs"), backend);
+        for g in 0..view.count(Section::BlobGroups) {
+            let rec = view.blob_group::<R>(g);
+            let scene = view;
+            let group = BlobGroup {
+                count: rec.count as usize,
+                ball: |k: usize| scene.ball::<R>(rec.first + k as u32),
+                kernel: rec.kernel,
+                threshold: rec.threshold,
+            };
+            let (lo, hi) = group.bounds();
+            let pts = blob_points(lo, hi);
+            let (_, empty) = count(|| loop_empty_points(&pts));
+            let (_, t) = count(|| loop_field(&view, g, &pts));
+            let net = t.saturating_sub(empty);
+            say!(
+            o,
+            "OP name=blob_field_eval backend={} group={} balls={} kernel={:?} n={} instr={} per_op={}.{:02}",
+            backend.name(),
+            g,
+            rec.count,
+            rec.kernel,
+            BLOB_POINTS,
+            net,
+            net / BLOB_POINTS as u64,
+            (net % BLOB_POINTS as u64) * 100 / BLOB_POINTS as u64
+        );
+        }
+    }
+}
+
+/// Render scene `s` in `R` with the technique set of `r`, check it against the host's render
+/// and print its `RUN` line; true when pixels and counts equal the host's.
+fn render_scene<R: Real>(
     o: &mut Out,
     s: &SceneData,
-    r: &TechRun,
+    r: &Run,
     pixels: &mut [Rgb8; MAX_PIXELS],
     overhead: u64,
 ) -> bool {
+    assert!(r.backend.name() == R::NAME, "the run's backend is R");
     let ((), validate) = count(|| {
-        black_box(SceneView::new(black_box(s.image)).expect("valid SceneImage"));
+        black_box(SceneView::new(black_box(r.image)).expect("valid SceneImage"));
     });
-    let view = SceneView::new(s.image).expect("valid SceneImage");
-    let mut tracer = Tracer::<f32>::with_techniques(view, r.techniques);
+    let view = SceneView::new(r.image).expect("valid SceneImage");
+    view.check_storage::<R>()
+        .expect("the image is in the backend's storage format");
+    let mut tracer = Tracer::<R>::with_techniques(view, r.techniques);
     let n = (s.width * s.height) as usize;
     assert!(n <= MAX_PIXELS, "frame too large for the benchmark");
     let out = &mut pixels[..n];
     let ((), instr) = count(|| render_frame(&mut tracer, s.width, s.height, out));
     let mut mismatched = 0u32;
     let mut max_diff = 0u8;
-    for (px, want) in out.iter().zip(s.reference.chunks_exact(3)) {
+    assert!(r.reference.len() == 3 * n, "reference size");
+    for (px, want) in out.iter().zip(r.reference.chunks_exact(3)) {
         if px[..] != want[..] {
             mismatched += 1;
         }
@@ -741,13 +818,14 @@ fn render_scene(
     let stats_match = dbg.as_str() == r.host_stats_debug;
     say!(
         o,
-        "RUN scene={} techniques={} w={} h={} pixels={} bytes={} instr={} validate_instr={} {} mismatched={} max_diff={} stats_match={} hash={:016x} host_hash={:016x}",
+        "RUN scene={} techniques={} backend={} w={} h={} pixels={} bytes={} instr={} validate_instr={} {} mismatched={} max_diff={} stats_match={} hash={:016x} host_hash={:016x}",
         s.name,
         r.name,
+        r.backend.name(),
         s.width,
         s.height,
         n,
-        s.image.len(),
+        r.image.len(),
         instr - overhead,
         validate - overhead,
         stats_kv(&tracer.stats),
@@ -755,18 +833,19 @@ fn render_scene(
         max_diff,
         stats_match,
         fnv1a(out.as_flattened()),
-        fnv1a(s.reference)
+        fnv1a(r.reference)
     );
     mismatched == 0 && stats_match
 }
 
 /// Print one micro-benchmark: instructions per operation net of the empty loop.
-fn op(o: &mut Out, name: &str, n: u64, hits: u32, instr: u64, empty: u64) {
+fn op(o: &mut Out, backend: Backend, name: &str, n: u64, hits: u32, instr: u64, empty: u64) {
     let net = instr.saturating_sub(empty);
     say!(
         o,
-        "OP name={} n={} hits={} instr={} empty_loop={} per_op={}.{:02}",
+        "OP name={} backend={} n={} hits={} instr={} empty_loop={} per_op={}.{:02}",
         name,
+        backend.name(),
         n,
         hits,
         net,
