@@ -50,6 +50,12 @@ pub trait SceneSource {
     /// Resolves once [`SceneSource::produced`] holds for `frame`. Implement it together
     /// with `produced`.
     async fn wait_produced(&self, _frame: u16) {}
+    /// The CRC-32 of frame `frame`'s scene if the DM delivers it with the scene (the DM
+    /// wrote the bytes; the RC then need not read all of them before the first chunk).
+    /// Default: `None`, the RC computes it.
+    fn scene_crc(&self, _frame: u16) -> Option<u32> {
+        None
+    }
 }
 
 /// CPU work the RC just did, reported to its clock (hardware: time passes by itself;
@@ -392,13 +398,17 @@ impl RootState {
         }
     }
 
-    /// The CRC-32 of frame `frame`'s scene `bytes`, computed once per frame (every chunk
-    /// carries it) and kept while the frame is in flight.
-    pub fn scene_crc(&mut self, frame: u16, bytes: &[u8]) -> u32 {
+    /// The CRC-32 of frame `frame`'s scene `bytes` (every chunk carries it): the DM's if it
+    /// delivers one, else computed once per frame; kept while the frame is in flight.
+    pub fn scene_crc(&mut self, frame: u16, bytes: &[u8], from_dm: Option<u32>) -> u32 {
         let slot = &mut self.scene_crc[(frame % 2) as usize];
         match *slot {
             Some((f, c)) if f == frame => c,
             _ => {
+                if let Some(c) = from_dm {
+                    *slot = Some((frame, c));
+                    return c;
+                }
                 let c = wire::CRC32.checksum(bytes);
                 *slot = Some((frame, c));
                 self.crc_work += bytes.len();
@@ -607,7 +617,7 @@ impl RootState {
             if let Some(scene) = scenes.scene(frame) {
                 let start = (c as usize * SCENE_CHUNK).min(scene.len());
                 let end = (start + SCENE_CHUNK).min(scene.len());
-                let crc = self.scene_crc(frame, scene);
+                let crc = self.scene_crc(frame, scene, scenes.scene_crc(frame));
                 let msg = Down::Scene {
                     frame,
                     offset: start as u32,
@@ -871,7 +881,9 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                 let scene = scenes
                     .scene(bframe)
                     .ok_or(RootError::BadScene { frame: bframe })?;
-                let crc = root.borrow_mut().scene_crc(bframe, scene);
+                let crc = root
+                    .borrow_mut()
+                    .scene_crc(bframe, scene, scenes.scene_crc(bframe));
                 let tx = bus.tx_bank();
                 let n = match boffset {
                     Some(off) => {
