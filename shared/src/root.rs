@@ -209,8 +209,9 @@ pub struct RootReport {
 struct NodeSlot {
     expect: u16,
     jobs: [Option<Job>; JOB_QUEUE],
-    /// Highest frame whose scene the node reported ready.
-    ready_upto: Option<u16>,
+    /// The frame whose scene the node reported ready, per bank (`frame % 2`). Per bank,
+    /// not "up to": a node may have missed frame `f`'s broadcast and still hold `f + 1`'s.
+    ready: [Option<u16>; 2],
     /// Scene chunks the node lacks (frame, bitmap), minus those already re-sent.
     repair: Option<(u16, [u32; wire::MAX_CHUNKS / 32])>,
     /// The chunk re-sent in the exchange in progress.
@@ -225,14 +226,14 @@ impl NodeSlot {
     const NEW: NodeSlot = NodeSlot {
         expect: 0,
         jobs: [None; JOB_QUEUE],
-        ready_upto: None,
+        ready: [None; 2],
         repair: None,
         repairing: None,
         heard_us: 0,
         dead: false,
     };
     fn ready_for(&self, frame: u16) -> bool {
-        self.ready_upto.is_some_and(|r| r >= frame)
+        self.ready[(frame % 2) as usize] == Some(frame)
     }
 }
 
@@ -482,6 +483,38 @@ impl RootState {
         died
     }
 
+    /// The frame to call a roll ([`Down::Wake`]) for on nodes `first..first + count`, if
+    /// work waits that no node there can otherwise be asked for: jobs of a dead node (any
+    /// bus), or a live node holding no jobs that has not reported the scene of the frame
+    /// being handed out although this bus has broadcast it (`broadcast_upto`: frames below it
+    /// are fully broadcast here) and no repair is under way. `None` with time-outs off.
+    pub fn roll_call(&self, first: NodeId, count: u16, broadcast_upto: u16) -> Option<u16> {
+        if self.finished() || self.timeout_us == 0 {
+            return None;
+        }
+        if let Some((d, k)) = self.orphan() {
+            return self.nodes[d].jobs[k].map(|j| j.frame);
+        }
+        let f = self.sched_frame;
+        if f >= broadcast_upto || self.sched.exhausted() {
+            return None;
+        }
+        self.nodes[self.nodes_in(first, count)]
+            .iter()
+            .any(|s| {
+                !s.dead
+                    && !s.ready_for(f)
+                    && s.jobs.iter().all(|j| j.is_none())
+                    && s.repair.is_none()
+            })
+            .then_some(f)
+    }
+
+    /// The time-out in force (µs; it doubles after each false alarm).
+    pub fn timeout_us(&self) -> u64 {
+        self.timeout_us
+    }
+
     /// A job held by a dead node, as (node, queue index), oldest frame first.
     fn orphan(&self) -> Option<(usize, usize)> {
         let mut best: Option<(usize, usize, u16)> = None;
@@ -605,10 +638,17 @@ impl RootState {
         let slot = &mut self.nodes[node as usize];
         slot.repairing = None;
         let next = slot.repair.and_then(|(frame, map)| {
-            let c = (0..wire::MAX_CHUNKS as u32)
+            // Only chunks the scene has (a node that heard nothing of it asks for all).
+            let chunks = scenes
+                .scene(frame)
+                .map_or(0, |s| s.len().div_ceil(SCENE_CHUNK)) as u32;
+            let c = (0..chunks.min(wire::MAX_CHUNKS as u32))
                 .find(|&c| map[(c / 32) as usize] & (1 << (c % 32)) != 0)?;
             Some((frame, c))
         });
+        if next.is_none() {
+            slot.repair = None;
+        }
         if let Some((frame, c)) = next {
             if let Some((_, map)) = &mut slot.repair {
                 map[(c / 32) as usize] &= !(1 << (c % 32));
@@ -666,7 +706,7 @@ impl RootState {
             Up::Poll => {}
             Up::Status { scene } => match scene {
                 SceneState::Ready { frame } => {
-                    slot.ready_upto = Some(slot.ready_upto.map_or(frame, |r| r.max(frame)));
+                    slot.ready[(frame % 2) as usize] = Some(frame);
                     if slot.repair.is_some_and(|(f, _)| f == frame) {
                         slot.repair = None;
                     }
@@ -795,6 +835,11 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
     let mut boffset: Option<u32> = Some(0);
     // Deaths this bus has broadcast `Wake` for.
     let mut woken: u16 = 0;
+    // Roll calls: when the next may go out while work waits (None: nothing waits), and the
+    // interval after it (doubles while the wait lasts: a lost `Wake` is repeated, a node
+    // that never answers costs a bounded number of broadcasts).
+    let mut call_at: Option<u64> = None;
+    let mut call_every: u64 = 0;
     // The transfer on the wire (double buffering only).
     let mut inflight: Option<Sent> = None;
     let (first, count) = bus.nodes();
@@ -812,23 +857,45 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
         }
         // 1. Choose the next transfer and compose it into the idle TX bank.
         let mut ready = bus.ready();
-        let mut wake = false;
+        let mut wake: Option<u16> = None;
         if ready.is_none() {
-            root.borrow_mut().expire(first, count, clock.now_us());
-            // A node died (on any bus): idle nodes must be told to ask for its work.
-            if root.borrow().deaths() > woken {
-                woken = root.borrow().deaths();
-                wake = true;
+            let now = clock.now_us();
+            root.borrow_mut().expire(first, count, now);
+            let waiting = root.borrow().roll_call(first, count, bframe);
+            let every = root.borrow().timeout_us();
+            match waiting {
+                None => call_at = None,
+                Some(frame) => {
+                    // A node died (on any bus): idle nodes must be told to ask for its work
+                    // at once. Otherwise call once the wait has lasted a time-out.
+                    if root.borrow().deaths() > woken {
+                        woken = root.borrow().deaths();
+                        call_at = Some(now);
+                        call_every = every;
+                    }
+                    let at = *call_at.get_or_insert_with(|| {
+                        call_every = every;
+                        now.saturating_add(every)
+                    });
+                    if now >= at {
+                        wake = Some(frame);
+                        call_at = Some(now.saturating_add(call_every));
+                        call_every = call_every.saturating_mul(2);
+                    }
+                }
             }
             let can_send = root.borrow().may_broadcast(bframe);
-            if !wake && !(can_send && scenes.produced(bframe)) {
+            if wake.is_none() && !(can_send && scenes.produced(bframe)) {
                 // Nothing to send now. The frame on the wire may change that: take it first.
                 if let Some(sent) = inflight.take() {
                     let got = bus.finish(&mut rx).await?;
                     complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
                     continue;
                 }
-                let deadline = root.borrow().next_deadline(first, count);
+                let deadline = match (root.borrow().next_deadline(first, count), call_at) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                };
                 let timer = async {
                     match deadline {
                         Some(t) => clock.at_us(t).await,
@@ -873,9 +940,17 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                 r.heard(node, clock.now_us());
                 (Sent::Exchange(node), r.reply(node, scenes, bus.tx_bank()))
             }
-            None if wake => (
+            None if wake.is_some() => (
                 Sent::Broadcast,
-                wire::encode(0, 0, &Down::Wake, bus.tx_bank()).unwrap_or(0),
+                wire::encode(
+                    0,
+                    0,
+                    &Down::Wake {
+                        frame: wake.unwrap_or(0),
+                    },
+                    bus.tx_bank(),
+                )
+                .unwrap_or(0),
             ),
             None => {
                 let scene = scenes

@@ -23,7 +23,7 @@ use core::fmt;
 use serde::{Deserialize, Serialize};
 
 /// Protocol version carried in every frame.
-pub const PROTOCOL_VERSION: u8 = 2;
+pub const PROTOCOL_VERSION: u8 = 3;
 /// Most pixels in one [`Up::Pixels`] message (one full 512-pixel scanline).
 pub const MAX_RUN: usize = 512;
 /// Bytes of scene image in one broadcast chunk.
@@ -146,9 +146,12 @@ pub enum Down<'a> {
     SceneEnd { frame: u16, len: u32, crc: u32 },
     /// No more work: the node may stop.
     Stop,
-    /// Broadcast after the RC declared a node dead: work is waiting to be re-issued, so an
-    /// idle node with a free job slot posts a [`Up::Poll`] to be handed some.
-    Wake,
+    /// Roll call, broadcast when work waits that no node can be asked for otherwise (a node
+    /// was declared dead holding jobs, or a node has not reported frame `frame`'s scene
+    /// long after its broadcast) and again, at doubling intervals, while that lasts. An idle
+    /// node with a free job slot answers: with a [`Up::Poll`] if it holds `frame`'s scene
+    /// (to be handed work), else with a [`SceneState::Missing`] status (to be sent it).
+    Wake { frame: u16 },
 }
 
 /// NC -> RC messages.
@@ -384,7 +387,7 @@ mod tests {
                 crc: 0xdead_beef,
             },
             Down::Stop,
-            Down::Wake,
+            Down::Wake { frame: 4 },
         ];
         for d in downs {
             roundtrip(d, &mut [0u8; MAX_FRAME]);
@@ -543,8 +546,9 @@ mod tests {
     fn wrong_version_and_garbage_are_errors_not_panics() {
         let mut buf = [0u8; 64];
         let n = encode(0, 0, &Down::Stop, &mut buf).unwrap();
-        // The next version, and version 1 (before `Down::Wake`).
-        for v in [PROTOCOL_VERSION + 1, 1] {
+        // The next version, and versions 1 (before `Down::Wake`) and 2 (`Wake` without its
+        // frame).
+        for v in [PROTOCOL_VERSION + 1, 1, 2] {
             buf[0] = v;
             let crc = CRC32.checksum(&buf[..n - 4]).to_le_bytes();
             buf[n - 4..n].copy_from_slice(&crc);

@@ -6,7 +6,7 @@ use links_core::dm::{compile, CompileOptions};
 use links_core::node::NodeConfig;
 use links_core::sched::{Policy, Shape};
 use links_core::wire::{self, Down, SCENE_CHUNK};
-use links_host::cluster::star::{Faults, NodeDeath};
+use links_host::cluster::star::{BroadcastDrop, Faults, NodeDeath};
 use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimError, SimReport};
 use links_host::frame::{render_frame, Precision};
 use links_host::scene_file::load_scene;
@@ -980,4 +980,126 @@ fn rc_double_buffering_hides_the_rcs_work_and_keeps_the_frame() {
         "free {:.6} double {:.6} single {:.6} (RC busy {:.6} / {:.6} s, chunk encode {:.6} s)",
         free.time_s, double.time_s, single.time_s, double.rc_busy_s, single.rc_busy_s, encode_s
     );
+}
+
+/// Broadcasts of one frame's scene on a bus: its chunks and its `SceneEnd`.
+fn scene_broadcasts(img: &[u8]) -> u64 {
+    img.len().div_ceil(SCENE_CHUNK) as u64 + 1
+}
+
+/// A node off the bus for a whole scene broadcast (chunks and `SceneEnd`) never hears of
+/// the scene. Alone, it must still be found and sent the scene point-to-point.
+#[test]
+fn a_node_that_missed_a_whole_scene_broadcast_is_sent_the_scene() {
+    let img = image("photo1.ron", 64, 60);
+    let chunks = img.len().div_ceil(SCENE_CHUNK);
+    let r = run(
+        &img,
+        SimConfig {
+            nodes: 1,
+            node_timeout_s: 0.01,
+            drops: vec![BroadcastDrop {
+                node: 0,
+                from: 0,
+                to: scene_broadcasts(&img),
+            }],
+            ..SimConfig::default()
+        },
+    );
+    assert!(r.frames[0] == reference(&img));
+    assert_eq!(r.bus[0].dropped_broadcast, scene_broadcasts(&img));
+    // Every chunk was re-sent to it, once.
+    assert_eq!(r.root.repairs as usize, chunks);
+    assert_eq!(r.node_reports[0].chunks as usize, chunks);
+    assert_eq!(r.root.pixels, 64 * 60);
+}
+
+/// In an animation a node misses frame 0's scene and gets frame 1's: it must not be handed
+/// frame-0 work it cannot do (its bank 0 is empty); it gets frame 0's scene or none of its
+/// work, and every frame is exact.
+#[test]
+fn a_node_that_missed_one_frames_scene_gets_it_or_no_work_of_that_frame() {
+    let a = image("photo1.ron", 64, 60);
+    let b = image("reflections.ron", 64, 60);
+    let scenes = [a.clone(), b.clone(), a.clone()];
+    let cfg = SimConfig {
+        nodes: 4,
+        keep_frames: true,
+        node_timeout_s: 0.1,
+        ..SimConfig::default()
+    };
+    let clean = simulate(&scenes, &cfg).expect("simulates");
+    assert_eq!(clean.root.timeouts, 0);
+    for node in [0u16, 3] {
+        let r = simulate(
+            &scenes,
+            &SimConfig {
+                drops: vec![BroadcastDrop {
+                    node,
+                    from: 0,
+                    to: scene_broadcasts(&a),
+                }],
+                ..cfg.clone()
+            },
+        )
+        .unwrap_or_else(|e| panic!("node {node}: {e}"));
+        let (ra, rb) = (reference(&a), reference(&b));
+        assert!(r.frames[0] == ra && r.frames[1] == rb && r.frames[2] == ra);
+        assert_eq!(r.bus[0].dropped_broadcast, scene_broadcasts(&a));
+        // No node was declared dead: the node never held work it could not do.
+        assert_eq!((r.root.timeouts, r.root.revived), (0, 0), "node {node}");
+        assert_eq!(r.root.pixels, 3 * 64 * 60);
+        // Not much later than without the loss (no time-out of a node holding work; at
+        // most a roll call after one time-out and the repair).
+        assert!(
+            r.time_s < clean.time_s + 2.0 * cfg.node_timeout_s,
+            "node {node}: {} vs {}",
+            r.time_s,
+            clean.time_s
+        );
+    }
+}
+
+/// A node idle when the RC broadcasts `Wake` (a node died holding work) misses it: the RC
+/// must call again, or the dead node's work waits forever. Static split on two nodes: node
+/// 0 renders its half and falls silent; node 1 dies early in its half and is declared dead
+/// (the time-out is longer than node 0's half) only after node 0 went idle.
+#[test]
+fn a_node_that_missed_a_wake_broadcast_is_woken_again() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let cfg = SimConfig {
+        nodes: 2,
+        policy: Policy::Static { shape: Shape::Span },
+        ..SimConfig::default()
+    };
+    let clean = run(&img, cfg.clone());
+    let t0 = clean.time_s;
+    let r = run(
+        &img,
+        SimConfig {
+            node_timeout_s: t0,
+            deaths: vec![NodeDeath {
+                node: 1,
+                at_s: 0.2 * t0,
+            }],
+            // Node 0 hears the scene, and loses the next broadcast: the first `Wake`.
+            drops: vec![BroadcastDrop {
+                node: 0,
+                from: scene_broadcasts(&img),
+                to: scene_broadcasts(&img) + 1,
+            }],
+            ..cfg
+        },
+    );
+    assert!(r.frames[0] == want);
+    assert_eq!((r.root.timeouts, r.root.revived), (1, 0));
+    assert_eq!(r.root.reissued, 1, "{:?}", r.root);
+    // The first Wake was lost, and at least one more went out.
+    let wakes = r.root.broadcasts as u64 - scene_broadcasts(&img);
+    assert!(wakes >= 2, "{wakes} Wake broadcasts");
+    assert_eq!(r.bus[0].dropped_broadcast, 1);
+    // Node 0 rendered the whole frame: its half, then node 1's again.
+    assert_eq!(r.node_reports[0].pixels, 64 * 60);
+    assert!(r.time_s < 5.0 * t0, "{} vs {t0}", r.time_s);
 }

@@ -36,7 +36,7 @@ use links_core::root::{
 use links_core::sched::Policy;
 use links_core::wire;
 use rccost::{RcClock, RcCost};
-use star::{BusCounters, BusTiming, Faults, NodeDeath, SimBus, SimNodeLink, Star};
+use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, SimBus, SimNodeLink, Star};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::fmt;
@@ -68,6 +68,8 @@ pub struct SimConfig {
     pub faults: Faults,
     /// Nodes that die (stop answering) during the run.
     pub deaths: Vec<NodeDeath>,
+    /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
+    pub drops: Vec<BroadcastDrop>,
     /// The RC declares a node holding jobs dead after this long without an exchange (s) and
     /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
     pub node_timeout_s: f64,
@@ -100,6 +102,7 @@ impl Default for SimConfig {
             model: CycleModel::default(),
             faults: Faults::default(),
             deaths: Vec::new(),
+            drops: Vec::new(),
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
             collect: Collect::Snoop,
@@ -376,6 +379,9 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     for d in &cfg.deaths {
         star.borrow_mut()
             .kill_at(d.node, (d.at_s * 1e12).round() as Ps);
+    }
+    for d in &cfg.drops {
+        star.borrow_mut().drop_broadcasts(*d);
     }
     let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
     let buses = star.borrow().bus_count();

@@ -70,6 +70,16 @@ pub struct NodeDeath {
     pub at_s: f64,
 }
 
+/// Fault injection: node `node`'s receiver is off the bus for broadcasts number
+/// `from..to` of its bus (0-based, in the order the bus sends them: scene chunks, `SceneEnd`,
+/// `Wake`, `Stop`); it loses them whole and hears about it from nobody. Exchanges still work.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BroadcastDrop {
+    pub node: NodeId,
+    pub from: u64,
+    pub to: u64,
+}
+
 /// Traffic counters of one bus.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct BusCounters {
@@ -87,6 +97,8 @@ pub struct BusCounters {
     pub corrupted_up: u64,
     pub corrupted_down: u64,
     pub corrupted_broadcast: u64,
+    /// Broadcast copies lost by a receiver off the bus ([`BroadcastDrop`]).
+    pub dropped_broadcast: u64,
 }
 
 impl BusCounters {
@@ -137,6 +149,7 @@ pub struct Star {
     /// When each node dies (stops answering: its ready line stays low, it takes no
     /// transfer and posts nothing); `Ps::MAX` = never.
     dead_at: Vec<Ps>,
+    drops: Vec<BroadcastDrop>,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -181,7 +194,13 @@ impl Star {
             rng: faults.random.unwrap_or(1).max(1),
             snoop,
             dead_at: vec![Ps::MAX; nodes as usize],
+            drops: Vec::new(),
         }))
+    }
+
+    /// A node loses some broadcasts (fault injection).
+    pub fn drop_broadcasts(&mut self, d: BroadcastDrop) {
+        self.drops.push(d);
     }
 
     /// Node `node` dies at virtual time `at` (fault injection).
@@ -249,12 +268,21 @@ impl Star {
             }
             None => {
                 let (first, count) = (self.buses[bus].first, self.buses[bus].count);
+                let index = self.buses[bus].counters.broadcasts;
                 let c = &mut self.buses[bus].counters;
                 c.broadcasts += 1;
                 c.broadcast_bytes += t.down.len() as u64;
                 let every = self.faults.broadcast_every;
                 for n in first..first + count {
                     if self.is_dead(n as usize) {
+                        continue;
+                    }
+                    if self
+                        .drops
+                        .iter()
+                        .any(|d| d.node == n && (d.from..d.to).contains(&index))
+                    {
+                        self.buses[bus].counters.dropped_broadcast += 1;
                         continue;
                     }
                     let mut f = t.down.clone();
