@@ -60,26 +60,6 @@ struct TechRun {
 
 include!(concat!(env!("OUT_DIR"), "/scenes.rs"));
 
-mod wire_bench;
-
-/// [`wire_bench::Meter`] over the SysTick counter.
-struct WireMeter<'a> {
-    o: &'a mut Out,
-    overhead: u64,
-}
-
-impl wire_bench::Meter for WireMeter<'_> {
-    fn instr(&mut self, f: &mut dyn FnMut()) -> u64 {
-        let t0 = ticks();
-        f();
-        let t1 = ticks();
-        ((t1 - t0) * INSTR_PER_TICK).saturating_sub(self.overhead)
-    }
-    fn line(&mut self, name: &str, bytes: usize, n: usize, instr: u64) {
-        say!(self.o, "WIRE name={} bytes={} n={} instr={}", name, bytes, n, instr);
-    }
-}
-
 /// QEMU mps2: SysTick runs at 25 MHz; with `-icount shift=0` the CPU runs at 1 instruction
 /// per ns, so one tick is 40 instructions.
 const INSTR_PER_TICK: u64 = 40;
@@ -539,6 +519,33 @@ fn sqrt_bench(o: &mut Out) -> bool {
             real_differ
         );
         real_differ == 0
+    }
+}
+
+mod wire_bench;
+
+/// [`wire_bench::Meter`] over the SysTick counter.
+struct WireMeter<'a> {
+    o: &'a mut Out,
+    overhead: u64,
+}
+
+impl wire_bench::Meter for WireMeter<'_> {
+    fn instr(&mut self, f: &mut dyn FnMut()) -> u64 {
+        let t0 = ticks();
+        f();
+        let t1 = ticks();
+        ((t1 - t0) * INSTR_PER_TICK).saturating_sub(self.overhead)
+    }
+    fn line(&mut self, name: &str, bytes: usize, n: usize, instr: u64) {
+        say!(
+            self.o,
+            "WIRE name={} bytes={} n={} instr={}",
+            name,
+            bytes,
+            n,
+            instr
+        );
     }
 }
 
