@@ -13,6 +13,7 @@
 //!   link traits, sub-screen scheduling, the NC and RC behaviour).
 //! - [`spi`]: the link driver protocol over a real SPI star (framing, handshake, banks,
 //!   retransmit requests), generic over the MCU ports.
+//! - [`serial`]: the PC <-> RC serial protocol (scene upload, frame readback).
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 // The one exception: the FPU square root in `num` (inline asm).
 #![deny(unsafe_code)]
@@ -30,6 +31,7 @@ pub mod num;
 pub mod render;
 pub mod root;
 pub mod sched;
+pub mod serial;
 pub mod shape;
 pub mod spi;
 pub mod wire;
