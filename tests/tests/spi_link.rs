@@ -323,18 +323,18 @@ fn run<F: Future>(f: F) -> F::Output {
     panic!("the link stalled");
 }
 
-fn banks<const N: usize>() -> Vec<Box<Bank>> {
-    (0..N).map(|_| Box::new([0u8; BANK])).collect()
+fn banks<const N: usize>() -> Vec<Bank> {
+    vec![[0u8; BANK]; N]
 }
 
-fn slave_banks(v: &mut [Box<Bank>]) -> SlaveBanks<'_> {
+fn slave_banks(v: &mut [Bank]) -> SlaveBanks<'_> {
     let [a, b, c, d, e] = v else {
         panic!("five banks")
     };
     SlaveBanks {
-        tx: [&mut **a, &mut **b],
-        rx: [&mut **c, &mut **d],
-        scratch: &mut **e,
+        tx: [a, b],
+        rx: [c, d],
+        scratch: e,
     }
 }
 
@@ -386,11 +386,9 @@ fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
         };
         let nc = async {
             let mut rx = [0u8; MAX_FRAME];
-            loop {
-                match handle.recv(&mut rx).await.expect("no error") {
-                    Incoming::Exchanged { len } => return rx[..len].to_vec(),
-                    Incoming::Broadcast { .. } => panic!("no broadcast was sent"),
-                }
+            match handle.recv(&mut rx).await.expect("no error") {
+                Incoming::Exchanged { len } => rx[..len].to_vec(),
+                Incoming::Broadcast { .. } => panic!("no broadcast was sent"),
             }
         };
         let link = task.run(&mut port, &shared);
