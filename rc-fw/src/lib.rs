@@ -43,6 +43,8 @@ pub mod pins {
     pub const CS: [&str; NODES] = ["PE8", "PE9", "PE10", "PE11", "PE12", "PE13", "PE14", "PE15"];
     /// Handshake inputs with EXTI (pull-down: an absent node reads "not ready").
     pub const READY: [&str; NODES] = ["PD0", "PD1", "PD2", "PD3", "PD6", "PD7", "PD8", "PD9"];
+    /// Select lines S0..S2 of the 8:1 MISO multiplexer (74LVC251: node i's MISO on input i).
+    pub const MISO_SEL: [&str; 3] = ["PE4", "PE5", "PE6"];
     /// USB OTG FS (the Discovery's micro-USB CN5): D-, D+.
     pub const USB: [&str; 2] = ["PA11", "PA12"];
     /// The Discovery's accelerometer shares SPI1: its chip-select is held high.
@@ -60,6 +62,7 @@ mod tests {
         all.extend(super::pins::READY);
         all.extend(super::pins::SPI1);
         all.extend(super::pins::USB);
+        all.extend(super::pins::MISO_SEL);
         all.push(super::pins::ACCEL_CS);
         let n = all.len();
         all.sort();

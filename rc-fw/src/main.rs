@@ -308,7 +308,18 @@ mod fw {
             ExtiInput::new(p.PD9, p.EXTI9, Pull::Down, Irqs),
         ];
         let [btx, brx] = &mut sram.link;
-        let link = MasterLink::new(RcPort { spi, cs, ready }, 0, btx, brx);
+        let miso_sel = [
+            Output::new(p.PE4, Level::Low, Speed::VeryHigh),
+            Output::new(p.PE5, Level::Low, Speed::VeryHigh),
+            Output::new(p.PE6, Level::Low, Speed::VeryHigh),
+        ];
+        let port = RcPort {
+            spi,
+            cs,
+            ready,
+            miso_sel,
+        };
+        let link = MasterLink::new(port, 0, btx, brx);
 
         spawner.spawn(unwrap!(usb_task(device)));
         spawner.spawn(unwrap!(usb_tx_task(tx)));

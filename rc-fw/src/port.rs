@@ -4,7 +4,7 @@
 
 use embassy_futures::select::{select, select_array};
 use embassy_stm32::exti::ExtiInput;
-use embassy_stm32::gpio::Output;
+use embassy_stm32::gpio::{Level, Output};
 use embassy_stm32::mode::Async;
 use embassy_stm32::spi::{mode::Master, Spi};
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -29,6 +29,9 @@ pub struct RcPort<const N: usize> {
     pub spi: Spi<'static, Async, Master>,
     pub cs: [Output<'static>; N],
     pub ready: [ExtiInput<'static, Async>; N],
+    /// Select lines (bit 0 first) of the MISO multiplexer: each node's MISO has its own wire
+    /// to the mux, so the nodes selected together by a broadcast never drive one line.
+    pub miso_sel: [Output<'static>; 3],
 }
 
 impl<const N: usize> MasterPort for RcPort<N> {
@@ -48,6 +51,13 @@ impl<const N: usize> MasterPort for RcPort<N> {
     async fn select(&mut self, sel: Select) {
         match sel {
             Select::One(i) => {
+                for (bit, line) in self.miso_sel.iter_mut().enumerate() {
+                    line.set_level(if i >> bit & 1 == 1 {
+                        Level::High
+                    } else {
+                        Level::Low
+                    });
+                }
                 if let Some(cs) = self.cs.get_mut(i as usize) {
                     cs.set_low();
                 }
