@@ -7,6 +7,7 @@ use links_core::dm::{compile, CompileOptions};
 use links_core::image::{SceneView, Section};
 use links_host::ablation::{run_ablation, AblationConfig};
 use links_host::cli_cluster;
+use links_host::cli_serial;
 use links_host::cost::{self, CycleModel};
 use links_host::frame::{encode_png, render_frame, Precision};
 use links_host::scene_file::load_scene;
@@ -130,6 +131,44 @@ enum Cmd {
         /// Host threads (0 = all cores)
         #[arg(long, default_value_t = 0)]
         threads: usize,
+    },
+    /// Compile a scene and send its SceneImage to a real RC over a serial port
+    Upload {
+        #[command(flatten)]
+        scene: SceneArgs,
+        /// Serial port of the RC (e.g. /dev/ttyACM0)
+        #[arg(long)]
+        port: String,
+        /// Baud rate (a USB CDC port ignores it)
+        #[arg(long, default_value_t = links_host::serial_host::DEFAULT_BAUD)]
+        baud: u32,
+        /// How long to wait for the RC's answer to one message before sending it again, in ms
+        #[arg(long, default_value_t = 1000)]
+        timeout_ms: u64,
+        /// Then ask the RC to render this many frames
+        #[arg(long)]
+        render: Option<u16>,
+        /// No progress bar or summary line
+        #[arg(short, long)]
+        quiet: bool,
+    },
+    /// Read a rendered frame from a real RC over a serial port and write it as a PNG
+    Readback {
+        /// Serial port of the RC (e.g. /dev/ttyACM0)
+        #[arg(long)]
+        port: String,
+        /// Output PNG file
+        #[arg(short, long, default_value = "frame.png")]
+        output: PathBuf,
+        /// Baud rate (a USB CDC port ignores it)
+        #[arg(long, default_value_t = links_host::serial_host::DEFAULT_BAUD)]
+        baud: u32,
+        /// Longest silence from the RC before giving up (or asking again), in ms
+        #[arg(long, default_value_t = 5000)]
+        timeout_ms: u64,
+        /// No progress bar or summary line
+        #[arg(short, long)]
+        quiet: bool,
     },
     /// Measurement sweeps
     #[command(subcommand)]
@@ -409,6 +448,34 @@ fn run(cli: Cli) -> Result<(), String> {
                 a.hit_mismatches,
                 a.hit_mismatches_off_silhouette
             );
+            Ok(())
+        }
+        Cmd::Upload {
+            scene,
+            port,
+            baud,
+            timeout_ms,
+            render,
+            quiet,
+        } => {
+            let image = compile_scene(&scene)?;
+            let line = cli_serial::upload_command(&image, &port, baud, timeout_ms, render, quiet)?;
+            if !quiet {
+                eprintln!("{line}");
+            }
+            Ok(())
+        }
+        Cmd::Readback {
+            port,
+            output,
+            baud,
+            timeout_ms,
+            quiet,
+        } => {
+            let line = cli_serial::readback_command(&port, &output, baud, timeout_ms, quiet)?;
+            if !quiet {
+                eprintln!("{line}");
+            }
             Ok(())
         }
         Cmd::Sweep(SweepCmd::Ablation {

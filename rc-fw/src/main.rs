@@ -32,7 +32,8 @@ mod fw {
     use links_core::root::{run_bus, RootConfig, RootState};
     use links_core::sched::Policy;
     use links_core::serial::{
-        Decoder, Encoder, RcError, ToPc, ToRc, UploadReceiver, MAX_TO_PC, MAX_TO_RC,
+        Decoder, Encoder, FrameStreamer, RcError, Reply, ToPc, ToRc, UploadEvent, UploadReceiver,
+        MAX_TO_PC, MAX_TO_RC,
     };
     use links_core::spi::{Bank, MasterLink};
     use rc_fw::pins::NODES;
@@ -123,7 +124,13 @@ mod fw {
 
     /// Render `frames` frames of `image` (each a full `run_bus` of one frame: the nodes'
     /// even bank holds the scene) and stream them back.
-    async fn render(link: Link, image: &[u8], frames: u16, mut enc: Encoder) -> (Link, Encoder) {
+    async fn render(
+        link: Link,
+        image: &[u8],
+        frames: u16,
+        mut enc: Encoder,
+        last: &mut Option<FrameStreamer>,
+    ) -> (Link, Encoder) {
         let mut out = [0u8; MAX_TO_PC];
         let dims = SceneView::new(image).ok().map(|v| {
             let f = v.frame::<f32>();
@@ -174,11 +181,12 @@ mod fw {
                 Ok(report) => info!("frame {}: {} / link {}", frame, report, link.counters),
                 Err(e) => warn!("frame {} failed: {}", frame, e),
             }
-            let (_, e, done) = sink.into_inner().end();
-            enc = e;
-            if done.is_err() {
+            let ended = sink.into_inner().end();
+            enc = ended.enc;
+            if ended.result.is_err() {
                 warn!("frame {} incomplete", frame);
             }
+            *last = Some(ended.streamer);
         }
         (link, enc)
     }
@@ -195,6 +203,7 @@ mod fw {
         let mut enc = Encoder::new();
         let mut out = [0u8; MAX_TO_PC];
         let mut pkt = [0u8; 64];
+        let mut last: Option<FrameStreamer> = None;
         loop {
             rx.wait_connection().await;
             info!("PC connected");
@@ -213,9 +222,22 @@ mod fw {
                                 None
                             }
                             ToRc::Resend { frame, start, len } => {
-                                // No frame memory on the RC: pixels cannot be sent again.
-                                warn!("resend of frame {} ({}+{}) refused", frame, start, len);
-                                None
+                                // The RC keeps no frame memory: pixels cannot be sent again
+                                // (USB bulk transfers are CRC-checked and retried, so a gap
+                                // means a lost frame of ours, not line noise). The FrameEnd
+                                // can: the PC then knows exactly what it lacks.
+                                if len > 0 {
+                                    warn!(
+                                        "frame {}: pixels {}+{} cannot be resent",
+                                        frame, start, len
+                                    );
+                                }
+                                last.as_ref().filter(|s| s.frame() == frame).map(|s| {
+                                    s.end(&mut enc, &mut out).map(|len| Reply {
+                                        len,
+                                        event: UploadEvent::Ignored,
+                                    })
+                                })
                             }
                             msg => Some(upload.on_message(&msg, &mut enc, &mut out)),
                         },
@@ -228,7 +250,7 @@ mod fw {
                         match upload.image() {
                             Some(image) => {
                                 info!("render {} frame(s) of a {}-byte scene", f, image.len());
-                                (link, enc) = render(link, image, f.max(1), enc).await;
+                                (link, enc) = render(link, image, f.max(1), enc, &mut last).await;
                             }
                             None => {
                                 let code = RcError::NoScene;

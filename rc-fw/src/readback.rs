@@ -74,9 +74,10 @@ impl<Q: ByteQueue> Readback<Q> {
 
     /// Queue the `FrameEnd` (with the whole frame's CRC); fails unless every pixel went
     /// out exactly once (then no `FrameEnd` is sent and the PC reports the frame
-    /// incomplete). Returns the queue and the encoder for the next frame either way.
-    pub fn end(mut self) -> (Q, Encoder, Result<(), SerialError>) {
-        let r = match self.streamer.end(&mut self.enc, &mut self.buf) {
+    /// incomplete). Hands back the queue, the encoder for the next frame and the streamer
+    /// (which can encode the `FrameEnd` again for a `Resend`) either way.
+    pub fn end(mut self) -> Ended<Q> {
+        let result = match self.streamer.end(&mut self.enc, &mut self.buf) {
             Ok(n) => {
                 self.send(n);
                 if self.dropped > 0 {
@@ -87,8 +88,21 @@ impl<Q: ByteQueue> Readback<Q> {
             }
             Err(e) => Err(e),
         };
-        (self.queue, self.enc, r)
+        Ended {
+            queue: self.queue,
+            enc: self.enc,
+            streamer: self.streamer,
+            result,
+        }
     }
+}
+
+/// What [`Readback::end`] hands back.
+pub struct Ended<Q> {
+    pub queue: Q,
+    pub enc: Encoder,
+    pub streamer: FrameStreamer,
+    pub result: Result<(), SerialError>,
 }
 
 impl<Q: ByteQueue> PixelSink for Readback<Q> {
@@ -187,9 +201,13 @@ mod tests {
             }
         }
         assert_eq!(rb.streamed() as usize, w * h);
-        let (q, _, r) = rb.end();
-        r.expect("complete");
-        let (got, crc, progress) = decode(&q.bytes, w, h);
+        let mut ended = rb.end();
+        ended.result.expect("complete");
+        // A FrameEnd asked for again carries the same CRC.
+        let mut again = [0u8; MAX_TO_PC];
+        let n = ended.streamer.end(&mut ended.enc, &mut again).unwrap();
+        ended.queue.bytes.extend_from_slice(&again[..n]);
+        let (got, crc, progress) = decode(&ended.queue.bytes, w, h);
         assert_eq!(got, want);
         assert_eq!(crc, Some(wire::CRC32.checksum(&want)));
         assert!(progress >= 1);
@@ -210,7 +228,7 @@ mod tests {
             rb.dropped >= 2,
             "a run that did not fit, a pixel of another frame"
         );
-        assert!(rb.end().2.is_err());
+        assert!(rb.end().result.is_err());
     }
 
     #[test]

@@ -721,7 +721,7 @@ impl FrameStreamer {
         let offset = self.check(y, x, rgb)?;
         let n = self.message(y, x, rgb, enc, out)?;
         self.crc.add(offset, rgb)?;
-        self.folded += (rgb.len() / 3) as u32;
+        self.folded = self.folded.saturating_add((rgb.len() / 3) as u32);
         Ok(n)
     }
 

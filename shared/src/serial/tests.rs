@@ -907,3 +907,113 @@ fn errors_display_their_cause() {
     let e: &dyn core::error::Error = &SerialError::BadCrc;
     assert!(e.to_string().contains("CRC"));
 }
+
+#[test]
+fn sizes_quoted_in_the_docs() {
+    assert_eq!((MAX_TO_RC, MAX_TO_PC), (541, 798));
+    let mut buf = [0u8; 32];
+    let n = encode_packet(0, &ToPc::Ack { offset: 512 }, &mut buf).unwrap();
+    assert_eq!(n, 12);
+    let mut body = [0u8; 16];
+    let m = cobs::decode(&buf[1..n - 1], &mut body).unwrap();
+    assert_eq!(&body[..5], &[1, 0, 0, 0x80, 0x04]);
+    assert_eq!(m, 9);
+    // A full raw run of 256 pixels (small seq and coordinates).
+    let rgb: Vec<u8> = (0..3 * MAX_RUN).map(|i| 1 + (i % 200) as u8).collect();
+    let run = ToPc::Pixels {
+        frame: 0,
+        y: 5,
+        x: 0,
+        rgb: &rgb,
+    };
+    let mut buf = [0u8; MAX_TO_PC];
+    let n = encode_packet(3, &run, &mut buf).unwrap();
+    assert!((780..=790).contains(&n), "{n}");
+}
+
+/// A lossy line for the upload property test: frames are dropped, corrupted or duplicated.
+fn lossy(rng: &mut Rng, frame: &[u8]) -> Vec<Vec<u8>> {
+    match rng.below(20) {
+        0 | 1 => vec![],
+        2 | 3 => {
+            let mut f = frame.to_vec();
+            let i = 1 + rng.below(f.len() - 2);
+            f[i] ^= 1 + rng.below(255) as u8;
+            vec![f]
+        }
+        4 => vec![frame.to_vec(), frame.to_vec()],
+        _ => vec![frame.to_vec()],
+    }
+}
+
+#[test]
+fn upload_over_a_lossy_line_always_arrives_intact() {
+    let mut rng = Rng(0xfeed_f00d);
+    for round in 0..40 {
+        let mut image = vec![0u8; 1 + rng.below(6000)];
+        rng.bytes(&mut image);
+        let (len, crc) = (image.len() as u32, CRC32.checksum(&image));
+        let mut store = vec![0u8; 8192];
+        let mut rx = UploadReceiver::new(&mut store);
+        let mut rc_dec = Decoder::<MAX_TO_RC>::new();
+        let mut pc_dec = Decoder::<MAX_TO_PC>::new();
+        let (mut pc, mut rc) = (Encoder::new(), Encoder::new());
+        // The PC: stop-and-wait as links upload does; `None` = SceneBegin not acknowledged.
+        let mut next: Option<u32> = None;
+        let mut done = false;
+        let mut sends = 0;
+        while !done {
+            sends += 1;
+            assert!(sends < 2000, "round {round}: no progress");
+            let mut line = [0u8; MAX_TO_RC];
+            let n = match next {
+                None => pc.encode(&ToRc::SceneBegin { len, crc }, &mut line),
+                Some(o) => {
+                    let end = (o as usize + MAX_CHUNK).min(image.len());
+                    let data = &image[o as usize..end];
+                    pc.encode(&ToRc::SceneChunk { offset: o, data }, &mut line)
+                }
+            }
+            .unwrap();
+            // PC -> RC over the lossy line; every decoded (or bad) frame gets one reply.
+            let mut replies = Vec::new();
+            for f in lossy(&mut rng, &line[..n]) {
+                for b in f {
+                    let mut out = [0u8; MAX_TO_PC];
+                    let r = match rc_dec.feed::<ToRc>(b) {
+                        None => continue,
+                        Some(Ok(p)) => rx.on_message(&p.msg, &mut rc, &mut out).unwrap(),
+                        Some(Err(e)) => rx.on_bad_frame(e, &mut rc, &mut out).unwrap(),
+                    };
+                    replies.extend(lossy(&mut rng, &out[..r.len]));
+                }
+            }
+            // RC -> PC; no reply at all = a time-out: send the same again.
+            for f in replies {
+                for b in f {
+                    let Some(Ok(p)) = pc_dec.feed::<ToPc>(b) else {
+                        continue;
+                    };
+                    match p.msg {
+                        ToPc::Ack { offset } => {
+                            if next.is_none_or(|o| offset > o) {
+                                next = Some(offset)
+                            }
+                        }
+                        ToPc::Nak { offset } => {
+                            if next.is_some() {
+                                next = Some(offset)
+                            }
+                        }
+                        ToPc::SceneDone { len: l, crc: c } => {
+                            assert_eq!((l, c), (len, crc));
+                            done = true;
+                        }
+                        other => panic!("round {round}: {other:?}"),
+                    }
+                }
+            }
+        }
+        assert_eq!(rx.image(), Some(&image[..]), "round {round}");
+    }
+}
