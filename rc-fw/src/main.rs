@@ -19,6 +19,7 @@ mod fw {
     use core::ptr::addr_of_mut;
     use defmt::{info, unwrap, warn};
     use embassy_executor::Spawner;
+    use embassy_futures::yield_now;
     use embassy_stm32::exti::{self, ExtiInput};
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
     use embassy_stm32::peripherals::{DMA2_CH0, DMA2_CH3, USB_OTG_FS};
@@ -29,11 +30,12 @@ mod fw {
     use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
     use embassy_usb::{Builder, UsbDevice};
     use links_core::image::SceneView;
+    use links_core::render::{render_run, Rgb8, Tracer};
     use links_core::root::{run_bus, RootConfig, RootState};
     use links_core::sched::Policy;
     use links_core::serial::{
-        Decoder, Encoder, FrameStreamer, RcError, Reply, ToPc, ToRc, UploadEvent, UploadReceiver,
-        MAX_TO_PC, MAX_TO_RC,
+        Decoder, Encoder, FrameStreamer, RcError, ToPc, ToRc, UploadReceiver,
+        MAX_RUN as SERIAL_RUN, MAX_TO_PC, MAX_TO_RC,
     };
     use links_core::spi::{Bank, MasterLink};
     use rc_fw::pins::NODES;
@@ -191,6 +193,38 @@ mod fw {
         (link, enc)
     }
 
+    /// Answer a `Resend`: the RC keeps no frame memory, so it renders the span again itself
+    /// (the scene is in its SRAM; the tracer gives the nodes' exact pixels), yielding to the
+    /// USB tasks between runs, then sends the `FrameEnd` again.
+    async fn resend(
+        fs: &FrameStreamer,
+        image: &[u8],
+        start: u32,
+        len: u32,
+        mut enc: Encoder,
+    ) -> Encoder {
+        let mut out = [0u8; MAX_TO_PC];
+        let mut pix: [Rgb8; SERIAL_RUN] = [[0; 3]; SERIAL_RUN];
+        if let Ok(view) = SceneView::new(image) {
+            for (y, x, n) in fs.span_runs(start, len) {
+                let px = &mut pix[..n as usize];
+                let mut tracer = Tracer::<f32>::new(view);
+                if render_run(&mut tracer, y as u32, x as u32, px).is_err() {
+                    warn!("resend: row {} cannot be rendered", y);
+                    break;
+                }
+                if let Ok(m) = fs.resend(y, x, px.as_flattened(), &mut enc, &mut out) {
+                    queue(&out[..m]).await;
+                }
+                yield_now().await;
+            }
+        }
+        if let Ok(m) = fs.end(&mut enc, &mut out) {
+            queue(&out[..m]).await;
+        }
+        enc
+    }
+
     /// The PC protocol: scene upload, render requests, readback acknowledgements.
     #[embassy_executor::task]
     async fn serial_task(
@@ -222,22 +256,13 @@ mod fw {
                                 None
                             }
                             ToRc::Resend { frame, start, len } => {
-                                // The RC keeps no frame memory: pixels cannot be sent again
-                                // (USB bulk transfers are CRC-checked and retried, so a gap
-                                // means a lost frame of ours, not line noise). The FrameEnd
-                                // can: the PC then knows exactly what it lacks.
-                                if len > 0 {
-                                    warn!(
-                                        "frame {}: pixels {}+{} cannot be resent",
-                                        frame, start, len
-                                    );
+                                match (last.as_ref(), upload.image()) {
+                                    (Some(fs), Some(image)) if fs.frame() == frame => {
+                                        enc = resend(fs, image, start, len, enc).await;
+                                    }
+                                    _ => warn!("resend of frame {}: not the last frame", frame),
                                 }
-                                last.as_ref().filter(|s| s.frame() == frame).map(|s| {
-                                    s.end(&mut enc, &mut out).map(|len| Reply {
-                                        len,
-                                        event: UploadEvent::Ignored,
-                                    })
-                                })
+                                None
                             }
                             msg => Some(upload.on_message(&msg, &mut enc, &mut out)),
                         },
