@@ -24,7 +24,7 @@ mod fw {
     use embassy_stm32::interrupt;
     use embassy_stm32::interrupt::{InterruptExt, Priority};
     use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
-    use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask, BANK};
+    use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
     use nc_fw::plan::{SCENE_EVEN, SCENE_ODD};
     use nc_fw::port::{Irqs, NcPort};
     use static_cell::{ConstStaticCell, StaticCell};
@@ -131,7 +131,6 @@ mod fw {
             scratch,
         });
         let shared: &'static SlaveShared<'static> = SHARED.init(shared);
-        debug_assert_eq!(core::mem::size_of::<Bank>(), BANK);
 
         // The Discovery's accelerometer shares SPI1's pins: keep it deselected.
         let accel_cs = Output::new(p.PE3, Level::High, Speed::Low);
