@@ -145,6 +145,7 @@ mod fw {
             rx_dma: p.DMA2_CH0,
             cs: ExtiInput::new(p.PB0, p.EXTI0, Pull::Up, Irqs),
             ready: Output::new(p.PB1, Level::Low, Speed::VeryHigh),
+            want_ready: false,
         };
 
         interrupt::UART4.set_priority(Priority::P6);

@@ -80,6 +80,8 @@ pub struct NcPort {
     /// The RC's chip-select, sensed (same net as NSS).
     pub cs: ExtiInput<'static, Async>,
     pub ready: Output<'static>,
+    /// The protocol wants the handshake line up: raised only once the DMA is armed.
+    pub want_ready: bool,
 }
 
 impl SlavePort for NcPort {
@@ -112,16 +114,23 @@ impl SlavePort for NcPort {
         if let Poll::Ready(r) = poll_once(dma.as_mut()) {
             return r.map(|()| Armed::Done).map_err(|_| PortError);
         }
+        // Armed: now the RC may select us.
+        if self.want_ready {
+            self.ready.set_high();
+        }
         if self.cs.is_high() {
             if let Either::Second(()) = select(self.cs.wait_for_low(), cancel).await {
                 if self.cs.is_high() {
-                    // Not selected: disarm (dropping the transfer stops the DMA).
+                    // Not selected: drop the line, then disarm (dropping the transfer stops
+                    // the DMA).
+                    self.ready.set_low();
                     return Ok(Armed::Cancelled);
                 }
             }
         }
         // Selected: acknowledge by dropping the handshake line, then drive MISO. The RC
         // waits its set-up time before the first clock edge.
+        self.want_ready = false;
         self.ready.set_low();
         miso_drive(true);
         let ended = select(dma.as_mut(), self.cs.wait_for_high()).await;
@@ -133,9 +142,9 @@ impl SlavePort for NcPort {
     }
 
     fn set_ready(&mut self, high: bool) {
-        if high {
-            self.ready.set_high();
-        } else {
+        // Raising waits for the next arming (in `transfer`); dropping is immediate.
+        self.want_ready = high;
+        if !high {
             self.ready.set_low();
         }
     }
