@@ -34,14 +34,14 @@ mod fw {
     use links_core::root::{run_bus, RootConfig, RootState};
     use links_core::sched::Policy;
     use links_core::serial::{
-        Decoder, Encoder, FrameStreamer, RcError, ToPc, ToRc, UploadReceiver,
-        MAX_RUN as SERIAL_RUN, MAX_TO_PC, MAX_TO_RC,
+        Encoder, FrameStreamer, RcError, ToPc, MAX_RUN as SERIAL_RUN, MAX_TO_PC,
     };
     use links_core::spi::{Bank, MasterLink};
     use rc_fw::pins::NODES;
     use rc_fw::plan::SCENE;
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
     use rc_fw::readback::{Readback, RUN_RESERVE};
+    use rc_fw::session::{Session, Step};
     use rc_fw::throttle::Throttle;
     use static_cell::{ConstStaticCell, StaticCell};
     use {defmt_rtt as _, panic_probe as _};
@@ -225,17 +225,15 @@ mod fw {
         enc
     }
 
-    /// The PC protocol: scene upload, render requests, readback acknowledgements.
+    /// The PC protocol: scene upload, render requests, readback acknowledgements
+    /// (`rc_fw::session`, host-tested), acted on here.
     #[embassy_executor::task]
     async fn serial_task(
         mut rx: Receiver<'static, UsbDriver>,
         mut link: Link,
         scene: &'static mut [u8],
     ) {
-        let mut upload = UploadReceiver::new(scene);
-        let mut dec = Decoder::<MAX_TO_RC>::new();
-        let mut enc = Encoder::new();
-        let mut out = [0u8; MAX_TO_PC];
+        let mut session = Session::new(scene);
         let mut pkt = [0u8; 64];
         let mut last: Option<FrameStreamer> = None;
         loop {
@@ -243,51 +241,37 @@ mod fw {
             info!("PC connected");
             while let Ok(n) = rx.read_packet(&mut pkt).await {
                 for &b in &pkt[..n] {
-                    let mut frames = None;
-                    let reply = match dec.feed::<ToRc>(b) {
-                        None => continue,
-                        Some(Ok(p)) => match p.msg {
-                            ToRc::StartRender { frames: f } => {
-                                frames = Some(f);
-                                None
-                            }
-                            ToRc::FrameAck { frame } => {
-                                info!("PC has frame {}", frame);
-                                None
-                            }
-                            ToRc::Resend { frame, start, len } => {
-                                match (last.as_ref(), upload.image()) {
-                                    (Some(fs), Some(image)) if fs.frame() == frame => {
-                                        enc = resend(fs, image, start, len, enc).await;
-                                    }
-                                    _ => warn!("resend of frame {}: not the last frame", frame),
+                    match session.feed(b) {
+                        Step::Nothing => {}
+                        Step::Reply(len) => queue(session.reply(len)).await,
+                        Step::Acked { frame } => info!("PC has frame {}", frame),
+                        Step::Render { frames } => {
+                            let enc = core::mem::take(&mut session.enc);
+                            let Some(image) = session.upload.image() else {
+                                session.enc = enc;
+                                continue;
+                            };
+                            info!("render {} frame(s) of a {}-byte scene", frames, image.len());
+                            let (l, e) = render(link, image, frames, enc, &mut last).await;
+                            link = l;
+                            session.enc = e;
+                        }
+                        Step::Resend { frame, start, len } => {
+                            let enc = core::mem::take(&mut session.enc);
+                            session.enc = match (last.as_ref(), session.upload.image()) {
+                                (Some(fs), Some(image)) if fs.frame() == frame => {
+                                    resend(fs, image, start, len, enc).await
                                 }
-                                None
-                            }
-                            msg => Some(upload.on_message(&msg, &mut enc, &mut out)),
-                        },
-                        Some(Err(e)) => Some(upload.on_bad_frame(e, &mut enc, &mut out)),
-                    };
-                    if let Some(Ok(r)) = reply {
-                        queue(&out[..r.len]).await;
-                    }
-                    if let Some(f) = frames {
-                        match upload.image() {
-                            Some(image) => {
-                                info!("render {} frame(s) of a {}-byte scene", f, image.len());
-                                (link, enc) = render(link, image, f.max(1), enc, &mut last).await;
-                            }
-                            None => {
-                                let code = RcError::NoScene;
-                                if let Ok(n) = enc.encode(&ToPc::Error { code }, &mut out) {
-                                    queue(&out[..n]).await;
+                                _ => {
+                                    warn!("resend of frame {}: not the last frame", frame);
+                                    enc
                                 }
-                            }
+                            };
                         }
                     }
                 }
             }
-            dec.reset();
+            session.line_reset();
         }
     }
 
