@@ -10,8 +10,8 @@
 //! in between, so a receiver that lost its place (garbage, a cut cable, a frame that
 //! overflowed its buffer) is back in step at the next zero: at most the frame being
 //! received is lost. The CRC is [`crate::wire::CRC32`], as on the cluster bus. The first
-//! byte of every packet is [`VERSION`], checked before anything else is decoded, so a
-//! version mismatch is reported as such and not as garbage.
+//! byte of every packet is [`VERSION`], checked right after the CRC and before the message,
+//! so a version mismatch is reported as such and not as garbage.
 //!
 //! ## Pieces
 //! - [`Encoder`]: writes frames into caller buffers and numbers them (`seq`).
