@@ -3,7 +3,7 @@
 //! The behaviour is `links_core::root::run_bus` over `links_core::spi::MasterLink` (the link
 //! protocol, tested on the host against an emulated bus); the PC side speaks
 //! `links_core::serial` over USB CDC. This crate adds the board: the memory plan and pin map,
-//! the PC conversation ([`session`]), the readback sink that turns accepted pixel runs into
+//! the PC conversation ([`session`]), a render request ([`render`]), the readback sink that turns accepted pixel runs into
 //! serial frames ([`readback`]), the
 //! bus wrapper that holds exchanges back while the USB queue is full ([`throttle`]) — all
 //! host-tested — and, for the MCU, the embassy-stm32 port ([`port`]).
@@ -53,6 +53,7 @@ pub mod pins {
 }
 
 pub mod readback;
+pub mod render;
 pub mod session;
 pub mod throttle;
 

@@ -14,12 +14,10 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod fw {
-    use core::cell::RefCell;
     use core::mem::MaybeUninit;
     use core::ptr::addr_of_mut;
     use defmt::{info, unwrap, warn};
     use embassy_executor::Spawner;
-    use embassy_futures::yield_now;
     use embassy_stm32::exti::{self, ExtiInput};
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
     use embassy_stm32::peripherals::{DMA2_CH0, DMA2_CH3, USB_OTG_FS};
@@ -29,20 +27,13 @@ mod fw {
     use embassy_sync::pipe::Pipe;
     use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
     use embassy_usb::{Builder, UsbDevice};
-    use links_core::image::SceneView;
-    use links_core::render::{render_run, Rgb8, Tracer};
-    use links_core::root::{run_bus, RootConfig, RootState};
-    use links_core::sched::Policy;
-    use links_core::serial::{
-        Encoder, FrameStreamer, RcError, ToPc, MAX_RUN as SERIAL_RUN, MAX_TO_PC,
-    };
+    use links_core::serial::FrameStreamer;
     use links_core::spi::{Bank, MasterLink};
     use rc_fw::pins::NODES;
     use rc_fw::plan::SCENE;
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
-    use rc_fw::readback::{Readback, RUN_RESERVE};
+    use rc_fw::render::{render_frames, resend_span};
     use rc_fw::session::{Session, Step};
-    use rc_fw::throttle::Throttle;
     use static_cell::{ConstStaticCell, StaticCell};
     use {defmt_rtt as _, panic_probe as _};
 
@@ -124,107 +115,6 @@ mod fw {
         USB_QUEUE.write_all(bytes).await;
     }
 
-    /// Render `frames` frames of `image` (each a full `run_bus` of one frame: the nodes'
-    /// even bank holds the scene) and stream them back.
-    async fn render(
-        link: Link,
-        image: &[u8],
-        frames: u16,
-        mut enc: Encoder,
-        last: &mut Option<FrameStreamer>,
-    ) -> (Link, Encoder) {
-        let mut out = [0u8; MAX_TO_PC];
-        let dims = SceneView::new(image).ok().map(|v| {
-            let f = v.frame::<f32>();
-            (f.width, f.height)
-        });
-        let Some((Ok(w), Ok(h))) = dims.map(|(w, h)| (u16::try_from(w), u16::try_from(h))) else {
-            if let Ok(n) = enc.encode(
-                &ToPc::Error {
-                    code: RcError::NoScene,
-                },
-                &mut out,
-            ) {
-                queue(&out[..n]).await;
-            }
-            return (link, enc);
-        };
-        let cfg = RootConfig {
-            policy: Policy::DECREASING,
-            nodes: NODES as u16,
-            frames: 1,
-            timeout_us: RootConfig::DEFAULT_TIMEOUT_US,
-        };
-        let scenes = [image];
-        let room = PipeQueue(&USB_QUEUE);
-        let mut link = link;
-        for frame in 0..frames {
-            let root = match RootState::new(cfg, &scenes[..]) {
-                Ok(r) => RefCell::new(r),
-                Err(e) => {
-                    warn!("scene refused: {}", e);
-                    break;
-                }
-            };
-            let mut rb = match Readback::new(PipeQueue(&USB_QUEUE), enc, frame, w, h) {
-                Ok(r) => r,
-                Err(_) => return (link, Encoder::new()),
-            };
-            rb.bus_frame = 0;
-            let sink = RefCell::new(rb);
-            let mut bus = Throttle {
-                bus: link,
-                room: &room,
-                need: RUN_RESERVE,
-            };
-            let r = run_bus(0, &mut bus, &Clock, &root, &scenes[..], &sink).await;
-            link = bus.bus;
-            match r {
-                Ok(report) => info!("frame {}: {} / link {}", frame, report, link.counters),
-                Err(e) => warn!("frame {} failed: {}", frame, e),
-            }
-            let ended = sink.into_inner().end();
-            enc = ended.enc;
-            if ended.result.is_err() {
-                warn!("frame {} incomplete", frame);
-            }
-            *last = Some(ended.streamer);
-        }
-        (link, enc)
-    }
-
-    /// Answer a `Resend`: the RC keeps no frame memory, so it renders the span again itself
-    /// (the scene is in its SRAM; the tracer gives the nodes' exact pixels), yielding to the
-    /// USB tasks between runs, then sends the `FrameEnd` again.
-    async fn resend(
-        fs: &FrameStreamer,
-        image: &[u8],
-        start: u32,
-        len: u32,
-        mut enc: Encoder,
-    ) -> Encoder {
-        let mut out = [0u8; MAX_TO_PC];
-        let mut pix: [Rgb8; SERIAL_RUN] = [[0; 3]; SERIAL_RUN];
-        if let Ok(view) = SceneView::new(image) {
-            for (y, x, n) in fs.span_runs(start, len) {
-                let px = &mut pix[..n as usize];
-                let mut tracer = Tracer::<f32>::new(view);
-                if render_run(&mut tracer, y as u32, x as u32, px).is_err() {
-                    warn!("resend: row {} cannot be rendered", y);
-                    break;
-                }
-                if let Ok(m) = fs.resend(y, x, px.as_flattened(), &mut enc, &mut out) {
-                    queue(&out[..m]).await;
-                }
-                yield_now().await;
-            }
-        }
-        if let Ok(m) = fs.end(&mut enc, &mut out) {
-            queue(&out[..m]).await;
-        }
-        enc
-    }
-
     /// The PC protocol: scene upload, render requests, readback acknowledgements
     /// (`rc_fw::session`, host-tested), acted on here.
     #[embassy_executor::task]
@@ -246,27 +136,48 @@ mod fw {
                         Step::Reply(len) => queue(session.reply(len)).await,
                         Step::Acked { frame } => info!("PC has frame {}", frame),
                         Step::Render { frames } => {
-                            let enc = core::mem::take(&mut session.enc);
                             let Some(image) = session.upload.image() else {
-                                session.enc = enc;
                                 continue;
                             };
                             info!("render {} frame(s) of a {}-byte scene", frames, image.len());
-                            let (l, e) = render(link, image, frames, enc, &mut last).await;
-                            link = l;
-                            session.enc = e;
+                            let r = render_frames(
+                                &mut link,
+                                &Clock,
+                                &PipeQueue(&USB_QUEUE),
+                                &mut PipeQueue(&USB_QUEUE),
+                                image,
+                                frames,
+                                NODES as u16,
+                                &mut session.enc,
+                                &mut last,
+                            )
+                            .await;
+                            match r {
+                                Ok(report) => {
+                                    info!("rendered: {} / link {}", report, link.counters)
+                                }
+                                Err(e) => warn!("render failed: {}", e),
+                            }
                         }
                         Step::Resend { frame, start, len } => {
-                            let enc = core::mem::take(&mut session.enc);
-                            session.enc = match (last.as_ref(), session.upload.image()) {
+                            match (last.as_ref(), session.upload.image()) {
                                 (Some(fs), Some(image)) if fs.frame() == frame => {
-                                    resend(fs, image, start, len, enc).await
+                                    let r = resend_span(
+                                        fs,
+                                        image,
+                                        start,
+                                        len,
+                                        &mut session.enc,
+                                        &PipeQueue(&USB_QUEUE),
+                                        &mut PipeQueue(&USB_QUEUE),
+                                    )
+                                    .await;
+                                    if let Err(e) = r {
+                                        warn!("resend failed: {}", e);
+                                    }
                                 }
-                                _ => {
-                                    warn!("resend of frame {}: not the last frame", frame);
-                                    enc
-                                }
-                            };
+                                _ => warn!("resend of frame {}: not the last frame", frame),
+                            }
                         }
                     }
                 }

@@ -14,6 +14,15 @@ pub trait ByteQueue {
     fn push(&mut self, bytes: &[u8]) -> bool;
 }
 
+impl<Q: ByteQueue + ?Sized> ByteQueue for &mut Q {
+    fn free(&self) -> usize {
+        (**self).free()
+    }
+    fn push(&mut self, bytes: &[u8]) -> bool {
+        (**self).push(bytes)
+    }
+}
+
 /// Queue space one accepted bus run can need: two serial frames (a 512-pixel run is two
 /// 256-pixel runs) and a progress frame. The bus waits for this much before an exchange.
 pub const RUN_RESERVE: usize = (wire::MAX_RUN.div_ceil(MAX_RUN) + 1) * MAX_TO_PC;

@@ -14,7 +14,7 @@ pub trait Room {
 
 /// A bus whose exchanges wait for `room`.
 pub struct Throttle<'r, B, R> {
-    pub bus: B,
+    pub bus: &'r mut B,
     pub room: &'r R,
     pub need: usize,
 }
@@ -105,10 +105,11 @@ mod tests {
         let q = Queue {
             free: Cell::new(10),
         };
+        let mut bus = Bus {
+            exchanges: Cell::new(0),
+        };
         let mut t = Throttle {
-            bus: Bus {
-                exchanges: Cell::new(0),
-            },
+            bus: &mut bus,
             room: &q,
             need: 100,
         };

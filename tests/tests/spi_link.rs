@@ -717,3 +717,177 @@ fn wire_frames_fit_a_bank() {
     let n = wire::encode(1, 2, &wire::Down::Stop, &mut buf).unwrap();
     assert!(HEADER + n < BANK);
 }
+
+// ---------------------------------------------------------------------------------------
+// The RC firmware's render request (rc_fw::render) over the link, read back as the PC would
+// ---------------------------------------------------------------------------------------
+
+/// A small USB queue drained a few bytes per poll, as the CDC endpoint drains the RC's.
+struct UsbQueue {
+    queued: std::collections::VecDeque<u8>,
+    cap: usize,
+    sent: Vec<u8>,
+    /// Bytes that did not fit (pushes refused).
+    refused: u32,
+}
+
+#[derive(Clone, Copy)]
+struct Q<'a>(&'a RefCell<UsbQueue>);
+
+impl rc_fw::readback::ByteQueue for Q<'_> {
+    fn free(&self) -> usize {
+        let q = self.0.borrow();
+        q.cap - q.queued.len()
+    }
+    fn push(&mut self, bytes: &[u8]) -> bool {
+        let mut q = self.0.borrow_mut();
+        if bytes.len() > q.cap - q.queued.len() {
+            q.refused += 1;
+            return false;
+        }
+        q.queued.extend(bytes);
+        true
+    }
+}
+
+impl rc_fw::throttle::Room for Q<'_> {
+    async fn wait_room(&self, n: usize) {
+        core::future::poll_fn(|cx| {
+            let q = self.0.borrow();
+            if q.cap - q.queued.len() >= n {
+                Poll::Ready(())
+            } else {
+                cx.waker().wake_by_ref();
+                Poll::Pending
+            }
+        })
+        .await
+    }
+}
+
+/// Move up to 63 bytes (one CDC packet) from the queue to `sent` per poll, until `done`.
+async fn drain(q: &RefCell<UsbQueue>, done: &core::cell::Cell<bool>) {
+    core::future::poll_fn(|cx| {
+        let mut q = q.borrow_mut();
+        for _ in 0..63 {
+            match q.queued.pop_front() {
+                Some(b) => q.sent.push(b),
+                None => break,
+            }
+        }
+        if done.get() && q.queued.is_empty() {
+            Poll::Ready(())
+        } else {
+            cx.waker().wake_by_ref();
+            Poll::Pending
+        }
+    })
+    .await
+}
+
+/// Decode what the RC sent: (frame pixels, FrameEnd CRCs, pixel messages).
+fn read_back(bytes: &[u8], w: usize, h: usize) -> (Vec<u8>, Vec<u32>, usize) {
+    use links_core::serial::{pixel_count, pixels_into, Decoder, Packet, ToPc, MAX_TO_PC};
+    let mut dec = Decoder::<MAX_TO_PC>::new();
+    let mut frame = vec![0u8; 3 * w * h];
+    let (mut ends, mut runs) = (Vec::new(), 0);
+    for &b in bytes {
+        let Some(r) = dec.feed::<ToPc>(b) else {
+            continue;
+        };
+        let p: Packet<ToPc> = r.expect("every frame the RC sends is valid");
+        match p.msg {
+            ToPc::Pixels { y, x, .. } | ToPc::PixelsRle { y, x, .. } => {
+                let at = 3 * (y as usize * w + x as usize);
+                let n = pixel_count(&p.msg);
+                pixels_into(&p.msg, &mut frame[at..at + 3 * n]).unwrap();
+                runs += 1;
+            }
+            ToPc::FrameEnd { crc, .. } => ends.push(crc),
+            ToPc::FrameHeader { width, height, .. } => {
+                assert_eq!((width as usize, height as usize), (w, h))
+            }
+            ToPc::Progress { .. } => {}
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+    (frame, ends, runs)
+}
+
+#[test]
+fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
+    let (w, h) = (24u32, 16u32);
+    let img = image(w, h);
+    let want = render_frame(&img, Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    let bus = bus(2);
+    let mut mb = banks::<2>();
+    let [mtx, mrx] = &mut mb[..] else {
+        unreachable!()
+    };
+    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, mtx, mrx);
+    let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
+    let [s0, s1, s2, s3] = &mut scene_banks[..] else {
+        unreachable!()
+    };
+    // A queue smaller than a frame: the bus must wait for USB, never drop.
+    let usb = RefCell::new(UsbQueue {
+        queued: Default::default(),
+        cap: 2 * rc_fw::readback::RUN_RESERVE,
+        sent: Vec::new(),
+        refused: 0,
+    });
+    let done = core::cell::Cell::new(false);
+    let mut enc = links_core::serial::Encoder::new();
+    let mut last = None;
+    let rc = async {
+        let r = rc_fw::render::render_frames(
+            &mut master,
+            &NoClock,
+            &Q(&usb),
+            &mut Q(&usb),
+            &img,
+            1,
+            2,
+            &mut enc,
+            &mut last,
+        )
+        .await;
+        done.set(true);
+        r
+    };
+    let nodes = join_array([node(bus.clone(), 0, s0, s1), node(bus.clone(), 1, s2, s3)]);
+    let (((r, nodes), ()), ()) = (run(join(join(rc, nodes), drain(&usb, &done))), ());
+    let report = r.expect("frame rendered");
+    assert!(report.pixels >= (w * h) as u64);
+    assert!(nodes.iter().all(|(n, _)| n.pixels > 0), "both nodes worked");
+    let sent = std::mem::take(&mut usb.borrow_mut().sent);
+    let (got, ends, _) = read_back(&sent, w as usize, h as usize);
+    assert_eq!(got, want, "the PC assembles the single-node render");
+    assert_eq!(ends, [wire::CRC32.checksum(&want)]);
+    assert_eq!(usb.borrow().refused, 0);
+
+    // Resend of a span that crosses a row: rendered again on the RC, then FrameEnd again.
+    let fs = last.expect("the last frame is kept");
+    done.set(false);
+    let resend = async {
+        rc_fw::render::resend_span(&fs, &img, 20, 30, &mut enc, &Q(&usb), &mut Q(&usb))
+            .await
+            .expect("resent");
+        done.set(true);
+    };
+    run(join(resend, drain(&usb, &done)));
+    let sent = std::mem::take(&mut usb.borrow_mut().sent);
+    let (again, ends, runs) = read_back(&sent, w as usize, h as usize);
+    assert_eq!(
+        runs, 3,
+        "row 0 from column 20, row 1 whole, row 2 up to column 2"
+    );
+    assert_eq!(again[3 * 20..3 * 50], want[3 * 20..3 * 50]);
+    assert!(
+        again[..3 * 20].iter().all(|&b| b == 0),
+        "nothing else resent"
+    );
+    assert_eq!(ends, [wire::CRC32.checksum(&want)]);
+}
