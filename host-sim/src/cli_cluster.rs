@@ -1,6 +1,7 @@
 //! The `links` commands that drive the simulated cluster: `render --nodes`, `sweep nodes`,
 //! `sweep divisions`. Thin glue over [`crate::cluster`]; every number is virtual time.
 
+use crate::cluster::rccost::RcCost;
 use crate::cluster::sweep::{
     divisions_csv, nodes_csv, steady_state_interval, sweep_divisions, sweep_nodes,
     write_divisions_chart, write_nodes_chart, NamedPolicy,
@@ -101,6 +102,42 @@ pub fn nodes_study(image: &[u8], out: &Path, progress: &dyn Fn(&str)) -> Result<
                 one_steady / steady,
                 100.0 * r.bus_utilisation(),
                 r.bytes_moved()
+            ));
+        }
+    }
+    table.push_str(
+        "\n| RC | nodes | single frame (s) | speed-up | steady state (s/frame) | speed-up | RC busy (single) | bus busy (single) |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    let rcs = [
+        ("double-buffered", true, RcCost::CORTEX_M4F),
+        ("single-buffered", false, RcCost::CORTEX_M4F),
+        ("free (no CPU time)", true, RcCost::FREE),
+    ];
+    for nodes in [64u16, 256] {
+        for (name, double, cost) in rcs {
+            progress(&format!("{nodes} nodes, RC {name}"));
+            let cfg = SimConfig {
+                nodes,
+                rc_double_buffer: double,
+                rc_cost: cost,
+                ..base.clone()
+            };
+            let one_cfg = SimConfig {
+                nodes: 1,
+                ..cfg.clone()
+            };
+            let one = simulate_frame(image, &one_cfg).map_err(e)?.time_s;
+            let one_steady = steady_state_interval(image, &one_cfg, 4).map_err(e)?;
+            let r = simulate_frame(image, &cfg).map_err(e)?;
+            let steady = steady_state_interval(image, &cfg, 8).map_err(e)?;
+            table.push_str(&format!(
+                "| {name} | {nodes} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% |\n",
+                r.time_s,
+                one / r.time_s,
+                steady,
+                one_steady / steady,
+                100.0 * r.rc_busy_s / r.time_s,
+                100.0 * r.bus_utilisation(),
             ));
         }
     }

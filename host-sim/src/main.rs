@@ -114,6 +114,10 @@ enum Cmd {
         /// How long the RC waits for a silent node holding work before re-issuing it, in ms
         #[arg(long, default_value_t = 500.0)]
         timeout_ms: f64,
+        /// A single-buffered RC: it composes, clocks and decodes one transfer at a time
+        /// (default: double-buffered, the bus busy while the RC works; cluster only)
+        #[arg(long)]
+        rc_single_buffer: bool,
     },
     /// Compile a scene and print its SceneImage size by section
     Info {
@@ -303,6 +307,7 @@ fn run(cli: Cli) -> Result<(), String> {
             dm_ms,
             kills,
             timeout_ms,
+            rc_single_buffer,
         } => {
             if !matches!(precision, PrecisionArg::F32) {
                 return Err(
@@ -326,6 +331,7 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             cfg.dm_s_per_frame = dm_ms * 1e-3;
             cfg.node_timeout_s = timeout_ms * 1e-3;
+            cfg.rc_double_buffer = !rc_single_buffer;
             cfg.deaths = kills
                 .iter()
                 .map(|k| cli_cluster::parse_death(k))
@@ -338,7 +344,7 @@ fn run(cli: Cli) -> Result<(), String> {
             std::fs::write(&output, png).map_err(|e| format!("{}: {e}", output.display()))?;
             if !quiet {
                 eprintln!(
-                    "{}: {}x{} on {nodes} simulated nodes ({buses} bus(es) at {bit_rate_mhz} MHz, {policy}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, {} bytes moved | host {:.2} s",
+                    "{}: {}x{} on {nodes} simulated nodes ({buses} bus(es) at {bit_rate_mhz} MHz, {policy}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered), {} bytes moved | host {:.2} s",
                     output.display(),
                     rep.width,
                     rep.height,
@@ -346,6 +352,8 @@ fn run(cli: Cli) -> Result<(), String> {
                     r.speedup,
                     r.one_node_s,
                     100.0 * rep.bus_utilisation(),
+                    100.0 * rep.rc_busy_s / rep.time_s,
+                    if rc_single_buffer { "single" } else { "double" },
                     rep.bytes_moved(),
                     start.elapsed().as_secs_f64()
                 );

@@ -13,11 +13,11 @@
 //! ([`check_outcome`]).
 
 use crate::cluster::{render_cluster, SimConfig};
-use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
+use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
 use links_core::node::{run_node, NodeConfig, NodeError, NodeReport, RealTime, Tracing};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
-use links_core::wire::{self, Down, Up, MAX_SCENE};
+use links_core::wire::{self, Down, Up, MAX_FRAME, MAX_SCENE};
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::fmt;
@@ -180,6 +180,11 @@ impl<N: NodeSide> BusInner<N> {
 /// A one-node bus whose RC acts only while the node waits.
 struct LockstepBus<N> {
     inner: RefCell<BusInner<N>>,
+    /// The RC's two TX banks; `idle` is the one it composes into.
+    banks: [Vec<u8>; 2],
+    idle: usize,
+    /// The node's frame of the transfer started and not yet finished (empty: a broadcast).
+    inflight: Option<Vec<u8>>,
 }
 
 impl<N: NodeSide> RootBus for LockstepBus<N> {
@@ -211,22 +216,50 @@ impl<N: NodeSide> RootBus for LockstepBus<N> {
         core::future::pending().await
     }
 
-    async fn exchange(
-        &mut self,
-        node: NodeId,
-        tx: &[u8],
-        rx: &mut [u8],
-    ) -> Result<usize, LinkError> {
-        if node != 0 {
-            return Err(LinkError::NoSuchNode { node });
+    fn tx_bank(&mut self) -> &mut [u8] {
+        &mut self.banks[self.idle]
+    }
+
+    /// The node takes the frame at once and runs to its next wait (lock step), so the
+    /// transfer is over when `start` returns; [`RootBus::finish`] only hands over the node's
+    /// frame. Double buffering is then real on the RC's side (it composes into the other
+    /// bank and decodes the previous frame after starting the next) and costs nothing.
+    fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
+        if self.inflight.is_some() {
+            return Err(LinkError::Busy);
         }
+        let bank = self.idle;
+        let max = self.banks[bank].len() as u32;
+        let down = self.banks[bank].get(..len).ok_or(LinkError::TooLong {
+            len: len as u32,
+            max,
+        })?;
         let mut s = self.inner.borrow_mut();
-        s.sync();
-        let Some(up) = s.tx.take() else {
-            s.fail("the RC exchanged with a node whose ready line is down".into());
-            return Err(LinkError::Aborted);
+        let up = match transfer {
+            Transfer::Exchange(0) => {
+                s.sync();
+                let Some(up) = s.tx.take() else {
+                    s.fail("the RC exchanged with a node whose ready line is down".into());
+                    return Err(LinkError::Aborted);
+                };
+                s.send(true, down)?;
+                up
+            }
+            Transfer::Exchange(node) => return Err(LinkError::NoSuchNode { node }),
+            Transfer::Broadcast => {
+                s.send(false, down)?;
+                Vec::new()
+            }
         };
-        s.send(true, tx)?;
+        drop(s);
+        // The DMA owns the bank just started; the RC composes into the other.
+        self.idle ^= 1;
+        self.inflight = Some(up);
+        Ok(())
+    }
+
+    async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+        let up = self.inflight.take().ok_or(LinkError::Aborted)?;
         let max = rx.len() as u32;
         let dst = rx.get_mut(..up.len()).ok_or(LinkError::TooLong {
             len: up.len() as u32,
@@ -234,10 +267,6 @@ impl<N: NodeSide> RootBus for LockstepBus<N> {
         })?;
         dst.copy_from_slice(&up);
         Ok(up.len())
-    }
-
-    async fn broadcast(&mut self, frame: &[u8]) -> Result<(), LinkError> {
-        self.inner.borrow_mut().send(false, frame)
     }
 }
 
@@ -283,11 +312,21 @@ pub struct RcOutcome {
 /// Run the real RC logic over one node until the frame is complete, the `Stop` is broadcast
 /// and the node has ended.
 pub fn run_rc<N: NodeSide>(image: &[u8], node: N) -> Result<RcOutcome, String> {
+    run_rc_buffered(image, node, true)
+}
+
+/// [`run_rc`] with the RC's DMA double buffering on or off ([`RootConfig::double_buffer`]).
+pub fn run_rc_buffered<N: NodeSide>(
+    image: &[u8],
+    node: N,
+    double_buffer: bool,
+) -> Result<RcOutcome, String> {
     let cfg = RootConfig {
         policy: Policy::DECREASING,
         nodes: 1,
         frames: 1,
         timeout_us: 0,
+        double_buffer,
     };
     let scenes = [image];
     let root = RefCell::new(RootState::new(cfg, &scenes[..]).map_err(|e| e.to_string())?);
@@ -308,6 +347,9 @@ pub fn run_rc<N: NodeSide>(image: &[u8], node: N) -> Result<RcOutcome, String> {
             transcript: Vec::new(),
             error: None,
         }),
+        banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+        idle: 0,
+        inflight: None,
     };
     let result = {
         let fut = run_bus(0, &mut bus, &NoClock, &root, &scenes[..], &sink);
@@ -828,6 +870,60 @@ mod tests {
         // Deterministic: a second run transfers the same bytes.
         let b = run_rc(&img, LocalNode::new()).unwrap();
         compare_transcripts(&b, &a).unwrap();
+    }
+
+    #[test]
+    fn lock_step_rc_single_and_double_buffered_assemble_the_same_frame() {
+        let img = image("photo1.ron", 24, 20);
+        let want = simulated_frame(&img).unwrap();
+        let single = run_rc_buffered(&img, LocalNode::new(), false).unwrap();
+        let double = run_rc_buffered(&img, LocalNode::new(), true).unwrap();
+        check_outcome(&single, &want, 0).unwrap();
+        check_outcome(&double, &want, 0).unwrap();
+        assert_eq!(single.frame, double.frame);
+        assert_eq!(single.root.pixels, double.root.pixels);
+    }
+
+    #[test]
+    fn lock_step_bus_keeps_one_transfer_in_flight() {
+        let mut bus = LockstepBus {
+            inner: RefCell::new(BusInner {
+                node: LocalNode::new(),
+                settled: false,
+                tx: None,
+                ended: None,
+                transcript: Vec::new(),
+                error: None,
+            }),
+            banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+            idle: 0,
+            inflight: None,
+        };
+        let mut rx = [0u8; MAX_FRAME];
+        fn poll<F: Future>(f: F) -> F::Output {
+            let mut f = std::pin::pin!(f);
+            match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
+                Poll::Ready(r) => r,
+                Poll::Pending => panic!("lock-step transfers never wait"),
+            }
+        }
+        // Nothing in flight: finish fails instead of waiting forever.
+        assert_eq!(poll(bus.finish(&mut rx)), Err(LinkError::Aborted));
+        let n = wire::encode(0, 0, &Down::Stop, bus.tx_bank()).unwrap();
+        let first = bus.idle;
+        bus.start(Transfer::Broadcast, n).unwrap();
+        assert_ne!(bus.idle, first, "the RC composes into the other bank");
+        assert_eq!(bus.start(Transfer::Broadcast, n), Err(LinkError::Busy));
+        assert_eq!(poll(bus.finish(&mut rx)), Ok(0));
+        // Past the bank, and nodes not on the bus, are errors.
+        assert!(matches!(
+            bus.start(Transfer::Broadcast, MAX_FRAME + 1),
+            Err(LinkError::TooLong { .. })
+        ));
+        assert_eq!(
+            bus.start(Transfer::Exchange(1), n),
+            Err(LinkError::NoSuchNode { node: 1 })
+        );
     }
 
     /// Re-encode a pixel frame with one byte of its colours changed (a valid frame: only the

@@ -11,6 +11,8 @@
 //! - `desc` and `dm` (feature `std`): the scene description and the DM scene compiler.
 //! - [`wire`], [`link`], [`sched`], [`node`], [`root`]: the cluster (bus messages, the IMSU
 //!   link traits, sub-screen scheduling, the NC and RC behaviour).
+//! - [`spi`]: the link driver protocol over a real SPI star (framing, handshake, banks,
+//!   retransmit requests), generic over the MCU ports.
 //! - [`serial`]: the PC <-> RC serial protocol (scene upload, frame readback).
 #![cfg_attr(not(any(test, feature = "std")), no_std)]
 // The one exception: the FPU square root in `num` (inline asm).
@@ -34,4 +36,5 @@ pub mod root;
 pub mod sched;
 pub mod serial;
 pub mod shape;
+pub mod spi;
 pub mod wire;

@@ -18,7 +18,9 @@
 //!
 //! DMA double buffering: [`NodeLink::post`] hands a frame to the TX bank and returns at once,
 //! so the node renders its next run while the previous one waits for, and crosses, the bus;
-//! [`NodeLink::recv`] waits for the transfer to finish.
+//! [`NodeLink::recv`] waits for the transfer to finish. The RC side is double-buffered the
+//! same way ([`RootBus::tx_bank`], [`RootBus::start`], [`RootBus::finish`]): the RC composes
+//! the next frame and takes the previous node's frame while a transfer is on the wire.
 
 use core::fmt;
 
@@ -78,7 +80,23 @@ pub trait NodeLink {
     async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError>;
 }
 
+/// What a transfer started with [`RootBus::start`] is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Transfer {
+    /// Swap frames with this node (its chip-select only).
+    Exchange(NodeId),
+    /// Write to every node of the bus at once (all chip-selects).
+    Broadcast,
+}
+
 /// One bus of the root's star: the nodes on it, their ready lines, exchange and broadcast.
+///
+/// RC-side DMA double buffering: the link owns two TX banks. [`RootBus::tx_bank`] is the
+/// idle one, where the RC composes its next frame while the other bank is on the wire;
+/// [`RootBus::start`] hands the idle bank to the DMA (the banks swap) and returns at once;
+/// [`RootBus::finish`] waits for the transfer in flight and copies what the node sent
+/// into `rx`. At most one transfer is in flight per bus.
 #[allow(async_fn_in_trait)]
 pub trait RootBus {
     /// The nodes on this bus: `first..first + count`.
@@ -92,15 +110,51 @@ pub trait RootBus {
     /// [`RootBus::wait_ready`] would make).
     fn ready(&self) -> Option<NodeId>;
 
+    /// The idle TX bank (at least [`crate::wire::MAX_FRAME`] bytes): compose the next frame
+    /// here, also while a transfer is in flight.
+    fn tx_bank(&mut self) -> &mut [u8];
+
+    /// Start clocking the first `len` bytes of the idle TX bank as `transfer` (for an
+    /// exchange the node's chip-select is asserted now, committing its TX bank). Fails with
+    /// [`LinkError::Busy`] while a transfer is in flight.
+    fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError>;
+
+    /// Wait for the transfer in flight to end; copy the node's frame (an exchange) into
+    /// `rx` and return its length (0 for a broadcast). [`LinkError::Aborted`] if nothing
+    /// is in flight.
+    async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError>;
+
     /// Swap frames with `node`: send `tx`, receive its frame into `rx`; returns the number
-    /// of bytes received.
+    /// of bytes received (start + finish, nothing else in flight).
     async fn exchange(
         &mut self,
         node: NodeId,
         tx: &[u8],
         rx: &mut [u8],
-    ) -> Result<usize, LinkError>;
+    ) -> Result<usize, LinkError> {
+        let bank = self.tx_bank();
+        let max = bank.len() as u32;
+        bank.get_mut(..tx.len())
+            .ok_or(LinkError::TooLong {
+                len: tx.len() as u32,
+                max,
+            })?
+            .copy_from_slice(tx);
+        self.start(Transfer::Exchange(node), tx.len())?;
+        self.finish(rx).await
+    }
 
     /// Write `frame` to every node on this bus at once (all chip-selects asserted).
-    async fn broadcast(&mut self, frame: &[u8]) -> Result<(), LinkError>;
+    async fn broadcast(&mut self, frame: &[u8]) -> Result<(), LinkError> {
+        let bank = self.tx_bank();
+        let max = bank.len() as u32;
+        bank.get_mut(..frame.len())
+            .ok_or(LinkError::TooLong {
+                len: frame.len() as u32,
+                max,
+            })?
+            .copy_from_slice(frame);
+        self.start(Transfer::Broadcast, frame.len())?;
+        self.finish(&mut []).await.map(|_| ())
+    }
 }

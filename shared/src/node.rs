@@ -243,8 +243,8 @@ struct Nc {
     last_rc_seq: u16,
     /// Scene state to report (sequenced).
     status: Option<SceneState>,
-    /// The RC broadcast [`Down::Wake`]: post a `Poll` to be handed re-issued work.
-    wake: bool,
+    /// The RC broadcast [`Down::Wake`] for this frame: answer if idle.
+    wake: Option<u16>,
     stopped: bool,
     report: NodeReport,
 }
@@ -348,6 +348,7 @@ impl Nc {
 
 /// Write a scene chunk into its bank; update readiness. Returns whether the state changed in
 /// a way the RC must hear (scene now ready, or still incomplete after the broadcast ended).
+#[allow(clippy::too_many_arguments)]
 fn scene_chunk(
     nc: &mut Nc,
     banks: &mut [&mut [u8]; 2],
@@ -356,6 +357,7 @@ fn scene_chunk(
     total: u32,
     crc: u32,
     data: &[u8],
+    direct: bool,
 ) -> bool {
     let b = (frame % 2) as usize;
     let cap = banks[b].len() as u32;
@@ -379,8 +381,9 @@ fn scene_chunk(
     let c = offset / SCENE_CHUNK as u32;
     nc.banks[b].got[(c / 32) as usize] |= 1 << (c % 32);
     nc.report.chunks += 1;
-    // Broadcasts go in order: the last chunk ends it even if its SceneEnd is lost.
-    if end == total as usize {
+    // Broadcasts go in order: the last chunk ends it even if its SceneEnd is lost. A chunk
+    // sent point-to-point (a repair) means the broadcast is over, whether or not we heard it.
+    if end == total as usize || direct {
         nc.banks[b].ended = true;
     }
     check_scene(nc, banks, b);
@@ -425,7 +428,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
         exchanges: 0,
         last_rc_seq: 0,
         status: None,
-        wake: false,
+        wake: None,
         stopped: false,
         report: *report,
     };
@@ -434,6 +437,28 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
     let mut coded = [0u8; 3 * MAX_RUN];
     let mut poll = [0u8; 16];
     while !nc.stopped {
+        // 0. A roll call: an idle node with a free slot answers. Without the scene of the
+        // frame the RC hands out (it missed its broadcast) it says what it lacks (the RC
+        // then sends it point-to-point), else it polls to be handed work.
+        let mut woken = false;
+        if let Some(frame) = nc.wake.take() {
+            if nc.cursor.is_none() && nc.queue.iter().any(|q| q.is_none()) {
+                let b = (frame % 2) as usize;
+                let bank = &nc.banks[b];
+                if bank.ready && bank.frame == Some(frame) {
+                    woken = true;
+                } else if nc.status.is_none() {
+                    nc.status = Some(match nc.bank_state(b) {
+                        s @ SceneState::Missing { frame: f, .. } if f == frame => s,
+                        // Nothing of it: all of it (the RC sends only the chunks it has).
+                        _ => SceneState::Missing {
+                            frame,
+                            chunks: [u32::MAX; MAX_CHUNKS / 32],
+                        },
+                    });
+                }
+            }
+        }
         // 1. Choose what to post.
         let mut posted = false;
         if nc.resend < 2 {
@@ -486,9 +511,6 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                 nc.resend = 2;
             }
         }
-        let woken = core::mem::take(&mut nc.wake)
-            && nc.cursor.is_none()
-            && nc.queue.iter().any(|q| q.is_none());
         if posted {
             nc.report.frames_posted += 1;
         } else if nc.unacked() > 0 || woken {
@@ -525,7 +547,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                         ack = Some(env.ack);
                         nc.last_rc_seq = env.seq;
                     }
-                    handle_down(&mut nc, &mut banks, env.msg);
+                    handle_down(&mut nc, &mut banks, env.msg, exchanged);
                 }
                 _ => nc.report.bad_frames += 1,
             }
@@ -633,7 +655,7 @@ async fn render_next<C: WorkClock, R: RunRenderer>(
     true
 }
 
-fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>) {
+fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>, exchanged: bool) {
     match msg {
         Down::Work { jobs } => {
             let mut dims = [None; 2];
@@ -654,7 +676,7 @@ fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>) {
             crc,
             data,
         } => {
-            if scene_chunk(nc, banks, frame, offset, total, crc, data) {
+            if scene_chunk(nc, banks, frame, offset, total, crc, data, exchanged) {
                 nc.status = Some(nc.bank_state((frame % 2) as usize));
             }
         }
@@ -673,7 +695,7 @@ fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>) {
             nc.status = Some(nc.bank_state(b));
         }
         Down::Stop => nc.stopped = true,
-        Down::Wake => nc.wake = true,
+        Down::Wake { frame } => nc.wake = Some(frame),
     }
 }
 

@@ -22,7 +22,7 @@
 //! and the time-out doubles (it was too short: this bounds the work lost to false alarms).
 
 use crate::image::SceneView;
-use crate::link::{LinkError, NodeId, RootBus};
+use crate::link::{LinkError, NodeId, RootBus, Transfer};
 use crate::sched::{Policy, SchedError, Scheduler};
 use crate::wire::{self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_FRAME, SCENE_CHUNK};
 use core::cell::RefCell;
@@ -50,6 +50,25 @@ pub trait SceneSource {
     /// Resolves once [`SceneSource::produced`] holds for `frame`. Implement it together
     /// with `produced`.
     async fn wait_produced(&self, _frame: u16) {}
+    /// The CRC-32 of frame `frame`'s scene if the DM delivers it with the scene (the DM
+    /// wrote the bytes; the RC then need not read all of them before the first chunk).
+    /// Default: `None`, the RC computes it.
+    fn scene_crc(&self, _frame: u16) -> Option<u32> {
+        None
+    }
+}
+
+/// CPU work the RC just did, reported to its clock (hardware: time passes by itself;
+/// simulator: the RC's CPU is busy for the modelled time of the work).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RcWork<'a> {
+    /// Composed one transfer's frame of `bytes` (choice of node, job table, postcard, CRC).
+    Encode { bytes: usize },
+    /// Checked, decoded and applied a node's frame (CRC, postcard, run-length expansion,
+    /// job bookkeeping, the pixel sink): the frame as received.
+    Decode { frame: &'a [u8] },
+    /// CRC-32 of `bytes` bytes of a whole scene image (once per frame's scene).
+    Checksum { bytes: usize },
 }
 
 /// The RC's time base, for node time-outs (hardware: a timer; simulator: virtual time).
@@ -59,6 +78,9 @@ pub trait RootClock {
     fn now_us(&self) -> u64;
     /// Resolves once `now_us() >= t`.
     async fn at_us(&self, t: u64);
+    /// The RC's CPU just did `work`; resolves when that work would be finished. Default:
+    /// at once (on hardware the work took its time already).
+    async fn worked(&self, _work: RcWork<'_>) {}
 }
 
 /// A clock that never advances: time-outs never fire (an RC without a timer).
@@ -100,6 +122,11 @@ pub struct RootConfig {
     /// and its jobs are re-issued; 0 = never. It must exceed the longest run a node renders
     /// between two exchanges ([`RootConfig::DEFAULT_TIMEOUT_US`]).
     pub timeout_us: u64,
+    /// RC-side DMA double buffering: compose the next transfer and take the previous
+    /// node's frame while a transfer is on the wire ([`RootBus::start`] /
+    /// [`RootBus::finish`]). `false`: one transfer at a time, the bus idle while the RC
+    /// composes and decodes.
+    pub double_buffer: bool,
 }
 
 impl RootConfig {
@@ -182,8 +209,9 @@ pub struct RootReport {
 struct NodeSlot {
     expect: u16,
     jobs: [Option<Job>; JOB_QUEUE],
-    /// Highest frame whose scene the node reported ready.
-    ready_upto: Option<u16>,
+    /// The frame whose scene the node reported ready, per bank (`frame % 2`). Per bank,
+    /// not "up to": a node may have missed frame `f`'s broadcast and still hold `f + 1`'s.
+    ready: [Option<u16>; 2],
     /// Scene chunks the node lacks (frame, bitmap), minus those already re-sent.
     repair: Option<(u16, [u32; wire::MAX_CHUNKS / 32])>,
     /// The chunk re-sent in the exchange in progress.
@@ -198,14 +226,14 @@ impl NodeSlot {
     const NEW: NodeSlot = NodeSlot {
         expect: 0,
         jobs: [None; JOB_QUEUE],
-        ready_upto: None,
+        ready: [None; 2],
         repair: None,
         repairing: None,
         heard_us: 0,
         dead: false,
     };
     fn ready_for(&self, frame: u16) -> bool {
-        self.ready_upto.is_some_and(|r| r >= frame)
+        self.ready[(frame % 2) as usize] == Some(frame)
     }
 }
 
@@ -239,6 +267,10 @@ pub struct RootState {
     timeout_us: u64,
     /// Bus tasks waiting for the end (woken when the last frame completes).
     finish_wakers: [Option<Waker>; MAX_BUSES],
+    /// CRC-32 of the scenes of the two frames in flight: (frame, crc) by `frame % 2`.
+    scene_crc: [Option<(u16, u32)>; 2],
+    /// Scene bytes checksummed since [`RootState::take_crc_work`] last ran.
+    crc_work: usize,
 }
 
 /// Resolves when every frame is complete.
@@ -305,6 +337,8 @@ impl RootState {
             deaths: 0,
             timeout_us: cfg.timeout_us,
             finish_wakers: [const { None }; MAX_BUSES],
+            scene_crc: [None; 2],
+            crc_work: 0,
         })
     }
 
@@ -365,6 +399,30 @@ impl RootState {
         }
     }
 
+    /// The CRC-32 of frame `frame`'s scene `bytes` (every chunk carries it): the DM's if it
+    /// delivers one, else computed once per frame; kept while the frame is in flight.
+    pub fn scene_crc(&mut self, frame: u16, bytes: &[u8], from_dm: Option<u32>) -> u32 {
+        let slot = &mut self.scene_crc[(frame % 2) as usize];
+        match *slot {
+            Some((f, c)) if f == frame => c,
+            _ => {
+                if let Some(c) = from_dm {
+                    *slot = Some((frame, c));
+                    return c;
+                }
+                let c = wire::CRC32.checksum(bytes);
+                *slot = Some((frame, c));
+                self.crc_work += bytes.len();
+                c
+            }
+        }
+    }
+
+    /// Scene bytes checksummed since the last call (the CPU work to account for).
+    pub fn take_crc_work(&mut self) -> usize {
+        core::mem::take(&mut self.crc_work)
+    }
+
     /// Nodes declared dead so far.
     pub fn deaths(&self) -> u16 {
         self.deaths
@@ -423,6 +481,38 @@ impl RootState {
         self.deaths = self.deaths.saturating_add(died);
         self.report.timeouts += died as u32;
         died
+    }
+
+    /// The frame to call a roll ([`Down::Wake`]) for on nodes `first..first + count`, if
+    /// work waits that no node there can otherwise be asked for: jobs of a dead node (any
+    /// bus), or a live node holding no jobs that has not reported the scene of the frame
+    /// being handed out although this bus has broadcast it (`broadcast_upto`: frames below it
+    /// are fully broadcast here) and no repair is under way. `None` with time-outs off.
+    pub fn roll_call(&self, first: NodeId, count: u16, broadcast_upto: u16) -> Option<u16> {
+        if self.finished() || self.timeout_us == 0 {
+            return None;
+        }
+        if let Some((d, k)) = self.orphan() {
+            return self.nodes[d].jobs[k].map(|j| j.frame);
+        }
+        let f = self.sched_frame;
+        if f >= broadcast_upto || self.sched.exhausted() {
+            return None;
+        }
+        self.nodes[self.nodes_in(first, count)]
+            .iter()
+            .any(|s| {
+                !s.dead
+                    && !s.ready_for(f)
+                    && s.jobs.iter().all(|j| j.is_none())
+                    && s.repair.is_none()
+            })
+            .then_some(f)
+    }
+
+    /// The time-out in force (µs; it doubles after each false alarm).
+    pub fn timeout_us(&self) -> u64 {
+        self.timeout_us
     }
 
     /// A job held by a dead node, as (node, queue index), oldest frame first.
@@ -548,10 +638,17 @@ impl RootState {
         let slot = &mut self.nodes[node as usize];
         slot.repairing = None;
         let next = slot.repair.and_then(|(frame, map)| {
-            let c = (0..wire::MAX_CHUNKS as u32)
+            // Only chunks the scene has (a node that heard nothing of it asks for all).
+            let chunks = scenes
+                .scene(frame)
+                .map_or(0, |s| s.len().div_ceil(SCENE_CHUNK)) as u32;
+            let c = (0..chunks.min(wire::MAX_CHUNKS as u32))
                 .find(|&c| map[(c / 32) as usize] & (1 << (c % 32)) != 0)?;
             Some((frame, c))
         });
+        if next.is_none() {
+            slot.repair = None;
+        }
         if let Some((frame, c)) = next {
             if let Some((_, map)) = &mut slot.repair {
                 map[(c / 32) as usize] &= !(1 << (c % 32));
@@ -560,11 +657,12 @@ impl RootState {
             if let Some(scene) = scenes.scene(frame) {
                 let start = (c as usize * SCENE_CHUNK).min(scene.len());
                 let end = (start + SCENE_CHUNK).min(scene.len());
+                let crc = self.scene_crc(frame, scene, scenes.scene_crc(frame));
                 let msg = Down::Scene {
                     frame,
                     offset: start as u32,
                     total: scene.len() as u32,
-                    crc: wire::CRC32.checksum(scene),
+                    crc,
                     data: &scene[start..end],
                 };
                 self.report.repairs += 1;
@@ -608,7 +706,7 @@ impl RootState {
             Up::Poll => {}
             Up::Status { scene } => match scene {
                 SceneState::Ready { frame } => {
-                    slot.ready_upto = Some(slot.ready_upto.map_or(frame, |r| r.max(frame)));
+                    slot.ready[(frame % 2) as usize] = Some(frame);
                     if slot.repair.is_some_and(|(f, _)| f == frame) {
                         slot.repair = None;
                     }
@@ -686,8 +784,42 @@ impl RootState {
     }
 }
 
+/// Take the frame of the transfer that just left the wire (an exchange: account for the
+/// decoding, then apply the node's frame; a broadcast: count it).
+async fn complete<C: RootClock, P: PixelSink>(
+    sent: Sent,
+    rx: &[u8],
+    clock: &C,
+    root: &RefCell<RootState>,
+    sink: &RefCell<P>,
+) {
+    match sent {
+        Sent::Exchange(node) => {
+            clock.worked(RcWork::Decode { frame: rx }).await;
+            let mut r = root.borrow_mut();
+            r.report.exchanges += 1;
+            r.heard(node, clock.now_us());
+            r.take(node, rx, &mut *sink.borrow_mut());
+        }
+        Sent::Broadcast => root.borrow_mut().report.broadcasts += 1,
+    }
+}
+
+/// What a bus transfer carried, for [`complete`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Sent {
+    Exchange(NodeId),
+    Broadcast,
+}
+
 /// Drive one bus until every frame is complete, then broadcast `Stop`. `index` numbers the
 /// bus tasks (0..[`MAX_BUSES`]) sharing `root`.
+///
+/// With [`RootConfig::double_buffer`] the RC works while the bus does: it composes transfer
+/// `k + 1` in the idle TX bank while transfer `k` is on the wire, starts it the moment `k`
+/// ends, and decodes and applies `k`'s node frame while `k + 1` is on the wire. The bus
+/// waits for the RC only when composing `k + 1` takes longer than transfer `k`. Without it,
+/// each transfer is composed, clocked and taken in turn.
 pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: PixelSink>(
     index: usize,
     bus: &mut B,
@@ -696,35 +828,74 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
     scenes: &S,
     sink: &RefCell<P>,
 ) -> Result<RootReport, RootError> {
-    let mut tx = [0u8; MAX_FRAME];
     let mut rx = [0u8; MAX_FRAME];
+    let double = root.borrow().cfg.double_buffer;
     // Broadcast position: frame, byte offset (None = SceneEnd next).
     let mut bframe: u16 = 0;
     let mut boffset: Option<u32> = Some(0);
-    let mut bcrc: Option<(u16, u32)> = None;
     // Deaths this bus has broadcast `Wake` for.
     let mut woken: u16 = 0;
+    // Roll calls: when the next may go out while work waits (None: nothing waits), and the
+    // interval after it (doubles while the wait lasts: a lost `Wake` is repeated, a node
+    // that never answers costs a bounded number of broadcasts).
+    let mut call_at: Option<u64> = None;
+    let mut call_every: u64 = 0;
+    // The transfer on the wire (double buffering only).
+    let mut inflight: Option<Sent> = None;
     let (first, count) = bus.nodes();
     loop {
         if root.borrow().finished() {
-            let n = wire::encode(0, 0, &Down::Stop, &mut tx).unwrap_or(0);
-            bus.broadcast(&tx[..n]).await?;
+            if let Some(sent) = inflight.take() {
+                let got = bus.finish(&mut rx).await?;
+                complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
+            }
+            let n = wire::encode(0, 0, &Down::Stop, bus.tx_bank()).unwrap_or(0);
+            clock.worked(RcWork::Encode { bytes: n }).await;
+            bus.start(Transfer::Broadcast, n)?;
+            bus.finish(&mut rx).await?;
             return Ok(root.borrow().report());
         }
+        // 1. Choose the next transfer and compose it into the idle TX bank.
         let mut ready = bus.ready();
+        let mut wake: Option<u16> = None;
         if ready.is_none() {
-            root.borrow_mut().expire(first, count, clock.now_us());
-            // A node died (on any bus): idle nodes must be told to ask for its work.
-            if root.borrow().deaths() > woken {
-                woken = root.borrow().deaths();
-                let n = wire::encode(0, 0, &Down::Wake, &mut tx).unwrap_or(0);
-                bus.broadcast(&tx[..n]).await?;
-                root.borrow_mut().report.broadcasts += 1;
-                continue;
+            let now = clock.now_us();
+            root.borrow_mut().expire(first, count, now);
+            let waiting = root.borrow().roll_call(first, count, bframe);
+            let every = root.borrow().timeout_us();
+            match waiting {
+                None => call_at = None,
+                Some(frame) => {
+                    // A node died (on any bus): idle nodes must be told to ask for its work
+                    // at once. Otherwise call once the wait has lasted a time-out.
+                    if root.borrow().deaths() > woken {
+                        woken = root.borrow().deaths();
+                        call_at = Some(now);
+                        call_every = every;
+                    }
+                    let at = *call_at.get_or_insert_with(|| {
+                        call_every = every;
+                        now.saturating_add(every)
+                    });
+                    if now >= at {
+                        wake = Some(frame);
+                        call_at = Some(now.saturating_add(call_every));
+                        call_every = call_every.saturating_mul(2);
+                    }
+                }
             }
             let can_send = root.borrow().may_broadcast(bframe);
-            if !(can_send && scenes.produced(bframe)) {
-                let deadline = root.borrow().next_deadline(first, count);
+            if wake.is_none() && !(can_send && scenes.produced(bframe)) {
+                // Nothing to send now. The frame on the wire may change that: take it first.
+                if let Some(sent) = inflight.take() {
+                    let got = bus.finish(&mut rx).await?;
+                    complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
+                    continue;
+                }
+                let deadline = match (root.borrow().next_deadline(first, count), call_at) {
+                    (Some(a), Some(b)) => Some(a.min(b)),
+                    (a, b) => a.or(b),
+                };
                 let timer = async {
                     match deadline {
                         Some(t) => clock.at_us(t).await,
@@ -745,29 +916,50 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                 }
             }
         }
-        match ready {
+        // A node whose exchange is still on the wire (or not yet taken) that is ready again
+        // already has our reply: take its last frame before composing the next reply.
+        if let (Some(node), Some(Sent::Exchange(busy))) = (ready, inflight) {
+            if node == busy {
+                inflight = None;
+                let got = bus.finish(&mut rx).await?;
+                complete(
+                    Sent::Exchange(node),
+                    &rx[..got.min(rx.len())],
+                    clock,
+                    root,
+                    sink,
+                )
+                .await;
+                continue;
+            }
+        }
+        let (next, n) = match ready {
             Some(node) => {
                 // Its ready line is up: the node is alive.
-                root.borrow_mut().heard(node, clock.now_us());
-                let n = root.borrow_mut().reply(node, scenes, &mut tx);
-                let got = bus.exchange(node, &tx[..n], &mut rx).await?;
                 let mut r = root.borrow_mut();
-                r.report.exchanges += 1;
                 r.heard(node, clock.now_us());
-                r.take(node, &rx[..got.min(rx.len())], &mut *sink.borrow_mut());
+                (Sent::Exchange(node), r.reply(node, scenes, bus.tx_bank()))
             }
+            None if wake.is_some() => (
+                Sent::Broadcast,
+                wire::encode(
+                    0,
+                    0,
+                    &Down::Wake {
+                        frame: wake.unwrap_or(0),
+                    },
+                    bus.tx_bank(),
+                )
+                .unwrap_or(0),
+            ),
             None => {
                 let scene = scenes
                     .scene(bframe)
                     .ok_or(RootError::BadScene { frame: bframe })?;
-                let crc = match bcrc {
-                    Some((f, c)) if f == bframe => c,
-                    _ => {
-                        let c = wire::CRC32.checksum(scene);
-                        bcrc = Some((bframe, c));
-                        c
-                    }
-                };
+                let crc = root
+                    .borrow_mut()
+                    .scene_crc(bframe, scene, scenes.scene_crc(bframe));
+                let tx = bus.tx_bank();
                 let n = match boffset {
                     Some(off) => {
                         let start = off as usize;
@@ -780,7 +972,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                             data: &scene[start..end],
                         };
                         boffset = (end < scene.len()).then_some(end as u32);
-                        wire::encode(0, 0, &msg, &mut tx).unwrap_or(0)
+                        wire::encode(0, 0, &msg, tx).unwrap_or(0)
                     }
                     None => {
                         let msg = Down::SceneEnd {
@@ -790,12 +982,36 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                         };
                         bframe += 1;
                         boffset = Some(0);
-                        wire::encode(0, 0, &msg, &mut tx).unwrap_or(0)
+                        wire::encode(0, 0, &msg, tx).unwrap_or(0)
                     }
                 };
-                bus.broadcast(&tx[..n]).await?;
-                root.borrow_mut().report.broadcasts += 1;
+                (Sent::Broadcast, n)
             }
+        };
+        let crc_bytes = root.borrow_mut().take_crc_work();
+        if crc_bytes > 0 {
+            clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;
+        }
+        clock.worked(RcWork::Encode { bytes: n }).await;
+        // 2. The transfer on the wire must end before this one starts; then take its frame
+        // while this one is on the wire.
+        let prev = match inflight.take() {
+            Some(sent) => Some((sent, bus.finish(&mut rx).await?)),
+            None => None,
+        };
+        let transfer = match next {
+            Sent::Exchange(node) => Transfer::Exchange(node),
+            Sent::Broadcast => Transfer::Broadcast,
+        };
+        bus.start(transfer, n)?;
+        if let Some((sent, got)) = prev {
+            complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
+        }
+        if double {
+            inflight = Some(next);
+        } else {
+            let got = bus.finish(&mut rx).await?;
+            complete(next, &rx[..got.min(rx.len())], clock, root, sink).await;
         }
     }
 }

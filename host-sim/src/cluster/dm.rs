@@ -3,6 +3,8 @@
 //! virtual time per frame; frame `f`'s scene exists from `(f + 1) · per_frame` on and the RC
 //! may not broadcast it before. The scenes themselves are compiled before the simulation
 //! (the DM's output is a pure function of its input); only their availability is timed.
+//! The DM delivers each scene with its CRC-32, so the RC does not read the whole image
+//! before it can broadcast the first chunk.
 
 use super::exec::{Delay, Ps, SharedClock};
 use links_core::root::SceneSource;
@@ -10,6 +12,8 @@ use links_core::root::SceneSource;
 /// Scenes that appear in virtual time.
 pub struct DmStage<'a, S> {
     scenes: &'a [S],
+    /// Each scene's CRC-32, delivered with it (the DM wrote the bytes).
+    crcs: Vec<u32>,
     clock: SharedClock,
     per_frame: Ps,
 }
@@ -19,6 +23,10 @@ impl<'a, S: AsRef<[u8]>> DmStage<'a, S> {
     pub fn new(scenes: &'a [S], clock: &SharedClock, per_frame: Ps) -> Self {
         Self {
             scenes,
+            crcs: scenes
+                .iter()
+                .map(|s| links_core::wire::CRC32.checksum(s.as_ref()))
+                .collect(),
             clock: clock.clone(),
             per_frame,
         }
@@ -33,6 +41,10 @@ impl<'a, S: AsRef<[u8]>> DmStage<'a, S> {
 impl<S: AsRef<[u8]>> SceneSource for DmStage<'_, S> {
     fn scene(&self, frame: u16) -> Option<&[u8]> {
         self.scenes.get(frame as usize).map(|s| s.as_ref())
+    }
+
+    fn scene_crc(&self, frame: u16) -> Option<u32> {
+        self.crcs.get(frame as usize).copied()
     }
 
     fn produced(&self, frame: u16) -> bool {

@@ -5,6 +5,7 @@
 //! - [`dm`]: the DM stage (each frame's scene appears after a fixed DM time per frame).
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
+//! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
 //! - [`sweep`]: the Fig. 5.1 / 5.2 analogs (node-count and division sweeps), CSV and charts.
 //!
 //! Node compute time is [`CycleModel::cycles`] of each run's operation counts at the
@@ -14,6 +15,7 @@
 pub mod dm;
 pub mod exec;
 pub mod framemem;
+pub mod rccost;
 pub mod star;
 pub mod sweep;
 
@@ -33,7 +35,8 @@ use links_core::root::{
 };
 use links_core::sched::Policy;
 use links_core::wire;
-use star::{BusCounters, BusTiming, Faults, NodeDeath, SimBus, SimNodeLink, Star};
+use rccost::{RcClock, RcCost};
+use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, SimBus, SimNodeLink, Star};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::fmt;
@@ -65,6 +68,8 @@ pub struct SimConfig {
     pub faults: Faults,
     /// Nodes that die (stop answering) during the run.
     pub deaths: Vec<NodeDeath>,
+    /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
+    pub drops: Vec<BroadcastDrop>,
     /// The RC declares a node holding jobs dead after this long without an exchange (s) and
     /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
     pub node_timeout_s: f64,
@@ -74,6 +79,11 @@ pub struct SimConfig {
     pub collect: Collect,
     /// Node options (run-length coded pixel runs).
     pub node: NodeConfig,
+    /// The RC's CPU cost of composing and decoding frames.
+    pub rc_cost: RcCost,
+    /// RC-side DMA double buffering (compose the next transfer and decode the previous
+    /// one while a transfer is on the wire); `false`: one transfer at a time.
+    pub rc_double_buffer: bool,
     /// Keep a copy of every finished frame in the report.
     pub keep_frames: bool,
     /// Memo of rendered runs shared between simulations of the same scenes (sweeps). The
@@ -92,10 +102,13 @@ impl Default for SimConfig {
             model: CycleModel::default(),
             faults: Faults::default(),
             deaths: Vec::new(),
+            drops: Vec::new(),
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
             collect: Collect::Snoop,
             node: NodeConfig::default(),
+            rc_cost: RcCost::default(),
+            rc_double_buffer: true,
             keep_frames: false,
             cache: None,
         }
@@ -119,6 +132,8 @@ pub struct SimReport {
     pub compute_s: f64,
     /// Compute time of each node (s).
     pub node_compute_s: Vec<f64>,
+    /// Time the RC's CPU was busy composing and decoding frames (s).
+    pub rc_busy_s: f64,
     pub bus: Vec<BusCounters>,
     pub root: RootReport,
     pub node_reports: Vec<NodeReport>,
@@ -339,6 +354,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         nodes: cfg.nodes,
         frames,
         timeout_us: (cfg.node_timeout_s * 1e6).round() as u64,
+        double_buffer: cfg.rc_double_buffer,
     };
     let root = RefCell::new(RootState::new(rc, scenes).map_err(SimError::Root)?);
     let (width, height) = root.borrow().size();
@@ -364,6 +380,9 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         star.borrow_mut()
             .kill_at(d.node, (d.at_s * 1e12).round() as Ps);
     }
+    for d in &cfg.drops {
+        star.borrow_mut().drop_broadcasts(*d);
+    }
     let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
     let buses = star.borrow().bus_count();
     let sink = RefCell::new(match cfg.collect {
@@ -378,12 +397,20 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         .map(|_| [vec![0u8; bank_len], vec![0u8; bank_len]])
         .collect();
 
+    let rc_cpu_free = Rc::new(std::cell::Cell::new(0 as Ps));
+    let rc_busy = Rc::new(std::cell::Cell::new(0 as Ps));
     let mut tasks: Vec<Option<Task<'_>>> = Vec::new();
     {
         let (root, sink, bus_results, dm) = (&root, &sink, &bus_results, &dm);
         for b in 0..buses {
             let star = star.clone();
-            let rc_clock = exec::VirtualClock(clock.clone());
+            let rc_clock = RcClock {
+                clock: clock.clone(),
+                cost: cfg.rc_cost,
+                sink_pixels: cfg.collect == Collect::ViaRoot,
+                cpu_free: rc_cpu_free.clone(),
+                busy: rc_busy.clone(),
+            };
             tasks.push(Some(Box::pin(async move {
                 let mut bus = SimBus::new(&star, b);
                 let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
@@ -474,6 +501,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         time_s: time_ps as f64 * 1e-12,
         compute_s: compute_ps as f64 * 1e-12,
         node_compute_s: node_ps.iter().map(|&t| t as f64 * 1e-12).collect(),
+        rc_busy_s: rc_busy.get() as f64 * 1e-12,
         bus,
         root: root_report,
         node_reports,

@@ -1,14 +1,15 @@
 //! The emulated SPI star: buses, chip-selects, ready lines, DMA banks, fault injection (bit
 //! flips, node deaths), and the snooping pixel collector feeding the frame memory.
 //!
-//! Timing of one transfer on a bus: `overhead` (handshake: ready-line interrupt, chip-select
-//! set-up, DMA arming on both sides) + `(header + body) · 8 / bit_rate`, where an exchange's
+//! Timing of one transfer on a bus: `overhead` (handshake: chip-select set-up and hold, DMA
+//! start, transfer-complete interrupt) + `(header + body) · 8 / bit_rate`, where an exchange's
 //! body is the longer of the two frames (full duplex) and the header phase carries both
 //! lengths. A bus does one transfer at a time; different buses run in parallel.
 
-use super::exec::{Delay, PollFn, Ps, SharedClock};
+use super::exec::{PollFn, Ps, SharedClock};
 use super::framemem::FrameMemory;
-use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
+use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
+use links_core::wire::MAX_FRAME;
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::rc::Rc;
@@ -18,7 +19,10 @@ use std::rc::Rc;
 pub struct BusTiming {
     /// SPI clock in bits per second (STM32F407 SPI1: up to 42 MHz).
     pub bit_rate_hz: f64,
-    /// Per-transfer handshake and DMA set-up, in nanoseconds.
+    /// Per-transfer handshake on the wire, in nanoseconds: chip-select set-up and hold,
+    /// starting the DMA streams and the transfer-complete interrupt on both ends. The RC's
+    /// CPU work per transfer (choosing it, composing, decoding) is not in here: see
+    /// [`super::rccost`].
     pub overhead_ns: f64,
     /// Bytes of the length header each transfer starts with.
     pub header_bytes: u32,
@@ -28,7 +32,7 @@ impl Default for BusTiming {
     fn default() -> Self {
         Self {
             bit_rate_hz: 42e6,
-            overhead_ns: 2000.0,
+            overhead_ns: 500.0,
             header_bytes: 4,
         }
     }
@@ -66,6 +70,16 @@ pub struct NodeDeath {
     pub at_s: f64,
 }
 
+/// Fault injection: node `node`'s receiver is off the bus for broadcasts number
+/// `from..to` of its bus (0-based, in the order the bus sends them: scene chunks, `SceneEnd`,
+/// `Wake`, `Stop`); it loses them whole and hears about it from nobody. Exchanges still work.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BroadcastDrop {
+    pub node: NodeId,
+    pub from: u64,
+    pub to: u64,
+}
+
 /// Traffic counters of one bus.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct BusCounters {
@@ -83,6 +97,8 @@ pub struct BusCounters {
     pub corrupted_up: u64,
     pub corrupted_down: u64,
     pub corrupted_broadcast: u64,
+    /// Broadcast copies lost by a receiver off the bus ([`BroadcastDrop`]).
+    pub dropped_broadcast: u64,
 }
 
 impl BusCounters {
@@ -97,10 +113,22 @@ struct NodeState {
     inbox: VecDeque<(bool, Vec<u8>)>,
 }
 
+/// A transfer on the wire: it takes effect (the node's inbox, the snoop, the RC's RX bank)
+/// when virtual time reaches `end`, whoever looks first.
+struct Inflight {
+    end: Ps,
+    /// The exchange's node, or `None` for a broadcast.
+    node: Option<NodeId>,
+    down: Vec<u8>,
+    up: Vec<u8>,
+    delivered: bool,
+}
+
 struct BusState {
     first: NodeId,
     count: u16,
     busy_until: Ps,
+    inflight: Option<Inflight>,
     /// Round-robin position of the ready-line scan.
     next_scan: u16,
     counters: BusCounters,
@@ -121,6 +149,7 @@ pub struct Star {
     /// When each node dies (stops answering: its ready line stays low, it takes no
     /// transfer and posts nothing); `Ps::MAX` = never.
     dead_at: Vec<Ps>,
+    drops: Vec<BroadcastDrop>,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -143,6 +172,7 @@ impl Star {
                     first,
                     count: end - first,
                     busy_until: 0,
+                    inflight: None,
                     next_scan: 0,
                     counters: BusCounters::default(),
                 }
@@ -164,7 +194,13 @@ impl Star {
             rng: faults.random.unwrap_or(1).max(1),
             snoop,
             dead_at: vec![Ps::MAX; nodes as usize],
+            drops: Vec::new(),
         }))
+    }
+
+    /// A node loses some broadcasts (fault injection).
+    pub fn drop_broadcasts(&mut self, d: BroadcastDrop) {
+        self.drops.push(d);
     }
 
     /// Node `node` dies at virtual time `at` (fault injection).
@@ -191,6 +227,77 @@ impl Star {
 
     fn touch(&self) {
         self.clock.borrow_mut().changes += 1;
+    }
+
+    /// Deliver every transfer whose end has come (bus order: deterministic). Called by
+    /// everything that can observe a delivery, so a transfer takes effect at its end time
+    /// for every observer whether or not the RC is busy then.
+    fn settle(&mut self) {
+        let now = self.clock.borrow().now;
+        for bus in 0..self.buses.len() {
+            let due = self.buses[bus]
+                .inflight
+                .as_ref()
+                .is_some_and(|t| !t.delivered && t.end <= now);
+            if due {
+                self.deliver(bus);
+            }
+        }
+    }
+
+    fn deliver(&mut self, bus: usize) {
+        let Some(mut t) = self.buses[bus].inflight.take() else {
+            return;
+        };
+        t.delivered = true;
+        match t.node {
+            Some(node) => {
+                let (fu, fd) = (self.faults.up_every, self.faults.down_every);
+                self.maybe_corrupt(0, fu, &mut t.up, bus);
+                self.maybe_corrupt(1, fd, &mut t.down, bus);
+                let c = &mut self.buses[bus].counters;
+                c.exchanges += 1;
+                c.up_bytes += t.up.len() as u64;
+                c.down_bytes += t.down.len() as u64;
+                if let Some(fm) = &self.snoop {
+                    fm.borrow_mut().snoop(&t.up);
+                }
+                self.nodes[node as usize]
+                    .inbox
+                    .push_back((true, t.down.clone()));
+            }
+            None => {
+                let (first, count) = (self.buses[bus].first, self.buses[bus].count);
+                let index = self.buses[bus].counters.broadcasts;
+                let c = &mut self.buses[bus].counters;
+                c.broadcasts += 1;
+                c.broadcast_bytes += t.down.len() as u64;
+                let every = self.faults.broadcast_every;
+                for n in first..first + count {
+                    if self.is_dead(n as usize) {
+                        continue;
+                    }
+                    if self
+                        .drops
+                        .iter()
+                        .any(|d| d.node == n && (d.from..d.to).contains(&index))
+                    {
+                        self.buses[bus].counters.dropped_broadcast += 1;
+                        continue;
+                    }
+                    let mut f = t.down.clone();
+                    // One receiver per hit, in turn, sees the corruption.
+                    let victim = self.bcast_victim % count as usize == (n - first) as usize;
+                    if every > 0 && (victim || self.faults.random.is_some()) {
+                        self.maybe_corrupt(2, every, &mut f, bus);
+                    }
+                    self.nodes[n as usize].inbox.push_back((false, f));
+                }
+                self.bcast_victim += 1;
+            }
+        }
+        self.buses[bus].inflight = Some(t);
+        self.touch();
     }
 
     /// Corrupt `frame` if this is the `every`-th transfer of kind `k`.
@@ -255,6 +362,7 @@ impl NodeLink for SimNodeLink {
     async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError> {
         let (exchanged, frame) = PollFn(|| {
             let mut s = self.star.borrow_mut();
+            s.settle();
             if s.is_dead(self.id) {
                 return None;
             }
@@ -280,11 +388,13 @@ impl NodeLink for SimNodeLink {
     }
 }
 
-/// The RC's end of one bus.
+/// The RC's end of one bus, with its two TX banks.
 pub struct SimBus {
     star: SharedStar,
     clock: SharedClock,
     bus: usize,
+    banks: [Vec<u8>; 2],
+    idle: usize,
 }
 
 impl SimBus {
@@ -294,6 +404,8 @@ impl SimBus {
             star: star.clone(),
             clock,
             bus,
+            banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+            idle: 0,
         }
     }
 
@@ -330,72 +442,76 @@ impl RootBus for SimBus {
         PollFn(|| self.ready()).await
     }
 
-    async fn exchange(
-        &mut self,
-        node: NodeId,
-        tx: &[u8],
-        rx: &mut [u8],
-    ) -> Result<usize, LinkError> {
-        let (first, count) = self.nodes();
-        if node < first || node >= first + count {
-            return Err(LinkError::NoSuchNode { node });
-        }
-        // Chip-select asserted: the node's TX bank is committed to this transfer.
-        let up = {
-            let mut s = self.star.borrow_mut();
-            let b = &mut s.buses[self.bus];
-            b.next_scan = (node - first + 1) % count;
-            s.nodes[node as usize].tx.take().ok_or(LinkError::Aborted)?
-        };
-        let end = self.claim(tx.len().max(up.len()));
-        Delay::new(&self.clock, end).await;
-        let mut s = self.star.borrow_mut();
-        let (fu, fd) = (s.faults.up_every, s.faults.down_every);
-        let mut up = up;
-        let mut down = tx.to_vec();
-        s.maybe_corrupt(0, fu, &mut up, self.bus);
-        s.maybe_corrupt(1, fd, &mut down, self.bus);
-        let c = &mut s.buses[self.bus].counters;
-        c.exchanges += 1;
-        c.up_bytes += up.len() as u64;
-        c.down_bytes += down.len() as u64;
-        if let Some(fm) = &s.snoop {
-            fm.borrow_mut().snoop(&up);
-        }
-        s.nodes[node as usize].inbox.push_back((true, down));
-        s.touch();
-        let max = rx.len() as u32;
-        let dst = rx.get_mut(..up.len()).ok_or(LinkError::TooLong {
-            len: up.len() as u32,
-            max,
-        })?;
-        dst.copy_from_slice(&up);
-        Ok(up.len())
+    fn tx_bank(&mut self) -> &mut [u8] {
+        &mut self.banks[self.idle]
     }
 
-    async fn broadcast(&mut self, frame: &[u8]) -> Result<(), LinkError> {
-        let end = self.claim(frame.len());
-        Delay::new(&self.clock, end).await;
+    fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
+        let max = MAX_FRAME as u32;
+        let down = self.banks[self.idle]
+            .get(..len)
+            .ok_or(LinkError::TooLong {
+                len: len as u32,
+                max,
+            })?
+            .to_vec();
+        let (node, up) = {
+            let mut s = self.star.borrow_mut();
+            if s.buses[self.bus].inflight.is_some() {
+                return Err(LinkError::Busy);
+            }
+            match transfer {
+                Transfer::Exchange(node) => {
+                    let b = &mut s.buses[self.bus];
+                    let (first, count) = (b.first, b.count);
+                    if node < first || node >= first + count {
+                        return Err(LinkError::NoSuchNode { node });
+                    }
+                    // Chip-select asserted: the node's TX bank is committed to this transfer.
+                    b.next_scan = (node - first + 1) % count;
+                    let up = s.nodes[node as usize].tx.take().ok_or(LinkError::Aborted)?;
+                    (Some(node), up)
+                }
+                Transfer::Broadcast => (None, Vec::new()),
+            }
+        };
+        let end = self.claim(down.len().max(up.len()));
+        self.clock.borrow_mut().at(end);
         let mut s = self.star.borrow_mut();
-        let (first, count) = (s.buses[self.bus].first, s.buses[self.bus].count);
-        let c = &mut s.buses[self.bus].counters;
-        c.broadcasts += 1;
-        c.broadcast_bytes += frame.len() as u64;
-        let every = s.faults.broadcast_every;
-        for n in first..first + count {
-            if s.is_dead(n as usize) {
-                continue;
-            }
-            let mut f = frame.to_vec();
-            // One receiver per hit, in turn, sees the corruption.
-            let victim = s.bcast_victim % count as usize == (n - first) as usize;
-            if every > 0 && (victim || s.faults.random.is_some()) {
-                s.maybe_corrupt(2, every, &mut f, self.bus);
-            }
-            s.nodes[n as usize].inbox.push_back((false, f));
-        }
-        s.bcast_victim += 1;
+        s.buses[self.bus].inflight = Some(Inflight {
+            end,
+            node,
+            down,
+            up,
+            delivered: false,
+        });
         s.touch();
+        self.idle ^= 1;
         Ok(())
+    }
+
+    async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+        let bus = self.bus;
+        let star = self.star.clone();
+        let t = PollFn(|| {
+            let mut s = star.borrow_mut();
+            s.settle();
+            let b = &mut s.buses[bus];
+            match &b.inflight {
+                None => Some(None),
+                Some(t) if t.delivered => Some(b.inflight.take()),
+                Some(_) => None,
+            }
+        })
+        .await
+        .ok_or(LinkError::Aborted)?;
+        self.star.borrow_mut().touch();
+        let max = rx.len() as u32;
+        let dst = rx.get_mut(..t.up.len()).ok_or(LinkError::TooLong {
+            len: t.up.len() as u32,
+            max,
+        })?;
+        dst.copy_from_slice(&t.up);
+        Ok(t.up.len())
     }
 }

@@ -19,6 +19,8 @@
 //!   stats against the host's with the same backend and techniques;
 //! - `OP`: micro-benchmarks of single operations in loops (net of an empty loop), in f32
 //!   and in Q16.16.
+//! - `WIRE`: the RC's per-transfer CPU work (wire encode/decode, CRC, RLE, copy) at two
+//!   sizes each ([`wire_bench`]), what host-sim's RC cost model is fitted to.
 //!
 //! Exits through semihosting: status 0 when every check passed.
 
@@ -551,6 +553,33 @@ fn sqrt_bench(o: &mut Out) -> bool {
     }
 }
 
+mod wire_bench;
+
+/// [`wire_bench::Meter`] over the SysTick counter.
+struct WireMeter<'a> {
+    o: &'a mut Out,
+    overhead: u64,
+}
+
+impl wire_bench::Meter for WireMeter<'_> {
+    fn instr(&mut self, f: &mut dyn FnMut()) -> u64 {
+        let t0 = ticks();
+        f();
+        let t1 = ticks();
+        ((t1 - t0) * INSTR_PER_TICK).saturating_sub(self.overhead)
+    }
+    fn line(&mut self, name: &str, bytes: usize, n: usize, instr: u64) {
+        say!(
+            self.o,
+            "WIRE name={} bytes={} n={} instr={}",
+            name,
+            bytes,
+            n,
+            instr
+        );
+    }
+}
+
 fn calibrate(n: u32) {
     // Two instructions per iteration: subs + bne.
     unsafe {
@@ -629,6 +658,10 @@ fn main() -> ! {
     micro::<Fx>(&mut o, Backend::Fx);
 
     ok &= sqrt_bench(&mut o);
+    ok &= wire_bench::run(&mut WireMeter {
+        o: &mut o,
+        overhead,
+    });
 
     say!(o, "END ok={}", ok);
     if ok {

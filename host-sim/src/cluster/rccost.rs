@@ -1,0 +1,151 @@
+//! The RC's CPU in virtual time: what composing, checking and decoding wire frames costs.
+//!
+//! The RC (an STM32F407, like the nodes) reports every piece of work to its clock
+//! ([`links_core::root::RcWork`]); [`RcClock`] turns it into busy time of the one RC CPU
+//! shared by all bus tasks (work queues behind work already running), so a bus waits for the
+//! RC exactly when the RC's work for its next transfer is not done yet.
+//!
+//! Constants: instructions on the Cortex-M4F measured under QEMU with `-icount`
+//! (`tests/qemu-bench/src/wire_bench.rs`, printed as `WIRE` lines by `scripts/qemu-bench`;
+//! release build, fat LTO, as the firmware), each operation at two sizes so the per-byte
+//! slope and the fixed part separate (fitted to a standalone build of that file; the full
+//! benchmark binary agrees within 1.5%, the RLE per-quadruple cost within 7%). `per_transfer` (the bookkeeping of `run_bus`,
+//! `reply` and `take` apart from the wire work: choosing the node, the job table, the
+//! scheduler, the acknowledgement, arming the DMA) is **not measured**: 500 instructions is
+//! an estimate (docs/cluster.md shows what it changes). Cycles per instruction 1.3 and
+//! 168 MHz as for the nodes (`crate::cost`; the RC is the same STM32F407).
+
+use super::exec::{Delay, Ps, SharedClock};
+use links_core::root::{RcWork, RootClock};
+use links_core::wire::{self, Up};
+use std::cell::Cell;
+use std::rc::Rc;
+
+/// Instructions per piece of RC work, and the RC's clock.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RcCost {
+    /// RC core clock (Hz).
+    pub clock_hz: f64,
+    pub cycles_per_instruction: f64,
+    /// Per transfer: choosing it, the job table / scheduler / acknowledgement bookkeeping
+    /// of `reply` and `take`, arming the DMA.
+    pub per_transfer: f64,
+    /// `wire::encode`: fixed part and per byte of the frame (postcard + CRC-32 per byte).
+    pub encode_fixed: f64,
+    pub encode_per_byte: f64,
+    /// `wire::decode` (CRC check + postcard, payloads borrowed): fixed and per byte.
+    pub decode_fixed: f64,
+    pub decode_per_byte: f64,
+    /// `wire::rle_decode`: per `(count, r, g, b)` quadruple and per pixel written.
+    pub rle_per_quad: f64,
+    pub rle_per_pixel: f64,
+    /// CRC-32 of a scene image, per byte.
+    pub crc_per_byte: f64,
+    /// Copying pixels to the frame memory when the RC is the pixel sink, per byte.
+    pub copy_per_byte: f64,
+}
+
+impl RcCost {
+    /// The STM32F407 at 168 MHz, QEMU-measured instruction counts (see the module doc).
+    pub const CORTEX_M4F: RcCost = RcCost {
+        clock_hz: 168e6,
+        cycles_per_instruction: 1.3,
+        per_transfer: 500.0,
+        encode_fixed: 450.0,
+        encode_per_byte: 8.75,
+        decode_fixed: 230.0,
+        decode_per_byte: 5.25,
+        rle_per_quad: 30.0,
+        rle_per_pixel: 4.8,
+        crc_per_byte: 5.25,
+        copy_per_byte: 1.06,
+    };
+
+    /// An RC whose work takes no time (the bus never waits for it).
+    pub const FREE: RcCost = RcCost {
+        clock_hz: 168e6,
+        cycles_per_instruction: 0.0,
+        per_transfer: 0.0,
+        encode_fixed: 0.0,
+        encode_per_byte: 0.0,
+        decode_fixed: 0.0,
+        decode_per_byte: 0.0,
+        rle_per_quad: 0.0,
+        rle_per_pixel: 0.0,
+        crc_per_byte: 0.0,
+        copy_per_byte: 0.0,
+    };
+
+    /// Instructions of one piece of work; `sink_pixels`: the RC copies pixels it accepts
+    /// into the frame memory (no snooping collector).
+    pub fn instructions(&self, work: &RcWork<'_>, sink_pixels: bool) -> f64 {
+        match *work {
+            RcWork::Encode { bytes } => {
+                self.per_transfer + self.encode_fixed + self.encode_per_byte * bytes as f64
+            }
+            RcWork::Checksum { bytes } => self.crc_per_byte * bytes as f64,
+            RcWork::Decode { frame } => {
+                let mut i = self.decode_fixed + self.decode_per_byte * frame.len() as f64;
+                let pixels = match wire::decode::<Up>(frame).map(|e| e.msg) {
+                    Ok(Up::Pixels { rgb, .. }) => rgb.len() / 3,
+                    Ok(Up::PixelsRle { len, data, .. }) => {
+                        i += self.rle_per_quad * (data.len() / 4) as f64
+                            + self.rle_per_pixel * len as f64;
+                        len as usize
+                    }
+                    _ => 0,
+                };
+                if sink_pixels {
+                    i += self.copy_per_byte * (3 * pixels) as f64;
+                }
+                i
+            }
+        }
+    }
+
+    /// Picoseconds of one piece of work.
+    pub fn duration_ps(&self, work: &RcWork<'_>, sink_pixels: bool) -> Ps {
+        let cycles = self.instructions(work, sink_pixels) * self.cycles_per_instruction;
+        (cycles * 1e12 / self.clock_hz).ceil() as Ps
+    }
+}
+
+impl Default for RcCost {
+    fn default() -> Self {
+        Self::CORTEX_M4F
+    }
+}
+
+/// The RC's clock in the simulator: virtual time for time-outs, and the RC CPU, one for all
+/// bus tasks.
+pub struct RcClock {
+    pub clock: SharedClock,
+    pub cost: RcCost,
+    pub sink_pixels: bool,
+    /// When the RC CPU finishes the work given it so far.
+    pub cpu_free: Rc<Cell<Ps>>,
+    /// Total RC CPU busy time.
+    pub busy: Rc<Cell<Ps>>,
+}
+
+impl RootClock for RcClock {
+    fn now_us(&self) -> u64 {
+        self.clock.borrow().now / 1_000_000
+    }
+
+    async fn at_us(&self, t: u64) {
+        Delay::new(&self.clock, t.saturating_mul(1_000_000)).await
+    }
+
+    async fn worked(&self, work: RcWork<'_>) {
+        let d = self.cost.duration_ps(&work, self.sink_pixels);
+        if d == 0 {
+            return;
+        }
+        let now = self.clock.borrow().now;
+        let end = now.max(self.cpu_free.get()) + d;
+        self.cpu_free.set(end);
+        self.busy.set(self.busy.get() + d);
+        Delay::new(&self.clock, end).await;
+    }
+}

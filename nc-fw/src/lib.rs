@@ -1,0 +1,55 @@
+//! LINKS-1 node computer (NC) firmware for the STM32F407VG.
+//!
+//! The behaviour is `links_core::node::run_node`; the link protocol is
+//! `links_core::spi` (tested on the host against an emulated bus). This crate adds only the
+//! board: the memory plan and pin map (plain data, checked by host tests) and, for the MCU,
+//! the embassy-stm32 port of the SPI slave ([`port`]).
+//!
+//! Host tests: `tests/tests/fw_plan.rs` (the plan against real SceneImage sizes) and
+//! `tests/tests/spi_link.rs` (the link protocol against an emulated bus).
+#![cfg_attr(target_os = "none", no_std)]
+
+#[cfg(target_os = "none")]
+pub mod port;
+
+/// Where every large buffer lives (bytes). See `docs/hardware.md`.
+pub mod plan {
+    use links_core::spi::BANK;
+
+    /// SRAM1 + SRAM2 (DMA-reachable).
+    pub const SRAM: usize = 128 * 1024;
+    /// CCM data RAM (CPU only).
+    pub const CCM: usize = 64 * 1024;
+    /// The link's DMA banks: two TX, two RX, one scratch (in SRAM).
+    pub const LINK_BANKS: usize = 5 * BANK;
+    /// Scene bank of even frames (in SRAM): what the DMA banks leave, in whole KB.
+    pub const SCENE_EVEN: usize = (SRAM - LINK_BANKS) / 1024 * 1024;
+    /// Scene bank of odd frames (in CCM; the CPU reads scenes in place, DMA never touches
+    /// them). Animations whose odd frames need more must alternate on two boards' worth of
+    /// SRAM; single frames (what the RC firmware renders) use the even bank only.
+    pub const SCENE_ODD: usize = 24 * 1024;
+    /// CCM left for .data, .bss (the executor's task futures, the link's shared state,
+    /// RTT buffers) and the stack.
+    pub const CCM_REST: usize = CCM - SCENE_ODD;
+
+    const _: () = assert!(LINK_BANKS + SCENE_EVEN <= SRAM);
+    const _: () = assert!(SCENE_EVEN <= links_core::wire::MAX_SCENE);
+    const _: () = assert!(CCM_REST >= 32 * 1024);
+}
+
+/// Pins of the NC board (STM32F4DISCOVERY). See `docs/hardware.md`.
+pub mod pins {
+    /// SPI1 (slave): SCK, MISO, MOSI, NSS (hardware chip-select input).
+    pub const SPI1: [&str; 4] = ["PA5", "PA6", "PA7", "PA4"];
+    /// The RC's chip-select line also goes here: an EXTI input that tells the link when a
+    /// transfer starts and ends (the DMA is armed for a whole bank).
+    pub const CS_SENSE: &str = "PB0";
+    /// Handshake output to the RC ("armed, frame posted").
+    pub const READY: &str = "PB1";
+    /// The Discovery's accelerometer shares SPI1: its chip-select is held high.
+    pub const ACCEL_CS: &str = "PE3";
+    /// MISO pin number on GPIOA (driven by the slave-pin workaround in [`crate::port`]).
+    pub const MISO_PA: usize = 6;
+    /// MOSI pin number on GPIOA.
+    pub const MOSI_PA: usize = 7;
+}

@@ -1,0 +1,159 @@
+//! NC bring-up: clocks, pins, the link task (interrupt executor, preempts rendering) and the
+//! node task (thread mode: `links_core::node::run_node`, rendering f32 on the FPU).
+#![cfg_attr(target_os = "none", no_std)]
+#![cfg_attr(target_os = "none", no_main)]
+
+#[cfg(not(target_os = "none"))]
+fn main() {
+    eprintln!(
+        "nc-fw is firmware for the STM32F407VG: \
+         cargo run --release --target thumbv7em-none-eabihf -p nc-fw"
+    );
+    std::process::exit(2);
+}
+
+#[cfg(target_os = "none")]
+mod fw {
+    use core::mem::MaybeUninit;
+    use core::ptr::addr_of_mut;
+    use cortex_m_rt::entry;
+    use defmt::{info, unwrap, warn};
+    use embassy_executor::{Executor, InterruptExecutor};
+    use embassy_stm32::exti::ExtiInput;
+    use embassy_stm32::gpio::{Level, Output, Pull, Speed};
+    use embassy_stm32::interrupt;
+    use embassy_stm32::interrupt::{InterruptExt, Priority};
+    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
+    use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
+    use nc_fw::plan::{SCENE_EVEN, SCENE_ODD};
+    use nc_fw::port::{Irqs, NcPort};
+    use static_cell::{ConstStaticCell, StaticCell};
+    use {defmt_rtt as _, panic_probe as _};
+
+    /// Everything DMA touches, and the big scene bank, in SRAM (`.sram`, see memory.x).
+    struct Sram {
+        link: [Bank; 5],
+        scene_even: [u8; SCENE_EVEN],
+    }
+
+    #[link_section = ".sram"]
+    static mut SRAM: MaybeUninit<Sram> = MaybeUninit::uninit();
+    /// The odd frames' scene bank: CCM (`.bss`), read in place by the CPU only.
+    static SCENE_ODD_BANK: ConstStaticCell<[u8; SCENE_ODD]> = ConstStaticCell::new([0; SCENE_ODD]);
+    static SHARED: StaticCell<SlaveShared<'static>> = StaticCell::new();
+    static EXECUTOR_LINK: InterruptExecutor = InterruptExecutor::new();
+    static EXECUTOR_NODE: StaticCell<Executor> = StaticCell::new();
+
+    #[interrupt]
+    unsafe fn UART4() {
+        // SAFETY: the interrupt executor's documented use: called from its own interrupt.
+        unsafe { EXECUTOR_LINK.on_interrupt() }
+    }
+
+    fn board() -> embassy_stm32::Config {
+        use embassy_stm32::rcc::*;
+        use embassy_stm32::time::Hertz;
+        let mut c = embassy_stm32::Config::default();
+        // 8 MHz crystal -> 168 MHz core, APB2 84 MHz (SPI1 up to 42 MHz), 48 MHz for USB.
+        c.rcc.hse = Some(Hse {
+            freq: Hertz(8_000_000),
+            mode: HseMode::Oscillator,
+        });
+        c.rcc.pll_src = PllSource::HSE;
+        c.rcc.pll = Some(Pll {
+            prediv: PllPreDiv::DIV4,
+            mul: PllMul::MUL168,
+            divp: Some(PllPDiv::DIV2),
+            divq: Some(PllQDiv::DIV7),
+            divr: None,
+        });
+        c.rcc.ahb_pre = AHBPrescaler::DIV1;
+        c.rcc.apb1_pre = APBPrescaler::DIV4;
+        c.rcc.apb2_pre = APBPrescaler::DIV2;
+        c.rcc.sys = Sysclk::PLL1_P;
+        c.rcc.mux.clk48sel = mux::Clk48sel::PLL1_Q;
+        c
+    }
+
+    #[embassy_executor::task]
+    async fn link_task(
+        port: NcPort,
+        task: SlaveTask<'static>,
+        shared: &'static SlaveShared<'static>,
+    ) {
+        let mut port = port;
+        task.run(&mut port, shared).await
+    }
+
+    #[embassy_executor::task]
+    async fn node_task(
+        shared: &'static SlaveShared<'static>,
+        even: &'static mut [u8],
+        odd: &'static mut [u8],
+    ) {
+        let mut renderer = Tracing::<f32>::new();
+        let mut link = shared.handle();
+        loop {
+            let mut report = NodeReport::default();
+            let r = run_node(
+                NodeConfig::default(),
+                &mut link,
+                &mut RealTime,
+                &mut renderer,
+                [&mut *even, &mut *odd],
+                &mut report,
+            )
+            .await;
+            match r {
+                Ok(()) => info!("stopped: {}", report),
+                Err(e) => warn!("node error {}: {}", e, report),
+            }
+            info!("link: {}", shared.counters());
+        }
+    }
+
+    #[entry]
+    fn main() -> ! {
+        let p = embassy_stm32::init(board());
+        info!("LINKS-1 NC up");
+        // SAFETY: `main` runs once; this is the only reference ever made to SRAM. Zeroing
+        // through the raw pointer (no stack temporary: the bank is 120 KB) makes every
+        // byte array valid.
+        let sram: &'static mut Sram = unsafe {
+            let ptr = addr_of_mut!(SRAM).cast::<Sram>();
+            ptr.write_bytes(0, 1);
+            &mut *ptr
+        };
+        let [tx0, tx1, rx0, rx1, scratch] = &mut sram.link;
+        let (shared, task) = SlaveShared::new(SlaveBanks {
+            tx: [tx0, tx1],
+            rx: [rx0, rx1],
+            scratch,
+        });
+        let shared: &'static SlaveShared<'static> = SHARED.init(shared);
+
+        // The Discovery's accelerometer shares SPI1's pins: keep it deselected.
+        let accel_cs = Output::new(p.PE3, Level::High, Speed::Low);
+        core::mem::forget(accel_cs);
+        let port = NcPort {
+            spi: p.SPI1,
+            sck: p.PA5,
+            miso: p.PA6,
+            mosi: p.PA7,
+            nss: p.PA4,
+            tx_dma: p.DMA2_CH3,
+            rx_dma: p.DMA2_CH0,
+            cs: ExtiInput::new(p.PB0, p.EXTI0, Pull::Up, Irqs),
+            ready: Output::new(p.PB1, Level::Low, Speed::VeryHigh),
+            want_ready: false,
+        };
+
+        interrupt::UART4.set_priority(Priority::P6);
+        let spawner = EXECUTOR_LINK.start(interrupt::UART4);
+        spawner.spawn(unwrap!(link_task(port, task, shared)));
+
+        let executor = EXECUTOR_NODE.init(Executor::new());
+        let odd: &'static mut [u8] = SCENE_ODD_BANK.take();
+        executor.run(|s| s.spawn(unwrap!(node_task(shared, &mut sram.scene_even, odd))))
+    }
+}

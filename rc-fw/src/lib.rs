@@ -1,0 +1,87 @@
+//! LINKS-1 root computer (RC) firmware for the STM32F407VG.
+//!
+//! The behaviour is `links_core::root::run_bus` over `links_core::spi::MasterLink` (the link
+//! protocol, tested on the host against an emulated bus); the PC side speaks
+//! `links_core::serial` over USB CDC. This crate adds the board: the memory plan and pin map,
+//! the PC conversation ([`session`]), a render request ([`render`]), the readback sink that turns accepted pixel runs into
+//! serial frames ([`readback`]), the
+//! bus wrapper that holds exchanges back while the USB queue is full ([`throttle`]) — all
+//! host-tested — and, for the MCU, the embassy-stm32 port ([`port`]).
+#![cfg_attr(target_os = "none", no_std)]
+
+#[cfg(target_os = "none")]
+pub mod port;
+
+/// Where every large buffer lives (bytes). See `docs/hardware.md`.
+pub mod plan {
+    use links_core::spi::BANK;
+
+    /// SRAM1 + SRAM2 (DMA-reachable).
+    pub const SRAM: usize = 128 * 1024;
+    /// CCM data RAM (CPU only).
+    pub const CCM: usize = 64 * 1024;
+    /// The bus's DMA banks: two TX (double-buffered: the RC composes into one while the
+    /// other waits for or crosses the bus) and one RX (in SRAM).
+    pub const LINK_BANKS: usize = 3 * BANK;
+    /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
+    /// through the TX bank): what the DMA banks leave, in whole KB.
+    pub const SCENE: usize = (SRAM - LINK_BANKS) / 1024 * 1024;
+    /// Bytes of serial frames queued for USB (in CCM).
+    pub const USB_QUEUE: usize = 8 * 1024;
+
+    const _: () = assert!(LINK_BANKS + SCENE <= SRAM);
+    const _: () = assert!(SCENE <= links_core::wire::MAX_SCENE);
+    const _: () = assert!(USB_QUEUE >= 4 * links_core::serial::MAX_TO_PC);
+    // The throttle holds two exchanges' runs back (one may be in flight, double buffering)
+    // plus a frame header.
+    const _: () =
+        assert!(USB_QUEUE >= 2 * crate::readback::RUN_RESERVE + links_core::serial::MAX_TO_PC);
+}
+
+/// Pins of the RC board (STM32F4DISCOVERY). See `docs/hardware.md`.
+pub mod pins {
+    /// Nodes on the one bus this firmware drives (one chip-select and one handshake line
+    /// each; EXTI lines must differ, so at most 16 per RC without a decoder).
+    pub const NODES: usize = 8;
+    /// SPI1 (master): SCK, MISO, MOSI.
+    pub const SPI1: [&str; 3] = ["PA5", "PA6", "PA7"];
+    /// Chip-select outputs, node 0..7 (active low).
+    pub const CS: [&str; NODES] = ["PE8", "PE9", "PE10", "PE11", "PE12", "PE13", "PE14", "PE15"];
+    /// Handshake inputs with EXTI (pull-down: an absent node reads "not ready").
+    pub const READY: [&str; NODES] = ["PD0", "PD1", "PD2", "PD3", "PD6", "PD7", "PD8", "PD9"];
+    /// Select lines S0..S2 of the 8:1 MISO multiplexer (74LVC251: node i's MISO on input i).
+    pub const MISO_SEL: [&str; 3] = ["PE4", "PE5", "PE6"];
+    /// USB OTG FS (the Discovery's micro-USB CN5): D-, D+.
+    pub const USB: [&str; 2] = ["PA11", "PA12"];
+    /// The Discovery's accelerometer shares SPI1: its chip-select is held high.
+    pub const ACCEL_CS: &str = "PE3";
+}
+
+pub mod readback;
+pub mod render;
+pub mod session;
+pub mod throttle;
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn pins_are_distinct_and_exti_lines_differ() {
+        let mut all: Vec<&str> = super::pins::CS.to_vec();
+        all.extend(super::pins::READY);
+        all.extend(super::pins::SPI1);
+        all.extend(super::pins::USB);
+        all.extend(super::pins::MISO_SEL);
+        all.push(super::pins::ACCEL_CS);
+        let n = all.len();
+        all.sort();
+        all.dedup();
+        assert_eq!(all.len(), n, "no pin used twice");
+        let mut lines: Vec<&str> = super::pins::READY
+            .iter()
+            .map(|p| p.trim_start_matches(|c: char| c.is_ascii_alphabetic()))
+            .collect();
+        lines.sort();
+        lines.dedup();
+        assert_eq!(lines.len(), super::pins::NODES, "one EXTI line per node");
+    }
+}

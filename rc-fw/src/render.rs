@@ -1,0 +1,141 @@
+//! One render request from the PC: every frame a full `run_bus` over the bus (the nodes keep
+//! the scene in their even bank: it is frame 0 to them), the accepted runs streamed to the PC
+//! as they arrive, and the `Resend` answer (the RC renders the span itself: it keeps no frame
+//! memory). Generic over the bus, clock and queue, so the host tests run exactly this.
+
+use crate::readback::{ByteQueue, Readback, RUN_RESERVE};
+use crate::throttle::{Room, Throttle};
+use core::cell::RefCell;
+use core::future::poll_fn;
+use core::task::Poll;
+use links_core::image::SceneView;
+use links_core::link::RootBus;
+use links_core::render::{render_run, Rgb8, Tracer};
+use links_core::root::{run_bus, RootClock, RootConfig, RootError, RootReport, RootState};
+use links_core::sched::Policy;
+use links_core::serial::{Encoder, FrameStreamer, RcError, SerialError, ToPc, MAX_RUN, MAX_TO_PC};
+
+/// Why a render request did not produce its frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(target_os = "none", derive(defmt::Format))]
+pub enum RenderFail {
+    /// The uploaded bytes are no usable SceneImage (or exceed the 1024 x 1024 frame); the PC
+    /// was sent `Error { NoScene }`.
+    BadScene,
+    /// The root logic stopped with this error.
+    Root(RootError),
+    /// A frame ended without every pixel sent once (no `FrameEnd` went out).
+    Incomplete(SerialError),
+}
+
+/// Queue `bytes` once there is room.
+async fn send<R: Room, Q: ByteQueue>(room: &R, queue: &mut Q, bytes: &[u8]) -> bool {
+    room.wait_room(bytes.len()).await;
+    queue.push(bytes)
+}
+
+/// Render `frames` frames of `image` on the `nodes` nodes of `bus` and stream them to
+/// `queue` (frames numbered 0.. for the PC). `last` keeps the last frame's streamer for a
+/// later `Resend`. Returns the last frame's root report.
+#[allow(clippy::too_many_arguments)]
+pub async fn render_frames<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
+    bus: &mut B,
+    clock: &C,
+    room: &R,
+    queue: &mut Q,
+    image: &[u8],
+    frames: u16,
+    nodes: u16,
+    enc: &mut Encoder,
+    last: &mut Option<FrameStreamer>,
+) -> Result<RootReport, RenderFail> {
+    let dims = SceneView::new(image).ok().and_then(|v| {
+        let f = v.frame::<f32>();
+        let w = u16::try_from(f.width).ok()?;
+        let h = u16::try_from(f.height).ok()?;
+        FrameStreamer::new(0, w, h).ok().map(|_| (w, h))
+    });
+    let Some((w, h)) = dims else {
+        let mut out = [0u8; MAX_TO_PC];
+        let code = RcError::NoScene;
+        if let Ok(n) = enc.encode(&ToPc::Error { code }, &mut out) {
+            send(room, queue, &out[..n]).await;
+        }
+        return Err(RenderFail::BadScene);
+    };
+    let cfg = RootConfig {
+        policy: Policy::DECREASING,
+        nodes,
+        frames: 1,
+        timeout_us: RootConfig::DEFAULT_TIMEOUT_US,
+        double_buffer: true,
+    };
+    let scenes = [image];
+    let mut report = RootReport::default();
+    for frame in 0..frames.max(1) {
+        let root = RefCell::new(RootState::new(cfg, &scenes[..]).map_err(RenderFail::Root)?);
+        // Room for the frame header first (the sink itself never waits).
+        room.wait_room(MAX_TO_PC).await;
+        let mut rb = Readback::new(&mut *queue, core::mem::take(enc), frame, w, h)
+            .map_err(RenderFail::Incomplete)?;
+        rb.bus_frame = 0;
+        let sink = RefCell::new(rb);
+        let mut throttled = Throttle {
+            bus: &mut *bus,
+            room,
+            need: RUN_RESERVE,
+        };
+        let r = run_bus(0, &mut throttled, clock, &root, &scenes[..], &sink).await;
+        let ended = sink.into_inner().end();
+        *enc = ended.enc;
+        *last = Some(ended.streamer);
+        report = r.map_err(RenderFail::Root)?;
+        ended.result.map_err(RenderFail::Incomplete)?;
+    }
+    Ok(report)
+}
+
+/// Answer a `Resend { start, len }` of the frame `fs` streamed: render the span again from
+/// the scene (the same tracer the nodes run, so the same pixels), yielding between runs, then
+/// send the `FrameEnd` again.
+pub async fn resend_span<R: Room, Q: ByteQueue>(
+    fs: &FrameStreamer,
+    image: &[u8],
+    start: u32,
+    len: u32,
+    enc: &mut Encoder,
+    room: &R,
+    queue: &mut Q,
+) -> Result<(), RenderFail> {
+    let view = SceneView::new(image).map_err(|_| RenderFail::BadScene)?;
+    let mut out = [0u8; MAX_TO_PC];
+    let mut pix: [Rgb8; MAX_RUN] = [[0; 3]; MAX_RUN];
+    for (y, x, n) in fs.span_runs(start, len) {
+        let px = &mut pix[..n as usize];
+        let mut tracer = Tracer::<f32>::new(view);
+        render_run(&mut tracer, y as u32, x as u32, px).map_err(|_| RenderFail::BadScene)?;
+        let m = fs
+            .resend(y, x, px.as_flattened(), enc, &mut out)
+            .map_err(RenderFail::Incomplete)?;
+        send(room, queue, &out[..m]).await;
+        yield_once().await;
+    }
+    let m = fs.end(enc, &mut out).map_err(RenderFail::Incomplete)?;
+    send(room, queue, &out[..m]).await;
+    Ok(())
+}
+
+/// Let the other tasks (USB) run between two runs of a resend.
+async fn yield_once() {
+    let mut yielded = false;
+    poll_fn(|cx| {
+        if yielded {
+            Poll::Ready(())
+        } else {
+            yielded = true;
+            cx.waker().wake_by_ref();
+            Poll::Pending
+        }
+    })
+    .await
+}

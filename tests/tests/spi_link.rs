@@ -1,0 +1,955 @@
+//! The SPI link driver (`links_core::spi`, the protocol `nc-fw` and `rc-fw` run) against an
+//! emulated bus that enforces the hardware's rules and injects faults:
+//!
+//! - a master transfer is full duplex: transmit and receive lengths are equal;
+//! - bytes move only while a chip-select is asserted, and only into a node whose DMA is
+//!   armed (others miss them, as real hardware would);
+//! - handshake ordering: the RC may select one node only while its ready line is high;
+//! - several nodes selected at once (broadcast) drive MISO together: the RC reads garbage;
+//! - faults: a flipped bit in a chosen transfer (either direction), lost ready-line edges.
+//!
+//! The end-to-end tests run the real root and node logic (`run_bus`, `run_node`) over the
+//! link and compare the frame with the single-node render.
+
+use core::future::Future;
+use core::pin::pin;
+use core::task::{Context, Poll};
+use embassy_futures::join::{join, join_array};
+use embassy_futures::select::{select, Either};
+use links_core::dm::{compile, CompileOptions};
+use links_core::link::{Incoming, LinkError, NodeLink, RootBus, Transfer};
+use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
+use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootState};
+use links_core::sched::Policy;
+use links_core::spi::{
+    Armed, Bank, MasterLink, MasterPort, PortError, Select, SlaveBanks, SlavePort, SlaveShared,
+    ACK, BANK, HEADER, NAK,
+};
+use links_core::wire::{self, MAX_FRAME};
+use links_host::frame::{render_frame, Precision};
+use links_host::scene_file::load_scene;
+use std::cell::RefCell;
+use std::path::Path;
+use std::rc::Rc;
+
+/// Which direction a fault hits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Dir {
+    /// What the RC receives (MISO).
+    Up,
+    /// What the nodes receive (MOSI).
+    Down,
+}
+
+struct Arm {
+    tx: Vec<u8>,
+    rx: Vec<u8>,
+    pos: usize,
+    /// Selected at least once since armed.
+    touched: bool,
+    /// Selected and released: the transfer is over.
+    done: bool,
+}
+
+#[derive(Default)]
+struct FakeNode {
+    arm: Option<Arm>,
+    ready: bool,
+    selected: bool,
+}
+
+#[derive(Default)]
+struct Bus {
+    nodes: Vec<FakeNode>,
+    selected: Option<Select>,
+    /// Master transfers so far (each header, body and trailer phase counts one).
+    transfers: u64,
+    /// Flip bit 0 of byte `.2` of master transfer number `.0` in direction `.1`.
+    faults: Vec<(u64, Dir, usize)>,
+    faults_hit: u32,
+    /// Ready-line rising edges to lose (the RC's interrupt never fires for them).
+    lose_edges: u32,
+    edges_lost: u32,
+    edge: bool,
+    /// Rule violations (each a description); a test fails if any occur.
+    violations: Vec<String>,
+    /// Bytes clocked while a selected node was not armed.
+    missed: u64,
+    /// Trailer bytes the RC sent (single-byte transfers).
+    trailers: Vec<u8>,
+}
+
+type SharedBus = Rc<RefCell<Bus>>;
+
+fn bus(nodes: usize) -> SharedBus {
+    Rc::new(RefCell::new(Bus {
+        nodes: (0..nodes).map(|_| FakeNode::default()).collect(),
+        ..Bus::default()
+    }))
+}
+
+struct FakeMaster {
+    bus: SharedBus,
+}
+
+/// Resolve after `n` polls (the polling fallback of a real `wait_any_ready`, or a delay).
+async fn polls(n: u32) {
+    let mut k = 0;
+    core::future::poll_fn(|cx| {
+        k += 1;
+        cx.waker().wake_by_ref();
+        if k > n {
+            Poll::Ready(())
+        } else {
+            Poll::Pending
+        }
+    })
+    .await
+}
+
+impl MasterPort for FakeMaster {
+    fn count(&self) -> u16 {
+        self.bus.borrow().nodes.len() as u16
+    }
+
+    fn ready(&self, i: u16) -> bool {
+        self.bus
+            .borrow()
+            .nodes
+            .get(i as usize)
+            .is_some_and(|n| n.ready)
+    }
+
+    async fn wait_any_ready(&mut self) {
+        // An edge wakes at once; without one, a polling period (a lost edge costs this).
+        let mut k = 0;
+        core::future::poll_fn(|cx| {
+            k += 1;
+            let mut b = self.bus.borrow_mut();
+            if std::mem::take(&mut b.edge) || k > 200 {
+                Poll::Ready(())
+            } else {
+                cx.waker().wake_by_ref();
+                Poll::Pending
+            }
+        })
+        .await
+    }
+
+    async fn select(&mut self, sel: Select) {
+        {
+            let mut b = self.bus.borrow_mut();
+            if b.selected.is_some() {
+                b.violations.push("select while selected".into());
+            }
+            if let Select::One(i) = sel {
+                if !b.nodes[i as usize].ready {
+                    b.violations
+                        .push(format!("node {i} selected with its ready line low"));
+                }
+            }
+            b.selected = Some(sel);
+            let all = matches!(sel, Select::All);
+            for (k, n) in b.nodes.iter_mut().enumerate() {
+                if all || sel == Select::One(k as u16) {
+                    n.selected = true;
+                    // The node's port drops its ready line when its chip-select falls.
+                    if n.arm.is_some() {
+                        n.ready = false;
+                    }
+                    if let Some(a) = &mut n.arm {
+                        a.touched = true;
+                    }
+                }
+            }
+        }
+        // Chip-select set-up time.
+        polls(2).await;
+    }
+
+    async fn deselect(&mut self) {
+        {
+            let mut b = self.bus.borrow_mut();
+            if b.selected.is_none() {
+                b.violations.push("deselect while not selected".into());
+            }
+            b.selected = None;
+            for n in b.nodes.iter_mut() {
+                if std::mem::take(&mut n.selected) {
+                    if let Some(a) = &mut n.arm {
+                        if a.touched {
+                            a.done = true;
+                        }
+                    }
+                }
+            }
+        }
+        // Hold time: the nodes re-arm.
+        polls(2).await;
+    }
+
+    async fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), PortError> {
+        polls(1).await;
+        let mut b = self.bus.borrow_mut();
+        let b = &mut *b;
+        if tx.len() != rx.len() {
+            b.violations
+                .push(format!("transfer of {} out, {} in", tx.len(), rx.len()));
+            return Err(PortError);
+        }
+        let Some(sel) = b.selected else {
+            b.violations.push("transfer without chip-select".into());
+            return Err(PortError);
+        };
+        let t = b.transfers;
+        b.transfers += 1;
+        if tx.len() == 1 {
+            b.trailers.push(tx[0]);
+        }
+        let mut down = tx.to_vec();
+        for &(at, dir, byte) in &b.faults {
+            if at == t && dir == Dir::Down && !down.is_empty() {
+                down[byte % tx.len()] ^= 1;
+                b.faults_hit += 1;
+            }
+        }
+        rx.fill(0xff);
+        let mut driving = 0;
+        for n in b.nodes.iter_mut().filter(|n| n.selected) {
+            driving += 1;
+            match &mut n.arm {
+                Some(a) if !a.done => {
+                    for (k, &byte) in down.iter().enumerate() {
+                        if let Some(d) = a.rx.get_mut(a.pos + k) {
+                            *d = byte;
+                        }
+                        if let (Some(&s), true) = (a.tx.get(a.pos + k), sel != Select::All) {
+                            rx[k] = s;
+                        }
+                    }
+                    a.pos += down.len();
+                }
+                _ => b.missed += down.len() as u64,
+            }
+        }
+        if driving > 1 {
+            // Contention on MISO: what the RC reads is meaningless.
+            rx.fill(0x00);
+        }
+        for &(at, dir, byte) in &b.faults {
+            if at == t && dir == Dir::Up && !rx.is_empty() {
+                let k = byte % rx.len();
+                rx[k] ^= 1;
+                b.faults_hit += 1;
+            }
+        }
+        Ok(())
+    }
+}
+
+struct FakeSlave {
+    bus: SharedBus,
+    i: usize,
+}
+
+impl SlavePort for FakeSlave {
+    async fn transfer(
+        &mut self,
+        tx: &[u8],
+        rx: &mut [u8],
+        cancel: impl Future<Output = ()>,
+    ) -> Result<Armed, PortError> {
+        {
+            let mut b = self.bus.borrow_mut();
+            if tx.len() != rx.len() {
+                b.violations.push("slave DMA lengths differ".into());
+                return Err(PortError);
+            }
+            let n = &mut b.nodes[self.i];
+            n.arm = Some(Arm {
+                tx: tx.to_vec(),
+                rx: rx.to_vec(),
+                pos: 0,
+                touched: n.selected,
+                done: false,
+            });
+        }
+        let mut cancel = pin!(cancel);
+        core::future::poll_fn(|cx: &mut Context<'_>| {
+            let mut b = self.bus.borrow_mut();
+            let n = &mut b.nodes[self.i];
+            if n.arm.as_ref().is_some_and(|a| a.done) {
+                if let Some(a) = n.arm.take() {
+                    rx.copy_from_slice(&a.rx);
+                }
+                return Poll::Ready(Ok(Armed::Done));
+            }
+            let idle = !n.selected && !n.arm.as_ref().is_some_and(|a| a.touched);
+            if idle && cancel.as_mut().poll(cx).is_ready() {
+                n.arm = None;
+                return Poll::Ready(Ok(Armed::Cancelled));
+            }
+            cx.waker().wake_by_ref();
+            Poll::Pending
+        })
+        .await
+    }
+
+    fn set_ready(&mut self, high: bool) {
+        let mut b = self.bus.borrow_mut();
+        let was = b.nodes[self.i].ready;
+        b.nodes[self.i].ready = high;
+        if high && !was {
+            if b.lose_edges > 0 {
+                b.lose_edges -= 1;
+                b.edges_lost += 1;
+            } else {
+                b.edge = true;
+            }
+        }
+    }
+}
+
+/// Poll `f` to completion with a waker that does nothing (every future here re-polls
+/// itself); a stall fails the test instead of hanging it.
+fn run<F: Future>(f: F) -> F::Output {
+    let mut f = pin!(f);
+    let mut cx = Context::from_waker(std::task::Waker::noop());
+    for _ in 0..50_000_000u64 {
+        if let Poll::Ready(v) = f.as_mut().poll(&mut cx) {
+            return v;
+        }
+    }
+    panic!("the link stalled");
+}
+
+fn banks<const N: usize>() -> Vec<Bank> {
+    vec![[0u8; BANK]; N]
+}
+
+fn slave_banks(v: &mut [Bank]) -> SlaveBanks<'_> {
+    let [a, b, c, d, e] = v else {
+        panic!("five banks")
+    };
+    SlaveBanks {
+        tx: [a, b],
+        rx: [c, d],
+        scratch: e,
+    }
+}
+
+/// One node posts a frame; the RC exchanges with it; returns (what the RC got, what the
+/// node got) after the exchange that delivered the node's frame.
+#[test]
+fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
+    for fault in [None, Some(Dir::Up), Some(Dir::Down)] {
+        let bus = bus(1);
+        // Transfer 1 is the first exchange's body phase (0 = header, 2 = trailer).
+        if let Some(dir) = fault {
+            bus.borrow_mut().faults.push((1, dir, 5));
+        }
+        let mut mb = banks::<3>();
+        let [mtx0, mtx1, mrx] = &mut mb[..] else {
+            unreachable!()
+        };
+        let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+        let mut nb = banks::<5>();
+        let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
+        let mut port = FakeSlave {
+            bus: bus.clone(),
+            i: 0,
+        };
+        let up: Vec<u8> = (0..300u32).map(|i| (i * 7) as u8).collect();
+        let down: Vec<u8> = (0..40u32).map(|i| (i * 3 + 1) as u8).collect();
+        let mut handle = shared.handle();
+        handle.post(&up).expect("posts");
+        assert_eq!(
+            handle.post(&up),
+            Err(links_core::link::LinkError::Busy),
+            "one frame at a time"
+        );
+        let rc = async {
+            let mut got = Vec::new();
+            for _ in 0..4 {
+                let node = master.wait_ready().await;
+                let mut rx = [0u8; MAX_FRAME];
+                let n = master
+                    .exchange(node, &down, &mut rx)
+                    .await
+                    .expect("no error");
+                if n > 0 {
+                    got = rx[..n].to_vec();
+                    break;
+                }
+            }
+            got
+        };
+        let nc = async {
+            let mut rx = [0u8; MAX_FRAME];
+            match handle.recv(&mut rx).await.expect("no error") {
+                Incoming::Exchanged { len } => rx[..len].to_vec(),
+                Incoming::Broadcast { .. } => panic!("no broadcast was sent"),
+            }
+        };
+        let link = task.run(&mut port, &shared);
+        let ((got_up, got_down), _) = match run(select(join(rc, nc), link)) {
+            Either::First(v) => (v, ()),
+        };
+        let b = bus.borrow();
+        assert!(b.violations.is_empty(), "{:?}", b.violations);
+        let mc = master.counters;
+        let sc = shared.counters();
+        assert_eq!(
+            got_up, up,
+            "{fault:?}: the RC receives the node's frame intact"
+        );
+        match fault {
+            None => {
+                assert_eq!(got_down, down);
+                assert_eq!((mc.naks, sc.retransmits, mc.exchanges), (0, 0, 1));
+                assert_eq!(b.trailers, [ACK]);
+            }
+            Some(Dir::Up) => {
+                // The RC counted the malformed frame and asked for it again; the node kept
+                // it and sent it once more. The node hears only the exchange that carried
+                // its frame home.
+                assert_eq!(b.faults_hit, 1);
+                assert_eq!((mc.naks, sc.retransmits, mc.exchanges), (1, 1, 2));
+                assert_eq!(b.trailers, [NAK, ACK]);
+                assert_eq!(got_down, down);
+            }
+            Some(Dir::Down) => {
+                // The node's frame arrived (ACK); the RC's reply did not: the node logic is
+                // handed an empty frame, which it counts as bad and recovers from.
+                assert_eq!(b.faults_hit, 1);
+                assert_eq!(b.trailers, [ACK]);
+                assert_eq!(sc.bad_bodies, 1);
+                assert!(got_down.is_empty());
+            }
+        }
+    }
+}
+
+#[test]
+fn garbled_headers_never_deliver_and_the_link_recovers() {
+    // Every byte of the node's header, in turn, flipped on the first try.
+    for byte in 0..HEADER {
+        let bus = bus(1);
+        bus.borrow_mut().faults.push((0, Dir::Up, byte));
+        let mut mb = banks::<3>();
+        let [mtx0, mtx1, mrx] = &mut mb[..] else {
+            unreachable!()
+        };
+        let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+        let mut nb = banks::<5>();
+        let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
+        let mut port = FakeSlave {
+            bus: bus.clone(),
+            i: 0,
+        };
+        let mut handle = shared.handle();
+        handle.post(b"hello").unwrap();
+        let rc = async {
+            let mut tries = 0;
+            loop {
+                tries += 1;
+                let node = master.wait_ready().await;
+                let mut rx = [0u8; MAX_FRAME];
+                let n = master.exchange(node, b"world", &mut rx).await.unwrap();
+                if n > 0 {
+                    assert_eq!(&rx[..n], b"hello");
+                    return tries;
+                }
+            }
+        };
+        let link = task.run(&mut port, &shared);
+        let Either::First(tries) = run(select(rc, link));
+        assert_eq!(tries, 2, "byte {byte}");
+        assert_eq!(master.counters.bad_headers, 1);
+        // The node saw no trailer: it keeps the frame, as after a NAK.
+        assert_eq!(shared.counters().retransmits, 1);
+        assert!(bus.borrow().violations.is_empty());
+    }
+}
+
+#[test]
+fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
+    let bus = bus(2);
+    let mut mb = banks::<3>();
+    let [mtx0, mtx1, mrx] = &mut mb[..] else {
+        unreachable!()
+    };
+    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 10, [mtx0, mtx1], mrx);
+    assert_eq!(master.nodes(), (10, 2));
+    assert_eq!(master.ready(), None);
+    let mut rx = [0u8; MAX_FRAME];
+    let n = run(master.exchange(11, b"x", &mut rx)).unwrap();
+    assert_eq!(n, 0);
+    assert_eq!(master.counters.not_ready, 1);
+    assert_eq!(bus.borrow().transfers, 0, "nothing clocked");
+    assert!(
+        run(master.exchange(12, b"x", &mut rx)).is_err(),
+        "not on this bus"
+    );
+    assert!(
+        run(master.exchange(9, b"x", &mut rx)).is_err(),
+        "not on this bus"
+    );
+    let big = vec![0u8; MAX_FRAME + 1];
+    assert!(run(master.exchange(10, &big, &mut rx)).is_err());
+    assert!(run(master.broadcast(&big)).is_err());
+}
+
+#[test]
+fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
+    let bus = bus(3);
+    let mut mb = banks::<3>();
+    let [mtx0, mtx1, mrx] = &mut mb[..] else {
+        unreachable!()
+    };
+    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut nb = banks::<5>();
+    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
+    let mut port = FakeSlave {
+        bus: bus.clone(),
+        i: 1,
+    };
+    // Node 1 is emulated; nodes 0 and 2 are selected but never armed (they miss bytes).
+    let rc = async {
+        for k in 0..3u8 {
+            // Give the node time to re-arm between broadcasts.
+            polls(50).await;
+            master.broadcast(&[k; 100]).await.unwrap();
+        }
+        polls(50).await;
+    };
+    let link = task.run(&mut port, &shared);
+    let Either::First(()) = run(select(rc, link));
+    let c = shared.counters();
+    assert_eq!(c.broadcasts, 3);
+    assert_eq!(c.overflows, 1, "the third found both banks full");
+    let mut handle = shared.handle();
+    let mut rx = [0u8; MAX_FRAME];
+    for k in 0..2u8 {
+        let got = run(handle.recv(&mut rx)).unwrap();
+        assert_eq!(got, Incoming::Broadcast { len: 100 });
+        assert!(rx[..100].iter().all(|&b| b == k));
+    }
+    let b = bus.borrow();
+    assert!(b.missed > 0, "unarmed nodes miss what is clocked");
+    assert!(b.violations.is_empty(), "{:?}", b.violations);
+}
+
+/// RC double buffering: the next frame is composed in the idle TX bank while the started
+/// transfer waits in the other; composing never changes what goes out.
+#[test]
+fn rc_composes_the_next_frame_while_a_transfer_is_started() {
+    let bus = bus(1);
+    let mut mb = banks::<3>();
+    let [mtx0, mtx1, mrx] = &mut mb[..] else {
+        unreachable!()
+    };
+    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut nb = banks::<5>();
+    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
+    let mut port = FakeSlave {
+        bus: bus.clone(),
+        i: 0,
+    };
+    let rc = async {
+        let mut rx = [0u8; MAX_FRAME];
+        assert_eq!(master.finish(&mut rx).await, Err(LinkError::Aborted));
+        polls(20).await;
+        master.tx_bank()[..64].fill(1);
+        master.start(Transfer::Broadcast, 64).unwrap();
+        assert_eq!(
+            master.start(Transfer::Broadcast, 64),
+            Err(LinkError::Busy),
+            "one transfer at a time"
+        );
+        // The next frame, composed before the first is clocked.
+        master.tx_bank()[..64].fill(2);
+        assert_eq!(master.finish(&mut rx).await, Ok(0));
+        polls(20).await;
+        master.start(Transfer::Broadcast, 64).unwrap();
+        master.tx_bank()[..64].fill(3);
+        assert_eq!(master.finish(&mut rx).await, Ok(0));
+        assert_eq!(
+            master.start(Transfer::Exchange(1), 1),
+            Err(LinkError::NoSuchNode { node: 1 })
+        );
+        assert!(matches!(
+            master.start(Transfer::Broadcast, MAX_FRAME + 1),
+            Err(LinkError::TooLong { .. })
+        ));
+        polls(20).await;
+    };
+    let link = task.run(&mut port, &shared);
+    let Either::First(()) = run(select(rc, link));
+    assert_eq!(shared.counters().broadcasts, 2);
+    let mut handle = shared.handle();
+    let mut rx = [0u8; MAX_FRAME];
+    for k in 1..=2u8 {
+        let got = run(handle.recv(&mut rx)).unwrap();
+        assert_eq!(got, Incoming::Broadcast { len: 64 });
+        assert!(rx[..64].iter().all(|&b| b == k), "frame {k} as composed");
+    }
+    assert!(bus.borrow().violations.is_empty());
+}
+
+#[test]
+fn a_corrupt_broadcast_is_counted_and_dropped() {
+    let bus = bus(1);
+    bus.borrow_mut().faults.push((0, Dir::Down, HEADER + 3));
+    let mut mb = banks::<3>();
+    let [mtx0, mtx1, mrx] = &mut mb[..] else {
+        unreachable!()
+    };
+    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut nb = banks::<5>();
+    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
+    let mut port = FakeSlave { bus, i: 0 };
+    let rc = async {
+        polls(20).await;
+        master.broadcast(&[9u8; 64]).await.unwrap();
+        polls(20).await;
+        master.broadcast(&[8u8; 64]).await.unwrap();
+        polls(20).await;
+    };
+    let Either::First(()) = run(select(rc, task.run(&mut port, &shared)));
+    let c = shared.counters();
+    assert_eq!((c.broadcasts, c.bad_bodies), (2, 1));
+    let mut rx = [0u8; MAX_FRAME];
+    let got = run(shared.handle().recv(&mut rx)).unwrap();
+    assert_eq!(got, Incoming::Broadcast { len: 64 });
+    assert_eq!(rx[..64], [8u8; 64], "only the intact one is delivered");
+}
+
+// ---------------------------------------------------------------------------------------
+// End to end: root and node logic over the link
+// ---------------------------------------------------------------------------------------
+
+fn image(w: u32, h: u32) -> Vec<u8> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
+    let desc = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let opts = CompileOptions {
+        width: Some(w),
+        height: Some(h),
+        ..Default::default()
+    };
+    compile(&desc, &opts).expect("compiles").bytes
+}
+
+struct Frame {
+    w: usize,
+    rgb: Vec<u8>,
+}
+
+impl PixelSink for Frame {
+    fn pixels(&mut self, _frame: u16, y: u16, x: u16, rgb: &[u8]) {
+        let at = 3 * (y as usize * self.w + x as usize);
+        self.rgb[at..at + rgb.len()].copy_from_slice(rgb);
+    }
+}
+
+async fn node(
+    bus: SharedBus,
+    i: usize,
+    scene: &mut [u8],
+    odd: &mut [u8],
+) -> (NodeReport, links_core::spi::SlaveCounters) {
+    let mut nb = banks::<5>();
+    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
+    let mut port = FakeSlave { bus, i };
+    let mut report = NodeReport::default();
+    let mut handle = shared.handle();
+    let (mut clock, mut tracer) = (RealTime, Tracing::<f32>::new());
+    let logic = run_node(
+        NodeConfig::default(),
+        &mut handle,
+        &mut clock,
+        &mut tracer,
+        [scene, odd],
+        &mut report,
+    );
+    match select(logic, task.run(&mut port, &shared)).await {
+        Either::First(r) => r.expect("node ends on Stop"),
+    }
+    (report, shared.counters())
+}
+
+fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
+    let (w, h) = (24u32, 16u32);
+    let img = image(w, h);
+    let want = render_frame(&img, Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    let bus = bus(2);
+    bus.borrow_mut().faults = faults.clone();
+    bus.borrow_mut().lose_edges = lose_edges;
+    let cfg = RootConfig {
+        policy: Policy::DECREASING,
+        nodes: 2,
+        frames: 1,
+        timeout_us: 0,
+        double_buffer: true,
+    };
+    let scenes = [img.as_slice()];
+    let root = RefCell::new(RootState::new(cfg, &scenes[..]).expect("valid"));
+    let sink = RefCell::new(Frame {
+        w: w as usize,
+        rgb: vec![0; (w * h * 3) as usize],
+    });
+    let mut mb = banks::<3>();
+    let [mtx0, mtx1, mrx] = &mut mb[..] else {
+        unreachable!()
+    };
+    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
+    let [s0, s1, s2, s3] = &mut scene_banks[..] else {
+        unreachable!()
+    };
+    let nodes = join_array([node(bus.clone(), 0, s0, s1), node(bus.clone(), 1, s2, s3)]);
+    let rc = run_bus(0, &mut master, &NoClock, &root, &scenes[..], &sink);
+    let (rr, nodes) = run(join(rc, nodes));
+    let rr = rr.expect("root runs");
+    assert_eq!(
+        sink.borrow().rgb,
+        want,
+        "frame equals the single-node render"
+    );
+    let b = bus.borrow();
+    assert!(b.violations.is_empty(), "{:?}", b.violations);
+    let mc = master.counters;
+    let pixels: u64 = nodes.iter().map(|(r, _)| r.pixels).sum();
+    assert!(pixels >= (w * h) as u64);
+    assert!(rr.broadcasts > 0 && mc.exchanges > 0);
+    if faults.is_empty() && lose_edges == 0 {
+        assert_eq!(mc.naks + mc.bad_headers, 0);
+        assert_eq!(rr.bad_frames, 0);
+    } else {
+        let hit = b.faults_hit as u64;
+        let node_bad: u32 = nodes
+            .iter()
+            .map(|(_, c)| c.bad_bodies + c.bad_headers)
+            .sum();
+        let resent: u32 = nodes.iter().map(|(_, c)| c.retransmits).sum();
+        assert_eq!(
+            hit,
+            faults.len() as u64,
+            "every fault landed ({} transfers)",
+            b.transfers
+        );
+        assert!(
+            (mc.naks + mc.bad_headers) as u64 + node_bad as u64 >= 1,
+            "faults were noticed"
+        );
+        assert!(
+            resent >= mc.naks,
+            "every NAK was answered by a retransmission"
+        );
+        assert_eq!(b.edges_lost, lose_edges);
+    }
+}
+
+#[test]
+fn cluster_over_the_link_equals_the_single_node_render() {
+    cluster(Vec::new(), 0);
+}
+
+#[test]
+fn cluster_over_the_link_survives_corrupt_bytes_and_lost_edges() {
+    // Transfers in all three phases of several exchanges and broadcasts, both directions.
+    let faults = (0..12u64)
+        .map(|k| {
+            let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
+            (10 + 15 * k, dir, (k as usize * 5) % 9)
+        })
+        .collect();
+    cluster(faults, 3);
+}
+
+#[test]
+fn wire_frames_fit_a_bank() {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = wire::encode(1, 2, &wire::Down::Stop, &mut buf).unwrap();
+    assert!(HEADER + n < BANK);
+}
+
+// ---------------------------------------------------------------------------------------
+// The RC firmware's render request (rc_fw::render) over the link, read back as the PC would
+// ---------------------------------------------------------------------------------------
+
+/// A small USB queue drained a few bytes per poll, as the CDC endpoint drains the RC's.
+struct UsbQueue {
+    queued: std::collections::VecDeque<u8>,
+    cap: usize,
+    sent: Vec<u8>,
+    /// Bytes that did not fit (pushes refused).
+    refused: u32,
+}
+
+#[derive(Clone, Copy)]
+struct Q<'a>(&'a RefCell<UsbQueue>);
+
+impl rc_fw::readback::ByteQueue for Q<'_> {
+    fn free(&self) -> usize {
+        let q = self.0.borrow();
+        q.cap - q.queued.len()
+    }
+    fn push(&mut self, bytes: &[u8]) -> bool {
+        let mut q = self.0.borrow_mut();
+        if bytes.len() > q.cap - q.queued.len() {
+            q.refused += 1;
+            return false;
+        }
+        q.queued.extend(bytes);
+        true
+    }
+}
+
+impl rc_fw::throttle::Room for Q<'_> {
+    fn has_room(&self, n: usize) -> bool {
+        let q = self.0.borrow();
+        q.cap - q.queued.len() >= n
+    }
+    async fn wait_room(&self, n: usize) {
+        core::future::poll_fn(|cx| {
+            let q = self.0.borrow();
+            if q.cap - q.queued.len() >= n {
+                Poll::Ready(())
+            } else {
+                cx.waker().wake_by_ref();
+                Poll::Pending
+            }
+        })
+        .await
+    }
+}
+
+/// Move up to 63 bytes (one CDC packet) from the queue to `sent` per poll, until `done`.
+async fn drain(q: &RefCell<UsbQueue>, done: &core::cell::Cell<bool>) {
+    core::future::poll_fn(|cx| {
+        let mut q = q.borrow_mut();
+        for _ in 0..63 {
+            match q.queued.pop_front() {
+                Some(b) => q.sent.push(b),
+                None => break,
+            }
+        }
+        if done.get() && q.queued.is_empty() {
+            Poll::Ready(())
+        } else {
+            cx.waker().wake_by_ref();
+            Poll::Pending
+        }
+    })
+    .await
+}
+
+/// Decode what the RC sent: (frame pixels, FrameEnd CRCs, pixel messages).
+fn read_back(bytes: &[u8], w: usize, h: usize) -> (Vec<u8>, Vec<u32>, usize) {
+    use links_core::serial::{pixel_count, pixels_into, Decoder, Packet, ToPc, MAX_TO_PC};
+    let mut dec = Decoder::<MAX_TO_PC>::new();
+    let mut frame = vec![0u8; 3 * w * h];
+    let (mut ends, mut runs) = (Vec::new(), 0);
+    for &b in bytes {
+        let Some(r) = dec.feed::<ToPc>(b) else {
+            continue;
+        };
+        let p: Packet<ToPc> = r.expect("every frame the RC sends is valid");
+        match p.msg {
+            ToPc::Pixels { y, x, .. } | ToPc::PixelsRle { y, x, .. } => {
+                let at = 3 * (y as usize * w + x as usize);
+                let n = pixel_count(&p.msg);
+                pixels_into(&p.msg, &mut frame[at..at + 3 * n]).unwrap();
+                runs += 1;
+            }
+            ToPc::FrameEnd { crc, .. } => ends.push(crc),
+            ToPc::FrameHeader { width, height, .. } => {
+                assert_eq!((width as usize, height as usize), (w, h))
+            }
+            ToPc::Progress { .. } => {}
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+    (frame, ends, runs)
+}
+
+#[test]
+fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
+    let (w, h) = (24u32, 16u32);
+    let img = image(w, h);
+    let want = render_frame(&img, Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    let bus = bus(2);
+    let mut mb = banks::<3>();
+    let [mtx0, mtx1, mrx] = &mut mb[..] else {
+        unreachable!()
+    };
+    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
+    let [s0, s1, s2, s3] = &mut scene_banks[..] else {
+        unreachable!()
+    };
+    // A queue smaller than a frame: the bus must wait for USB, never drop.
+    let usb = RefCell::new(UsbQueue {
+        queued: Default::default(),
+        cap: 2 * rc_fw::readback::RUN_RESERVE,
+        sent: Vec::new(),
+        refused: 0,
+    });
+    let done = core::cell::Cell::new(false);
+    let mut enc = links_core::serial::Encoder::new();
+    let mut last = None;
+    let rc = async {
+        let r = rc_fw::render::render_frames(
+            &mut master,
+            &NoClock,
+            &Q(&usb),
+            &mut Q(&usb),
+            &img,
+            1,
+            2,
+            &mut enc,
+            &mut last,
+        )
+        .await;
+        done.set(true);
+        r
+    };
+    let nodes = join_array([node(bus.clone(), 0, s0, s1), node(bus.clone(), 1, s2, s3)]);
+    let (((r, nodes), ()), ()) = (run(join(join(rc, nodes), drain(&usb, &done))), ());
+    let report = r.expect("frame rendered");
+    assert!(report.pixels >= (w * h) as u64);
+    assert!(nodes.iter().all(|(n, _)| n.pixels > 0), "both nodes worked");
+    let sent = std::mem::take(&mut usb.borrow_mut().sent);
+    let (got, ends, _) = read_back(&sent, w as usize, h as usize);
+    assert_eq!(got, want, "the PC assembles the single-node render");
+    assert_eq!(ends, [wire::CRC32.checksum(&want)]);
+    assert_eq!(usb.borrow().refused, 0);
+
+    // Resend of a span that crosses a row: rendered again on the RC, then FrameEnd again.
+    let fs = last.expect("the last frame is kept");
+    done.set(false);
+    let resend = async {
+        rc_fw::render::resend_span(&fs, &img, 20, 30, &mut enc, &Q(&usb), &mut Q(&usb))
+            .await
+            .expect("resent");
+        done.set(true);
+    };
+    run(join(resend, drain(&usb, &done)));
+    let sent = std::mem::take(&mut usb.borrow_mut().sent);
+    let (again, ends, runs) = read_back(&sent, w as usize, h as usize);
+    assert_eq!(
+        runs, 3,
+        "row 0 from column 20, row 1 whole, row 2 up to column 2"
+    );
+    assert_eq!(again[3 * 20..3 * 50], want[3 * 20..3 * 50]);
+    assert!(
+        again[..3 * 20].iter().all(|&b| b == 0),
+        "nothing else resent"
+    );
+    assert_eq!(ends, [wire::CRC32.checksum(&want)]);
+}
