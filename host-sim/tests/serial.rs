@@ -38,6 +38,14 @@ fn pty() -> (TTYPort, TTYPort, String) {
     // Long enough for writes to wait for a reader that is still starting.
     master.set_timeout(Duration::from_secs(30)).unwrap();
     let name = slave.name().expect("the slave has a path");
+    // A second descriptor of the master, kept open for the whole test run: when the RC
+    // thread ends and drops its end, the PC side's last flush (tcdrain) would otherwise race
+    // the close and fail with EIO (seen once under load). A board's RC never closes its end.
+    std::mem::forget(
+        master
+            .try_clone_native()
+            .expect("a second master descriptor"),
+    );
     (master, slave, name)
 }
 
