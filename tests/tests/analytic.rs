@@ -667,6 +667,11 @@ fn right_angle_prism_totally_reflects_at_its_hypotenuse() {
         [255, 0, 0],
         "f32: total internal reflection"
     );
+    assert_eq!(
+        pixel::<links_core::num::Fx>(&for_backend::<links_core::num::Fx>(img.clone()), 10, 10),
+        [255, 0, 0],
+        "Q16.16: total internal reflection"
+    );
     s.materials[1].ior = 1.0;
     assert_eq!(
         pixel::<f64>(&image_of(&s), 10, 10),
@@ -714,7 +719,12 @@ fn nesting_deeper_than_the_depth_cap_stays_bright_and_bounded() {
     ] {
         s.transparency = t;
         let img = image_of(&s);
-        for got in [pixel::<f64>(&img, 5, 5), pixel::<f32>(&img, 5, 5)] {
+        let fixed = for_backend::<links_core::num::Fx>(img.clone());
+        for got in [
+            pixel::<f64>(&img, 5, 5),
+            pixel::<f32>(&img, 5, 5),
+            pixel::<links_core::num::Fx>(&fixed, 5, 5),
+        ] {
             assert!(
                 (got[0] as i32 - want).abs() <= 1,
                 "{mode}: {got:?} vs 0.98^24 = {want}"
