@@ -111,10 +111,24 @@ pub fn compare_f32_to_f64(image: &[u8]) -> Result<Accuracy, AccuracyError> {
 /// `image` is the DM's f32 image; a fixed-point `T` renders the DM's Q16.16 rewrite of it
 /// (an error when the scene doesn't fit the format).
 pub fn compare_to_f64<T: Real>(image: &[u8]) -> Result<Accuracy, AccuracyError> {
+    compare_to::<T>(image, &reference(image)?)
+}
+
+/// The f64 render of an image, to compare several backends with (rendered once).
+pub struct Reference(Probe);
+
+/// Render the f64 reference of an f32 SceneImage.
+pub fn reference(image: &[u8]) -> Result<Reference, AccuracyError> {
+    Ok(Reference(probe::<f64>(SceneView::new(image)?)))
+}
+
+/// Compare a render in number type `T` with an f64 reference made by [`reference`] from
+/// the same image.
+pub fn compare_to<T: Real>(image: &[u8], reference: &Reference) -> Result<Accuracy, AccuracyError> {
     let view = SceneView::new(image)?;
     let f = view.frame::<f32>();
     let (w, h) = (f.width as usize, f.height as usize);
-    let reference = probe::<f64>(view);
+    let reference = &reference.0;
     let tested = match T::STORAGE {
         Storage::F32 => probe::<T>(view),
         Storage::Q16_16 => {

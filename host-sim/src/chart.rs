@@ -9,7 +9,7 @@
 //! deterministic numbers, so a test can regenerate the CSV and compare it with the committed
 //! copy.
 
-use crate::accuracy::{compare_to_f64, Accuracy, AccuracyError};
+use crate::accuracy::{compare_to, reference, Accuracy, AccuracyError};
 use links_core::num::{FastF32, Fx};
 use plotters::prelude::*;
 use std::fmt::{self, Write as _};
@@ -98,11 +98,12 @@ pub struct SceneAccuracy {
 pub fn measure(scenes: &[(String, Vec<u8>)]) -> Result<Vec<SceneAccuracy>, ChartError> {
     let mut out = Vec::new();
     for (name, image) in scenes {
+        let f64_render = reference(image).map_err(|e| ChartError::Accuracy(name.clone(), e))?;
         for backend in BACKENDS {
             let r = match backend {
-                "f32" => compare_to_f64::<f32>(image),
-                "f32-fast" => compare_to_f64::<FastF32>(image),
-                _ => compare_to_f64::<Fx>(image),
+                "f32" => compare_to::<f32>(image, &f64_render),
+                "f32-fast" => compare_to::<FastF32>(image, &f64_render),
+                _ => compare_to::<Fx>(image, &f64_render),
             };
             let accuracy = match r {
                 Ok(a) => Ok(a),
