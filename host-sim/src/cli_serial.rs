@@ -3,7 +3,7 @@
 
 use crate::frame::encode_png;
 use crate::serial_host::{
-    open_port, readback, upload, ReadbackEvent, ReadbackOptions, UploadOptions,
+    open_port, readback, upload, upload_deadline, ReadbackEvent, ReadbackOptions, UploadOptions,
 };
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -21,12 +21,19 @@ fn bar(quiet: bool, len: u64, template: &str) -> ProgressBar {
     b
 }
 
-/// `links upload`: send a compiled SceneImage; returns the summary line.
+/// `--deadline-s`: `None` when absent, `Some(None)` for 0 (no overall deadline).
+fn deadline(deadline_s: Option<u64>) -> Option<Option<Duration>> {
+    deadline_s.map(|s| (s > 0).then(|| Duration::from_secs(s)))
+}
+
+/// `links upload`: send a compiled SceneImage; returns the summary line. Without
+/// `deadline_s` the overall deadline is [`upload_deadline`]; 0 means none.
 pub fn upload_command(
     image: &[u8],
     port: &str,
     baud: u32,
     timeout_ms: u64,
+    deadline_s: Option<u64>,
     render: Option<u16>,
     quiet: bool,
 ) -> Result<String, String> {
@@ -42,11 +49,13 @@ pub fn upload_command(
         image.len() as u64,
         "{spinner} upload {bar:40} {bytes}/{total_bytes} ({bytes_per_sec}, eta {eta})",
     );
-    let opts = UploadOptions {
+    let mut opts = UploadOptions {
         reply_timeout: Duration::from_millis(timeout_ms),
         start_render: render,
         ..UploadOptions::default()
     };
+    opts.deadline =
+        deadline(deadline_s).unwrap_or_else(|| Some(upload_deadline(image.len(), baud, &opts)));
     let r = upload(&mut p, port, image, &opts, &|n| b.set_position(n));
     b.finish_and_clear();
     let r = r.map_err(|e| e.to_string())?;
@@ -64,12 +73,15 @@ pub fn upload_command(
     ))
 }
 
-/// `links readback`: read one frame and write it as a PNG; returns the summary line.
+/// `links readback`: read one frame and write it as a PNG; returns the summary line. No
+/// overall deadline unless `deadline_s` (> 0) gives one: rendering takes what it takes, and
+/// the progress rules of [`readback`] end a misbehaving RC.
 pub fn readback_command(
     port: &str,
     output: &Path,
     baud: u32,
     timeout_ms: u64,
+    deadline_s: Option<u64>,
     quiet: bool,
 ) -> Result<String, String> {
     if timeout_ms == 0 {
@@ -84,6 +96,7 @@ pub fn readback_command(
     b.set_message("waiting for a frame");
     let opts = ReadbackOptions {
         timeout: Duration::from_millis(timeout_ms),
+        deadline: deadline(deadline_s).flatten(),
         ..ReadbackOptions::default()
     };
     let r = readback(&mut p, port, &opts, &|ev| match ev {

@@ -152,6 +152,9 @@ enum Cmd {
         /// How long to wait for the RC's answer to one message before sending it again, in ms
         #[arg(long, default_value_t = 1000)]
         timeout_ms: u64,
+        /// Give up after this many seconds in all (default: from the scene size and baud rate; 0: never)
+        #[arg(long)]
+        deadline_s: Option<u64>,
         /// Then ask the RC to render this many frames
         #[arg(long)]
         render: Option<u16>,
@@ -173,6 +176,9 @@ enum Cmd {
         /// Longest silence from the RC before giving up (or asking again), in ms
         #[arg(long, default_value_t = 5000)]
         timeout_ms: u64,
+        /// Give up after this many seconds in all (default: none, the progress rules of docs/serial.md end a misbehaving RC)
+        #[arg(long)]
+        deadline_s: Option<u64>,
         /// No progress bar or summary line
         #[arg(short, long)]
         quiet: bool,
@@ -496,11 +502,14 @@ fn run(cli: Cli) -> Result<(), String> {
             port,
             baud,
             timeout_ms,
+            deadline_s,
             render,
             quiet,
         } => {
             let image = compile_scene(&scene)?;
-            let line = cli_serial::upload_command(&image, &port, baud, timeout_ms, render, quiet)?;
+            let line = cli_serial::upload_command(
+                &image, &port, baud, timeout_ms, deadline_s, render, quiet,
+            )?;
             if !quiet {
                 eprintln!("{line}");
             }
@@ -511,9 +520,11 @@ fn run(cli: Cli) -> Result<(), String> {
             output,
             baud,
             timeout_ms,
+            deadline_s,
             quiet,
         } => {
-            let line = cli_serial::readback_command(&port, &output, baud, timeout_ms, quiet)?;
+            let line =
+                cli_serial::readback_command(&port, &output, baud, timeout_ms, deadline_s, quiet)?;
             if !quiet {
                 eprintln!("{line}");
             }

@@ -252,6 +252,55 @@ fn a_silent_rc_is_reported_as_a_timeout() {
 }
 
 #[test]
+fn the_overall_deadline_ends_a_readback_before_its_silence_time_out() {
+    // Progress every 100 ms, a row further each time: no rule but the deadline ends it.
+    let (mut master, _slave, name) = pty();
+    let rc = std::thread::spawn(move || {
+        let mut line = [0u8; 64];
+        let n = encode_packet(
+            0,
+            &ToPc::FrameHeader {
+                frame: 0,
+                width: 1024,
+                height: 1024,
+            },
+            &mut line,
+        )
+        .unwrap();
+        master.write_all(&line[..n]).unwrap();
+        for k in 1..=20u32 {
+            std::thread::sleep(Duration::from_millis(100));
+            let msg = ToPc::Progress {
+                frame: 0,
+                done: k * 1024,
+                total: 1024 * 1024,
+            };
+            let n = encode_packet(k as u16, &msg, &mut line).unwrap();
+            if master.write_all(&line[..n]).is_err() {
+                break;
+            }
+        }
+    });
+    let start = Instant::now();
+    let o = links()
+        .args(["readback", "--port", &name, "--timeout-ms", "60000"])
+        .args(["--deadline-s", "1", "-o"])
+        .arg(tmp("never2.png"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("at the overall deadline of 1000 ms (--deadline-s): frame 0: 0 of 1048576 pixels received"),
+        "{err}"
+    );
+    assert!(!tmp("never2.png").exists());
+    // Well before the 60 s silence time-out (and the end of the RC's 2 s of Progress).
+    assert!(start.elapsed() < Duration::from_secs(30));
+    rc.join().unwrap();
+}
+
+#[test]
 fn a_wrong_frame_crc_is_reported_after_one_full_retry() {
     let (mut master, mut slave, _) = pty();
     let rgb: Vec<u8> = (0..3 * 16 * 8).map(|i| i as u8).collect();
