@@ -10,6 +10,7 @@ pub mod cluster;
 pub mod cost;
 pub mod frame;
 pub mod gen;
+pub mod limits;
 pub mod qemu_node;
 pub mod scene_file;
 pub mod serial_host;

@@ -10,6 +10,7 @@ use links_host::cli_cluster;
 use links_host::cli_serial;
 use links_host::cost::{self, CycleModel};
 use links_host::frame::{encode_png, render_frame, Precision};
+use links_host::limits;
 use links_host::scene_file::load_scene;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -58,14 +59,14 @@ enum TransparencyArg {
 struct SceneArgs {
     /// Scene file (.ron)
     scene: PathBuf,
-    /// Image width in pixels (default: the scene's)
-    #[arg(long)]
+    /// Image width in pixels, 1..=4096 (default: the scene's)
+    #[arg(long, value_parser = limits::parse_image_side)]
     width: Option<u32>,
-    /// Image height in pixels (default: the scene's)
-    #[arg(long)]
+    /// Image height in pixels, 1..=4096 (default: the scene's)
+    #[arg(long, value_parser = limits::parse_image_side)]
     height: Option<u32>,
-    /// Maximum recursion depth for reflection/refraction (default: the scene's)
-    #[arg(long)]
+    /// Maximum recursion depth for reflection/refraction, 0..=16 (default: the scene's)
+    #[arg(long, value_parser = limits::parse_max_depth)]
     max_depth: Option<u32>,
     /// Override the scene's transparency mode
     #[arg(long, value_enum)]
@@ -84,8 +85,9 @@ enum Cmd {
         /// Output PNG file
         #[arg(short, long, default_value = "out.png")]
         output: PathBuf,
-        /// Host threads (0 = all cores; single-host render only); the image does not depend on it
-        #[arg(long, default_value_t = 0)]
+        /// Host threads (0 = all cores, at most 256; single-host render only); the image does
+        /// not depend on it
+        #[arg(long, default_value_t = 0, value_parser = limits::parse_threads)]
         threads: usize,
         /// Number type of the render
         #[arg(long, value_enum, default_value = "f32")]
@@ -135,8 +137,8 @@ enum Cmd {
         /// (Q16.16)
         #[arg(long, default_value = "f32")]
         backend: String,
-        /// Host threads (0 = all cores)
-        #[arg(long, default_value_t = 0)]
+        /// Host threads (0 = all cores, at most 256)
+        #[arg(long, default_value_t = 0, value_parser = limits::parse_threads)]
         threads: usize,
     },
     /// Compile a scene and send its SceneImage to a real RC over a serial port
@@ -218,9 +220,9 @@ enum ChartCmd {
         /// Document whose generated table section to replace ("" = none)
         #[arg(long, default_value = "docs/numerics.md")]
         doc: PathBuf,
-        #[arg(long, default_value_t = links_host::chart::WIDTH)]
+        #[arg(long, default_value_t = links_host::chart::WIDTH, value_parser = limits::parse_image_side)]
         width: u32,
-        #[arg(long, default_value_t = links_host::chart::HEIGHT)]
+        #[arg(long, default_value_t = links_host::chart::HEIGHT, value_parser = limits::parse_image_side)]
         height: u32,
     },
 }
@@ -231,12 +233,12 @@ enum SweepCmd {
     Ablation {
         /// Scene file (.ron)
         scene: PathBuf,
-        #[arg(long, default_value_t = 512)]
+        #[arg(long, default_value_t = 512, value_parser = limits::parse_image_side)]
         width: u32,
-        #[arg(long, default_value_t = 480)]
+        #[arg(long, default_value_t = 480, value_parser = limits::parse_image_side)]
         height: u32,
-        /// Node computers the sub-screens are shared among
-        #[arg(long, default_value_t = 16)]
+        /// Node computers the sub-screens are shared among (1..=256)
+        #[arg(long, default_value_t = 16, value_parser = limits::parse_nodes)]
         nodes: u32,
         /// Sub-screen counts (multiples of the height), one table row each
         #[arg(long, value_delimiter = ',', default_value = "2400,480")]
@@ -528,8 +530,8 @@ fn run(cli: Cli) -> Result<(), String> {
             height,
         }) => {
             use links_host::chart;
-            let bench_csv = std::fs::read_to_string(&bench)
-                .map_err(|e| format!("{}: {e} (run scripts/qemu-bench first)", bench.display()))?;
+            let bench_csv = limits::read_text_bounded(&bench, limits::MAX_TEXT_BYTES, "CSV file")
+                .map_err(|e| format!("{e} (run scripts/qemu-bench first)"))?;
             let speed = chart::parse_bench(&bench_csv).map_err(|e| e.to_string())?;
             let images =
                 chart::bundled_images(&scenes, width, height).map_err(|e| e.to_string())?;
@@ -552,8 +554,7 @@ fn run(cli: Cli) -> Result<(), String> {
             chart::write(&csv_path, chart::csv(&acc, &speed).as_bytes())
                 .map_err(|e| e.to_string())?;
             if !doc.as_os_str().is_empty() {
-                let text =
-                    std::fs::read_to_string(&doc).map_err(|e| format!("{}: {e}", doc.display()))?;
+                let text = limits::read_text_bounded(&doc, limits::MAX_TEXT_BYTES, "document")?;
                 let new = chart::replace_table(&text, &chart::markdown(&acc, &speed))
                     .map_err(|e| format!("{}: {e}", doc.display()))?;
                 chart::write(&doc, new.as_bytes()).map_err(|e| e.to_string())?;
@@ -626,8 +627,7 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Cmd::Calibrate { csv, target } => {
-            let text =
-                std::fs::read_to_string(&csv).map_err(|e| format!("{}: {e}", csv.display()))?;
+            let text = limits::read_text_bounded(&csv, limits::MAX_TEXT_BYTES, "CSV file")?;
             let samples =
                 cost::parse_samples(&text).map_err(|e| format!("{}: {e}", csv.display()))?;
             let fitted = cost::fit(

@@ -236,3 +236,162 @@ fn fixed_point_render_is_close_to_f64_and_compare_reports_it() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("nodes compute in f32"));
 }
+
+/// Runs `links` with `args` in `dir`: (exit code, stderr). `None` is death by a signal (an
+/// abort on a failed allocation).
+fn run_in(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
+    let o = links().current_dir(dir).args(args).output().unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn run(args: &[&str]) -> (Option<i32>, String) {
+    run_in(&std::env::temp_dir(), args)
+}
+
+#[test]
+fn oversized_image_dimensions_are_refused_before_anything_is_allocated() {
+    let photo = scene("photo1.ron");
+    let p = photo.to_str().unwrap();
+    let out = tmp("huge.png");
+    let o = out.to_str().unwrap();
+    // Commands that write into their working directory run in a scratch one.
+    let dir = tmp("dims");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases: &[&[&str]] = &[
+        // The issue's command: a 65535 x 65535 frame is 12 GB.
+        &[
+            "render", p, "--width", "65535", "--height", "65535", "-o", o,
+        ],
+        &["render", p, "--width", "4097", "-o", o],
+        &["render", p, "--height", "0", "-o", o],
+        &["render", p, "--width", "4097", "--nodes", "2", "-o", o],
+        &["info", p, "--width", "4097"],
+        &["compare", p, "--height", "4097"],
+        &["upload", p, "--port", "/no/such/port", "--width", "4097"],
+        &[
+            "chart", "accuracy", "--width", "4097", "--bench", "none.csv",
+        ],
+        &["sweep", "ablation", p, "--height", "4097"],
+    ];
+    for args in cases {
+        let (code, err) = run_in(&dir, args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains("an image side is 1 to 4096 pixels"),
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!out.exists());
+    // 4096 itself is accepted (info compiles, nothing is rendered).
+    let (code, err) = run(&["info", p, "--width", "4096", "--height", "4096"]);
+    assert_eq!(code, Some(0), "{err}");
+}
+
+#[test]
+fn other_sizes_from_the_command_line_are_bounded() {
+    let photo = scene("photo1.ron");
+    let p = photo.to_str().unwrap();
+    let out = tmp("never-threads.png");
+    let o = out.to_str().unwrap();
+    let dir = tmp("sizes");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        // 100000 OS threads were started until the system refused.
+        (
+            &["render", p, "--threads", "100000", "-o", o],
+            "expected 0 (one per core) to 256 threads",
+        ),
+        (
+            &["compare", p, "--threads", "100000"],
+            "expected 0 (one per core) to 256 threads",
+        ),
+        // The model's per-node table was allocated for 4e9 nodes (a 32 GB abort).
+        (
+            &["sweep", "ablation", p, "--nodes", "4000000000"],
+            "a cluster has 1 to 256 node computers",
+        ),
+        (
+            &["info", p, "--max-depth", "17"],
+            "the recursion depth is 0 to 16",
+        ),
+    ];
+    for (args, want) in cases {
+        let (code, err) = run_in(&dir, args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    assert!(!out.exists());
+}
+
+#[cfg(unix)]
+#[test]
+fn scene_paths_that_are_not_regular_files_or_too_large_are_refused() {
+    let out = tmp("never-file.png");
+    let o = out.to_str().unwrap();
+    // /dev/zero never ends: it was read until memory ran out.
+    let (code, err) = run(&["render", "/dev/zero", "-o", o]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        "error: /dev/zero: cannot read the scene file: it is a character device, not a regular file"
+    );
+
+    // A FIFO: opening it waited forever for a writer. This writer is there so that a
+    // regression reads its text and fails the assertion instead of hanging the test.
+    let fifo = tmp("scene-fifo.ron");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let writer = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || {
+            use std::io::Write;
+            let mut w = std::fs::OpenOptions::new().write(true).open(&fifo).unwrap();
+            let _ = w.write_all(b"Scene()");
+        })
+    };
+    let (code, err) = run(&["render", fifo.to_str().unwrap(), "-o", o]);
+    // Release the writer: a non-blocking open for reading never waits.
+    let release = {
+        use std::os::unix::fs::OpenOptionsExt;
+        std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(&fifo)
+            .unwrap()
+    };
+    writer.join().unwrap();
+    drop(release);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "error: {}: cannot read the scene file: it is a FIFO (named pipe), not a regular file",
+            fifo.display()
+        )
+    );
+
+    // 100 MB (sparse: no disk space, and nothing is read).
+    let big = tmp("big.ron");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(100_000_000)
+        .unwrap();
+    let (code, err) = run(&["render", big.to_str().unwrap(), "-o", o]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "error: {}: cannot read the scene file: it is 100000000 bytes, over the 16 MiB \
+             (16777216 bytes) limit for a scene file",
+            big.display()
+        )
+    );
+    assert!(!out.exists());
+}

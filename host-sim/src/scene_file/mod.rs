@@ -27,6 +27,8 @@ mod tests;
 use std::path::Path;
 
 use links_core::desc::SceneDesc;
+
+use crate::limits::{read_bounded, MAX_SCENE_BYTES};
 use ron::extensions::Extensions;
 
 pub use error::SceneError;
@@ -34,12 +36,15 @@ pub use error::SceneError;
 use format::{RefScope, SceneFile};
 
 /// Reads and validates the scene file at `path`; meshes and textures are found relative to the
-/// file's directory. Errors name `path` as given.
+/// file's directory. Errors name `path` as given. Files are read with
+/// [`crate::limits::read_bounded`]: a path that is not a regular file, or a scene, mesh or
+/// texture over its limit in [`crate::limits`], is refused before it is read.
 pub fn load_scene(path: &Path) -> Result<SceneDesc, SceneError> {
-    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes =
+        read_bounded(path, MAX_SCENE_BYTES, "scene file").map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
     let file_name = path.display().to_string();
     let text = match std::str::from_utf8(&bytes) {
         Ok(t) => t,

@@ -527,6 +527,53 @@ fn missing_mesh_file_points_at_the_path() {
 }
 
 #[test]
+fn oversized_and_special_asset_files_are_refused_at_the_path() {
+    let s = Scratch::new("big-assets");
+    // Sparse files one byte over the limits: nothing is written to disk or read.
+    let big = |rel: &str, len: u64| {
+        let f = std::fs::File::create(s.path().join(rel)).unwrap();
+        f.set_len(len).unwrap();
+    };
+    big("assets/big.obj", crate::limits::MAX_MESH_BYTES + 1);
+    big("assets/big.png", crate::limits::MAX_TEXTURE_BYTES + 1);
+
+    let t = with_child("Mesh(file: \"assets/big.obj\"),");
+    let e = error_in(&t, s.path());
+    assert!(matches!(e, SceneError::Asset { kind: "mesh", .. }), "{e:?}");
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "t.ron:5:20: cannot read mesh file {}: it is 67108865 bytes, over the 64 MiB \
+             (67108864 bytes) limit for a mesh file",
+            s.path().join("assets/big.obj").display()
+        )
+    );
+
+    let t = "Scene(camera: (eye: (0, 0, -5), look_at: (0, 0, 0)),\n  textures: {\"t\": \"assets/big.png\"})";
+    let e = error_in(t, s.path());
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "t.ron:2:19: cannot read texture file {}: it is 67108865 bytes, over the 64 MiB \
+             (67108864 bytes) limit for a texture file",
+            s.path().join("assets/big.png").display()
+        )
+    );
+
+    // A device never ends: refused unread (absolute paths are allowed).
+    #[cfg(unix)]
+    {
+        let t = with_child("Mesh(file: \"/dev/zero\"),");
+        let e = error_in(&t, s.path());
+        assert_eq!(
+            e.to_string(),
+            "t.ron:5:20: cannot read mesh file /dev/zero: it is a character device, not a \
+             regular file"
+        );
+    }
+}
+
+#[test]
 fn missing_texture_file_points_at_the_path() {
     let s = Scratch::new("missing-png");
     let t = "Scene(camera: (eye: (0, 0, -5), look_at: (0, 0, 0)),\n  textures: {\"t\": \"t.png\"})";

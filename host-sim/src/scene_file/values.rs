@@ -14,8 +14,8 @@ use std::fmt;
 use serde::de::{self, DeserializeSeed, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
 
-/// Largest accepted image side and texture side, in pixels.
-pub(super) const MAX_IMAGE_SIDE: i64 = 4096;
+/// Largest accepted image side and texture side, in pixels ([`crate::limits::MAX_IMAGE_SIDE`]).
+pub(super) const MAX_IMAGE_SIDE: i64 = crate::limits::MAX_IMAGE_SIDE as i64;
 /// Largest accepted `max_depth`: the deepest recursion a SceneImage may ask for.
 pub(super) const MAX_DEPTH: i64 = links_core::image::MAX_DEPTH_LIMIT as i64;
 
