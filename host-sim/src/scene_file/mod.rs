@@ -68,6 +68,15 @@ pub fn load_scene(path: &Path) -> Result<SceneDesc, SceneError> {
 pub fn parse_scene(text: &str, file_name: &str, base_dir: &Path) -> Result<SceneDesc, SceneError> {
     // A byte-order mark is not RON; it is also not a column anybody can see.
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    if let Some((offset, message)) = locate::non_decimal_number(text) {
+        let (line, col) = locate::line_col(text, offset);
+        return Err(SceneError::Syntax {
+            file: file_name.to_string(),
+            line,
+            col,
+            message,
+        });
+    }
     let file = parse_file(text, file_name, None)?;
     resolve::Resolver::new(text, file_name, base_dir).scene(file)
 }
