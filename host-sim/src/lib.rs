@@ -5,6 +5,7 @@ pub mod ablation_doc;
 pub mod accuracy;
 pub mod chart;
 pub mod cli_cluster;
+pub mod cli_image;
 pub mod cli_serial;
 pub mod cluster;
 pub mod cost;

@@ -4,9 +4,10 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use links_core::desc::TransparencyMode;
 use links_core::dm::{compile, CompileOptions};
-use links_core::image::{SceneView, Section};
+use links_core::image::SceneView;
 use links_host::ablation::{run_ablation, AblationConfig};
 use links_host::cli_cluster;
+use links_host::cli_image;
 use links_host::cli_serial;
 use links_host::cost::{self, CycleModel};
 use links_host::frame::{encode_png, render_frame, Precision};
@@ -58,7 +59,8 @@ enum TransparencyArg {
 #[derive(clap::Args)]
 struct SceneArgs {
     /// Scene file (.ron)
-    scene: PathBuf,
+    #[arg(required = true)]
+    scene: Option<PathBuf>,
     /// Image width in pixels, 1..=4096 (default: the scene's)
     #[arg(long, value_parser = limits::parse_image_side)]
     width: Option<u32>,
@@ -78,10 +80,14 @@ struct SceneArgs {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Render a scene to a PNG file
+    /// Render a scene (or a compiled SceneImage, --image) to a PNG file
+    #[command(mut_arg("scene", |a| a.required(false).required_unless_present("image")))]
     Render {
         #[command(flatten)]
         scene: SceneArgs,
+        /// Render this compiled SceneImage file (as `info --image` writes) instead of a scene
+        #[arg(long, value_name = "FILE.bin", conflicts_with_all = ["scene", "width", "height", "max_depth", "transparency", "no_shadows"])]
+        image: Option<PathBuf>,
         /// Output PNG file
         #[arg(short, long, default_value = "out.png")]
         output: PathBuf,
@@ -89,9 +95,9 @@ enum Cmd {
         /// not depend on it
         #[arg(long, default_value_t = 0, value_parser = limits::parse_threads)]
         threads: usize,
-        /// Number type of the render
-        #[arg(long, value_enum, default_value = "f32")]
-        precision: PrecisionArg,
+        /// Number type of the render (default: f32; fixed for an --image that stores Q16.16)
+        #[arg(long, value_enum)]
+        precision: Option<PrecisionArg>,
         /// No progress bar or stats line
         #[arg(short, long)]
         quiet: bool,
@@ -120,6 +126,11 @@ enum Cmd {
         /// (default: double-buffered, the bus busy while the RC works; cluster only)
         #[arg(long)]
         rc_single_buffer: bool,
+    },
+    /// Check a compiled SceneImage file and print its size by section
+    CheckImage {
+        /// SceneImage file (as `info --image` writes)
+        image: PathBuf,
     },
     /// Compile a scene and print its SceneImage size by section
     Info {
@@ -268,7 +279,7 @@ enum SweepCmd {
 /// Scene arguments with every option at the scene's own setting.
 fn plain_args(scene: &std::path::Path) -> SceneArgs {
     SceneArgs {
-        scene: scene.to_path_buf(),
+        scene: Some(scene.to_path_buf()),
         width: None,
         height: None,
         max_depth: None,
@@ -277,8 +288,16 @@ fn plain_args(scene: &std::path::Path) -> SceneArgs {
     }
 }
 
+/// The scene file of `a` (clap requires it wherever `--image` is not given).
+fn scene_path(a: &SceneArgs) -> Result<&std::path::Path, String> {
+    a.scene
+        .as_deref()
+        .ok_or_else(|| "a scene file is required".to_string())
+}
+
 fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
-    let desc = load_scene(&a.scene).map_err(|e| e.to_string())?;
+    let path = scene_path(a)?;
+    let desc = load_scene(path).map_err(|e| e.to_string())?;
     let opts = CompileOptions {
         width: a.width,
         height: a.height,
@@ -290,14 +309,34 @@ fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
         mesh_hierarchy: Default::default(),
         no_shadows: a.no_shadows,
     };
-    let compiled = compile(&desc, &opts).map_err(|e| format!("{}: {e}", a.scene.display()))?;
+    let compiled = compile(&desc, &opts).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(compiled.bytes)
+}
+
+/// The SceneImage to render: the `--image` file (validated, frame within the host's limit),
+/// or the scene compiled; and the number type its storage allows.
+fn image_to_render(
+    a: &SceneArgs,
+    file: Option<&std::path::Path>,
+    precision: Option<PrecisionArg>,
+    cluster: bool,
+) -> Result<(Vec<u8>, Precision), String> {
+    let asked = precision.map(|p| match p {
+        PrecisionArg::F32 => Precision::F32,
+        PrecisionArg::F64 => Precision::F64,
+        PrecisionArg::Fixed => Precision::Fixed,
+    });
+    match file {
+        Some(path) => cli_image::for_render(path, asked, cluster).map_err(|e| e.to_string()),
+        None => Ok((compile_scene(a)?, asked.unwrap_or_default())),
+    }
 }
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::Render {
             scene,
+            image,
             output,
             threads: _,
             precision,
@@ -311,7 +350,7 @@ fn run(cli: Cli) -> Result<(), String> {
             timeout_ms,
             rc_single_buffer,
         } => {
-            if !matches!(precision, PrecisionArg::F32) {
+            if !matches!(precision, None | Some(PrecisionArg::F32)) {
                 return Err(
                     "the cluster's nodes compute in f32: drop --precision or --nodes".into(),
                 );
@@ -321,7 +360,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     "--nodes {nodes}: a cluster has 1 to 256 node computers"
                 ));
             }
-            let image = compile_scene(&scene)?;
+            let (image, _) = image_to_render(&scene, image.as_deref(), precision, true)?;
             let mut cfg = cli_cluster::config(
                 nodes,
                 buses,
@@ -364,6 +403,7 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Cmd::Render {
             scene,
+            image,
             output,
             threads,
             precision,
@@ -371,7 +411,7 @@ fn run(cli: Cli) -> Result<(), String> {
             nodes: None,
             ..
         } => {
-            let image = compile_scene(&scene)?;
+            let (image, precision) = image_to_render(&scene, image.as_deref(), precision, false)?;
             let view = SceneView::new(&image).map_err(|e| e.to_string())?;
             let f = view.frame::<f32>();
             let bar = if quiet || !std::io::stderr().is_terminal() {
@@ -388,11 +428,6 @@ fn run(cli: Cli) -> Result<(), String> {
                     .map_err(|e| e.to_string())?,
                 );
                 b
-            };
-            let precision = match precision {
-                PrecisionArg::F32 => Precision::F32,
-                PrecisionArg::F64 => Precision::F64,
-                PrecisionArg::Fixed => Precision::Fixed,
             };
             let frame = render_frame(&image, precision, threads, &|| bar.inc(1))
                 .map_err(|e| e.to_string())?;
@@ -429,27 +464,17 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
+        Cmd::CheckImage { image } => {
+            for line in cli_image::check_image(&image).map_err(|e| e.to_string())? {
+                outln!("{line}");
+            }
+            Ok(())
+        }
         Cmd::Info { scene, image } => {
             let bytes = compile_scene(&scene)?;
             let view = SceneView::new(&bytes).map_err(|e| e.to_string())?;
-            let f = view.frame::<f32>();
-            outln!(
-                "{}: SceneImage {} bytes ({}x{})",
-                scene.scene.display(),
-                bytes.len(),
-                f.width,
-                f.height
-            );
-            outln!("  {:<12} {:>8} {:>10}", "section", "records", "bytes");
-            for s in Section::ALL {
-                if view.count(s) > 0 {
-                    outln!(
-                        "  {:<12} {:>8} {:>10}",
-                        s.name(),
-                        view.count(s),
-                        view.section_bytes(s)
-                    );
-                }
+            for line in cli_image::describe(&scene_path(&scene)?.display().to_string(), &view) {
+                outln!("{line}");
             }
             if let Some(path) = image {
                 std::fs::write(&path, &bytes).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -481,7 +506,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 .map_err(|e| e.to_string())?;
             outln!(
                 "{}: {}x{} {backend} vs f64: PSNR {:.1} dB, max channel error {}/255, {:.3}% pixels off by > 1/255, {} NaN/inf pixels, {} hit-mask mismatches ({} off silhouettes)",
-                scene.scene.display(),
+                scene_path(&scene)?.display(),
                 a.width,
                 a.height,
                 a.psnr_db,

@@ -15,7 +15,10 @@ use crate::limits::ReadError;
 pub enum SceneError {
     /// The scene file itself could not be read: missing, not a regular file, or over
     /// [`crate::limits::MAX_SCENE_BYTES`].
-    Io { path: PathBuf, source: ReadError },
+    Io {
+        path: PathBuf,
+        source: Box<ReadError>,
+    },
     /// The text is not RON, or not the structure a scene file has (ron's own diagnosis: a
     /// missing comma, an unknown field, a string where a number belongs, ...).
     Syntax {
@@ -42,7 +45,7 @@ pub enum SceneError {
         kind: &'static str,
         /// The path the scene gave, resolved against the scene's directory.
         path: PathBuf,
-        source: ReadError,
+        source: Box<ReadError>,
     },
     /// A Wavefront OBJ mesh is malformed. `line` is `None` for problems with the file as a
     /// whole (no faces); `col` is `None` when the whole line is at fault.
@@ -131,7 +134,7 @@ impl fmt::Display for SceneError {
 impl std::error::Error for SceneError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            SceneError::Io { source, .. } | SceneError::Asset { source, .. } => Some(source),
+            SceneError::Io { source, .. } | SceneError::Asset { source, .. } => Some(&**source),
             _ => None,
         }
     }

@@ -43,7 +43,7 @@ pub fn load_scene(path: &Path) -> Result<SceneDesc, SceneError> {
     let bytes =
         read_bounded(path, MAX_SCENE_BYTES, "scene file").map_err(|source| SceneError::Io {
             path: path.to_path_buf(),
-            source,
+            source: Box::new(source),
         })?;
     let file_name = path.display().to_string();
     let text = match std::str::from_utf8(&bytes) {

@@ -67,7 +67,7 @@ impl<'a> Resolver<'a> {
             col,
             kind,
             path,
-            source: e,
+            source: Box::new(e),
         }
     }
 
