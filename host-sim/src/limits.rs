@@ -35,6 +35,9 @@ pub const MAX_TEXT_BYTES: u64 = 16 << 20;
 pub const MAX_THREADS: usize = 256;
 /// Most node computers a model or a simulated cluster may have (`--nodes`).
 pub const MAX_NODES: u32 = 256;
+/// The simulated SPI bit rate's range in MHz (`--bit-rate-mhz`): at 1 kHz a 4096 x 4096
+/// frame of raw RGB still takes well under the 2^64 ps of virtual time.
+pub const BIT_RATE_MHZ: (f64, f64) = (0.001, 10_000.0);
 
 /// Why a file was not read.
 #[derive(Debug)]
@@ -302,6 +305,14 @@ pub fn parse_max_depth(s: &str) -> Result<u32, String> {
     })
 }
 
+/// `--bit-rate-mhz`: within [`BIT_RATE_MHZ`] (not NaN).
+pub fn parse_bit_rate_mhz(s: &str) -> Result<f64, String> {
+    let (lo, hi) = BIT_RATE_MHZ;
+    parse_in(s, lo, hi, || {
+        format!("the SPI bit rate is {lo} to {hi} MHz")
+    })
+}
+
 /// `sweep ablation --nodes`: 1..=[`MAX_NODES`].
 pub fn parse_nodes(s: &str) -> Result<u32, String> {
     parse_in(s, 1, MAX_NODES, || {
@@ -478,6 +489,10 @@ mod tests {
         assert_eq!(parse_nodes("256"), Ok(256));
         assert!(parse_nodes("0").is_err());
         assert!(parse_nodes("4000000000").is_err());
+        assert_eq!(parse_bit_rate_mhz("42"), Ok(42.0));
+        for bad in ["0", "1e-300", "NaN", "inf", "1e5"] {
+            assert!(parse_bit_rate_mhz(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

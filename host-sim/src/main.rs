@@ -107,8 +107,8 @@ enum Cmd {
         /// SPI buses from the root computer (cluster only)
         #[arg(long, default_value_t = 1)]
         buses: u16,
-        /// SPI bit rate in MHz (cluster only)
-        #[arg(long, default_value_t = 42.0)]
+        /// SPI bit rate in MHz, 0.001..=10000 (cluster only)
+        #[arg(long, default_value_t = 42.0, value_parser = limits::parse_bit_rate_mhz)]
         bit_rate_mhz: f64,
         /// Sub-screen policy (cluster only): decreasing, static, fixed=N, fixed-rect=N
         #[arg(long, default_value = "decreasing")]

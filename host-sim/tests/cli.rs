@@ -317,6 +317,33 @@ fn other_sizes_from_the_command_line_are_bounded() {
             &["info", p, "--max-depth", "17"],
             "the recursion depth is 0 to 16",
         ),
+        // A byte took longer than the u64 picoseconds of virtual time hold: a panic.
+        (
+            &[
+                "render",
+                p,
+                "--nodes",
+                "2",
+                "--bit-rate-mhz",
+                "1e-300",
+                "-o",
+                o,
+            ],
+            "the SPI bit rate is 0.001 to 10000 MHz",
+        ),
+        (
+            &[
+                "render",
+                p,
+                "--nodes",
+                "2",
+                "--bit-rate-mhz",
+                "NaN",
+                "-o",
+                o,
+            ],
+            "the SPI bit rate is 0.001 to 10000 MHz",
+        ),
     ];
     for (args, want) in cases {
         let (code, err) = run_in(&dir, args);
