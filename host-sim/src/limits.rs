@@ -56,6 +56,13 @@ pub enum ReadError {
         /// "a FIFO (named pipe)", "a directory", ...
         kind: &'static str,
     },
+    /// A text file (CSV, Markdown) that is not UTF-8.
+    NotText {
+        path: PathBuf,
+        what: &'static str,
+        /// Offset of the first byte that is not UTF-8.
+        offset: usize,
+    },
     /// The file is larger than the limit for its kind.
     TooLarge {
         path: PathBuf,
@@ -74,6 +81,7 @@ impl ReadError {
         match self {
             ReadError::Io { path, .. }
             | ReadError::NotAFile { path, .. }
+            | ReadError::NotText { path, .. }
             | ReadError::TooLarge { path, .. } => path,
         }
     }
@@ -85,6 +93,9 @@ impl ReadError {
         match self {
             ReadError::Io { source, .. } => source.to_string(),
             ReadError::NotAFile { kind, .. } => format!("it is {kind}, not a regular file"),
+            ReadError::NotText { offset, .. } => {
+                format!("it is not UTF-8 text (invalid byte at offset {offset})")
+            }
             ReadError::TooLarge {
                 what,
                 size,
@@ -105,6 +116,7 @@ impl ReadError {
         match self {
             ReadError::Io { what, .. }
             | ReadError::NotAFile { what, .. }
+            | ReadError::NotText { what, .. }
             | ReadError::TooLarge { what, .. } => what,
         }
     }
@@ -248,27 +260,13 @@ pub fn read_text_bounded(
     path: &Path,
     max_bytes: u64,
     what: &'static str,
-) -> Result<String, String> {
-    let bytes = read_bounded(path, max_bytes, what).map_err(|e| e.to_string())?;
-    String::from_utf8(bytes).map_err(|e| {
-        format!(
-            "{}: the {what} is not UTF-8 text (invalid byte at offset {})",
-            path.display(),
-            e.utf8_error().valid_up_to()
-        )
+) -> Result<String, ReadError> {
+    let bytes = read_bounded(path, max_bytes, what)?;
+    String::from_utf8(bytes).map_err(|e| ReadError::NotText {
+        path: path.to_path_buf(),
+        what,
+        offset: e.utf8_error().valid_up_to(),
     })
-}
-
-/// Checks an image size against [`MAX_IMAGE_SIDE`].
-pub fn check_image_size(width: u32, height: u32) -> Result<(), String> {
-    let max = MAX_IMAGE_SIDE;
-    if (1..=max).contains(&width) && (1..=max).contains(&height) {
-        Ok(())
-    } else {
-        Err(format!(
-            "the image is {width}x{height} pixels; the host renders 1 to {max} pixels per side"
-        ))
-    }
 }
 
 /// A number in `lo..=hi` from the command line (for clap's `value_parser`); `what` says what
@@ -460,6 +458,25 @@ mod tests {
     }
 
     #[test]
+    fn text_must_be_utf8() {
+        let p = scratch("latin1.csv");
+        std::fs::write(&p, b"a,b\n\xe9,1\n").unwrap();
+        let e = read_text_bounded(&p, 100, "CSV file").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: cannot read the CSV file: it is not UTF-8 text (invalid byte at offset 4)",
+                p.display()
+            )
+        );
+        std::fs::write(&p, "a,b\né,1\n").unwrap();
+        assert_eq!(
+            read_text_bounded(&p, 100, "CSV file").unwrap(),
+            "a,b\né,1\n"
+        );
+    }
+
+    #[test]
     fn a_missing_file_names_the_path() {
         let e = read_bounded(Path::new("no/such/file.obj"), 10, "mesh file").unwrap_err();
         assert!(matches!(e, ReadError::Io { .. }));
@@ -493,15 +510,5 @@ mod tests {
         for bad in ["0", "1e-300", "NaN", "inf", "1e5"] {
             assert!(parse_bit_rate_mhz(bad).is_err(), "{bad}");
         }
-    }
-
-    #[test]
-    fn image_sizes() {
-        assert!(check_image_size(1, 4096).is_ok());
-        assert_eq!(
-            check_image_size(4097, 10).unwrap_err(),
-            "the image is 4097x10 pixels; the host renders 1 to 4096 pixels per side"
-        );
-        assert!(check_image_size(10, 0).is_err());
     }
 }

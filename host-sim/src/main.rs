@@ -579,7 +579,8 @@ fn run(cli: Cli) -> Result<(), String> {
             chart::write(&csv_path, chart::csv(&acc, &speed).as_bytes())
                 .map_err(|e| e.to_string())?;
             if !doc.as_os_str().is_empty() {
-                let text = limits::read_text_bounded(&doc, limits::MAX_TEXT_BYTES, "document")?;
+                let text = limits::read_text_bounded(&doc, limits::MAX_TEXT_BYTES, "document")
+                    .map_err(|e| e.to_string())?;
                 let new = chart::replace_table(&text, &chart::markdown(&acc, &speed))
                     .map_err(|e| format!("{}: {e}", doc.display()))?;
                 chart::write(&doc, new.as_bytes()).map_err(|e| e.to_string())?;
@@ -652,7 +653,8 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Cmd::Calibrate { csv, target } => {
-            let text = limits::read_text_bounded(&csv, limits::MAX_TEXT_BYTES, "CSV file")?;
+            let text = limits::read_text_bounded(&csv, limits::MAX_TEXT_BYTES, "CSV file")
+                .map_err(|e| e.to_string())?;
             let samples =
                 cost::parse_samples(&text).map_err(|e| format!("{}: {e}", csv.display()))?;
             let fitted = cost::fit(
