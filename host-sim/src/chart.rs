@@ -495,7 +495,14 @@ pub fn ensure_font() -> Result<(), String> {
     FONT.get_or_init(|| {
         let font = FONT_PATHS
             .iter()
-            .find_map(|p| std::fs::read(p).ok())
+            .find_map(|p| {
+                crate::limits::read_bounded(
+                    std::path::Path::new(p),
+                    crate::limits::MAX_TEXT_BYTES,
+                    "font file",
+                )
+                .ok()
+            })
             .ok_or_else(|| {
                 format!(
                     "no TrueType font for chart text (looked for {}); install fonts-dejavu-core",

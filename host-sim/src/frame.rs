@@ -4,8 +4,8 @@
 
 use links_core::fixed_image::{to_fixed, FixedError};
 use links_core::image::{ImageError, SceneView};
-use links_core::num::Fx;
 use links_core::num::Real;
+use links_core::num::{Fx, Storage};
 use links_core::render::{render_run, Stats, Tracer};
 use rayon::prelude::*;
 use std::fmt;
@@ -74,9 +74,10 @@ impl fmt::Display for FrameError {
 
 impl std::error::Error for FrameError {}
 
-/// Render every pixel of an f32 SceneImage (the fixed-point backend renders the DM's Q16.16
-/// rewrite of it). `threads` = 0 uses all cores; `progress` is called once per finished
-/// scanline (from any thread).
+/// Render every pixel of a SceneImage. An f32 image renders in any precision (the
+/// fixed-point backend renders the DM's Q16.16 rewrite of it); an image that already stores
+/// Q16.16 renders in fixed point only. `threads` = 0 uses all cores; `progress` is called
+/// once per finished scanline (from any thread).
 pub fn render_frame(
     image: &[u8],
     precision: Precision,
@@ -84,13 +85,19 @@ pub fn render_frame(
     progress: &(dyn Fn() + Sync),
 ) -> Result<FrameImage, FrameError> {
     let fixed;
-    let image = if precision == Precision::Fixed {
+    let stored = SceneView::new(image).map_err(FrameError::Image)?.storage();
+    let image = if precision == Precision::Fixed && stored == Storage::F32 {
         fixed = to_fixed(image).map_err(FrameError::Fixed)?;
         &fixed.bytes[..]
     } else {
         image
     };
     let view = SceneView::new(image).map_err(FrameError::Image)?;
+    match precision {
+        Precision::F32 | Precision::F64 => view.check_storage::<f32>(),
+        Precision::Fixed => view.check_storage::<Fx>(),
+    }
+    .map_err(FrameError::Image)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()

@@ -4,12 +4,14 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use links_core::desc::TransparencyMode;
 use links_core::dm::{compile, CompileOptions};
-use links_core::image::{SceneView, Section};
+use links_core::image::SceneView;
 use links_host::ablation::{run_ablation, AblationConfig};
 use links_host::cli_cluster;
+use links_host::cli_image;
 use links_host::cli_serial;
 use links_host::cost::{self, CycleModel};
 use links_host::frame::{encode_png, render_frame, Precision};
+use links_host::limits;
 use links_host::scene_file::load_scene;
 use std::io::IsTerminal;
 use std::path::PathBuf;
@@ -57,15 +59,16 @@ enum TransparencyArg {
 #[derive(clap::Args)]
 struct SceneArgs {
     /// Scene file (.ron)
-    scene: PathBuf,
-    /// Image width in pixels (default: the scene's)
-    #[arg(long)]
+    #[arg(required = true)]
+    scene: Option<PathBuf>,
+    /// Image width in pixels, 1..=4096 (default: the scene's)
+    #[arg(long, value_parser = limits::parse_image_side)]
     width: Option<u32>,
-    /// Image height in pixels (default: the scene's)
-    #[arg(long)]
+    /// Image height in pixels, 1..=4096 (default: the scene's)
+    #[arg(long, value_parser = limits::parse_image_side)]
     height: Option<u32>,
-    /// Maximum recursion depth for reflection/refraction (default: the scene's)
-    #[arg(long)]
+    /// Maximum recursion depth for reflection/refraction, 0..=16 (default: the scene's)
+    #[arg(long, value_parser = limits::parse_max_depth)]
     max_depth: Option<u32>,
     /// Override the scene's transparency mode
     #[arg(long, value_enum)]
@@ -77,19 +80,24 @@ struct SceneArgs {
 
 #[derive(Subcommand)]
 enum Cmd {
-    /// Render a scene to a PNG file
+    /// Render a scene (or a compiled SceneImage, --image) to a PNG file
+    #[command(mut_arg("scene", |a| a.required(false).required_unless_present("image")))]
     Render {
         #[command(flatten)]
         scene: SceneArgs,
+        /// Render this compiled SceneImage file (as `info --image` writes) instead of a scene
+        #[arg(long, value_name = "FILE.bin", conflicts_with_all = ["scene", "width", "height", "max_depth", "transparency", "no_shadows"])]
+        image: Option<PathBuf>,
         /// Output PNG file
         #[arg(short, long, default_value = "out.png")]
         output: PathBuf,
-        /// Host threads (0 = all cores; single-host render only); the image does not depend on it
-        #[arg(long, default_value_t = 0)]
+        /// Host threads (0 = all cores, at most 256; single-host render only); the image does
+        /// not depend on it
+        #[arg(long, default_value_t = 0, value_parser = limits::parse_threads)]
         threads: usize,
-        /// Number type of the render
-        #[arg(long, value_enum, default_value = "f32")]
-        precision: PrecisionArg,
+        /// Number type of the render (default: f32; fixed for an --image that stores Q16.16)
+        #[arg(long, value_enum)]
+        precision: Option<PrecisionArg>,
         /// No progress bar or stats line
         #[arg(short, long)]
         quiet: bool,
@@ -99,8 +107,8 @@ enum Cmd {
         /// SPI buses from the root computer (cluster only)
         #[arg(long, default_value_t = 1)]
         buses: u16,
-        /// SPI bit rate in MHz (cluster only)
-        #[arg(long, default_value_t = 42.0)]
+        /// SPI bit rate in MHz, 0.001..=10000 (cluster only)
+        #[arg(long, default_value_t = 42.0, value_parser = limits::parse_bit_rate_mhz)]
         bit_rate_mhz: f64,
         /// Sub-screen policy (cluster only): decreasing, static, fixed=N, fixed-rect=N
         #[arg(long, default_value = "decreasing")]
@@ -119,6 +127,11 @@ enum Cmd {
         #[arg(long)]
         rc_single_buffer: bool,
     },
+    /// Check a compiled SceneImage file and print its size by section
+    CheckImage {
+        /// SceneImage file (as `info --image` writes)
+        image: PathBuf,
+    },
     /// Compile a scene and print its SceneImage size by section
     Info {
         #[command(flatten)]
@@ -135,8 +148,8 @@ enum Cmd {
         /// (Q16.16)
         #[arg(long, default_value = "f32")]
         backend: String,
-        /// Host threads (0 = all cores)
-        #[arg(long, default_value_t = 0)]
+        /// Host threads (0 = all cores, at most 256)
+        #[arg(long, default_value_t = 0, value_parser = limits::parse_threads)]
         threads: usize,
     },
     /// Compile a scene and send its SceneImage to a real RC over a serial port
@@ -224,9 +237,9 @@ enum ChartCmd {
         /// Document whose generated table section to replace ("" = none)
         #[arg(long, default_value = "docs/numerics.md")]
         doc: PathBuf,
-        #[arg(long, default_value_t = links_host::chart::WIDTH)]
+        #[arg(long, default_value_t = links_host::chart::WIDTH, value_parser = limits::parse_image_side)]
         width: u32,
-        #[arg(long, default_value_t = links_host::chart::HEIGHT)]
+        #[arg(long, default_value_t = links_host::chart::HEIGHT, value_parser = limits::parse_image_side)]
         height: u32,
     },
 }
@@ -237,12 +250,12 @@ enum SweepCmd {
     Ablation {
         /// Scene file (.ron)
         scene: PathBuf,
-        #[arg(long, default_value_t = 512)]
+        #[arg(long, default_value_t = 512, value_parser = limits::parse_image_side)]
         width: u32,
-        #[arg(long, default_value_t = 480)]
+        #[arg(long, default_value_t = 480, value_parser = limits::parse_image_side)]
         height: u32,
-        /// Node computers the sub-screens are shared among
-        #[arg(long, default_value_t = 16)]
+        /// Node computers the sub-screens are shared among (1..=256)
+        #[arg(long, default_value_t = 16, value_parser = limits::parse_nodes)]
         nodes: u32,
         /// Sub-screen counts (multiples of the height), one table row each
         #[arg(long, value_delimiter = ',', default_value = "2400,480")]
@@ -272,7 +285,7 @@ enum SweepCmd {
 /// Scene arguments with every option at the scene's own setting.
 fn plain_args(scene: &std::path::Path) -> SceneArgs {
     SceneArgs {
-        scene: scene.to_path_buf(),
+        scene: Some(scene.to_path_buf()),
         width: None,
         height: None,
         max_depth: None,
@@ -281,8 +294,16 @@ fn plain_args(scene: &std::path::Path) -> SceneArgs {
     }
 }
 
+/// The scene file of `a` (clap requires it wherever `--image` is not given).
+fn scene_path(a: &SceneArgs) -> Result<&std::path::Path, String> {
+    a.scene
+        .as_deref()
+        .ok_or_else(|| "a scene file is required".to_string())
+}
+
 fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
-    let desc = load_scene(&a.scene).map_err(|e| e.to_string())?;
+    let path = scene_path(a)?;
+    let desc = load_scene(path).map_err(|e| e.to_string())?;
     let opts = CompileOptions {
         width: a.width,
         height: a.height,
@@ -294,14 +315,34 @@ fn compile_scene(a: &SceneArgs) -> Result<Vec<u8>, String> {
         mesh_hierarchy: Default::default(),
         no_shadows: a.no_shadows,
     };
-    let compiled = compile(&desc, &opts).map_err(|e| format!("{}: {e}", a.scene.display()))?;
+    let compiled = compile(&desc, &opts).map_err(|e| format!("{}: {e}", path.display()))?;
     Ok(compiled.bytes)
+}
+
+/// The SceneImage to render: the `--image` file (validated, frame within the host's limit),
+/// or the scene compiled; and the number type its storage allows.
+fn image_to_render(
+    a: &SceneArgs,
+    file: Option<&std::path::Path>,
+    precision: Option<PrecisionArg>,
+    cluster: bool,
+) -> Result<(Vec<u8>, Precision), String> {
+    let asked = precision.map(|p| match p {
+        PrecisionArg::F32 => Precision::F32,
+        PrecisionArg::F64 => Precision::F64,
+        PrecisionArg::Fixed => Precision::Fixed,
+    });
+    match file {
+        Some(path) => cli_image::for_render(path, asked, cluster).map_err(|e| e.to_string()),
+        None => Ok((compile_scene(a)?, asked.unwrap_or_default())),
+    }
 }
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.cmd {
         Cmd::Render {
             scene,
+            image,
             output,
             threads: _,
             precision,
@@ -315,7 +356,7 @@ fn run(cli: Cli) -> Result<(), String> {
             timeout_ms,
             rc_single_buffer,
         } => {
-            if !matches!(precision, PrecisionArg::F32) {
+            if !matches!(precision, None | Some(PrecisionArg::F32)) {
                 return Err(
                     "the cluster's nodes compute in f32: drop --precision or --nodes".into(),
                 );
@@ -325,7 +366,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     "--nodes {nodes}: a cluster has 1 to 256 node computers"
                 ));
             }
-            let image = compile_scene(&scene)?;
+            let (image, _) = image_to_render(&scene, image.as_deref(), precision, true)?;
             let mut cfg = cli_cluster::config(
                 nodes,
                 buses,
@@ -368,6 +409,7 @@ fn run(cli: Cli) -> Result<(), String> {
         }
         Cmd::Render {
             scene,
+            image,
             output,
             threads,
             precision,
@@ -375,7 +417,7 @@ fn run(cli: Cli) -> Result<(), String> {
             nodes: None,
             ..
         } => {
-            let image = compile_scene(&scene)?;
+            let (image, precision) = image_to_render(&scene, image.as_deref(), precision, false)?;
             let view = SceneView::new(&image).map_err(|e| e.to_string())?;
             let f = view.frame::<f32>();
             let bar = if quiet || !std::io::stderr().is_terminal() {
@@ -392,11 +434,6 @@ fn run(cli: Cli) -> Result<(), String> {
                     .map_err(|e| e.to_string())?,
                 );
                 b
-            };
-            let precision = match precision {
-                PrecisionArg::F32 => Precision::F32,
-                PrecisionArg::F64 => Precision::F64,
-                PrecisionArg::Fixed => Precision::Fixed,
             };
             let frame = render_frame(&image, precision, threads, &|| bar.inc(1))
                 .map_err(|e| e.to_string())?;
@@ -433,27 +470,17 @@ fn run(cli: Cli) -> Result<(), String> {
             }
             Ok(())
         }
+        Cmd::CheckImage { image } => {
+            for line in cli_image::check_image(&image).map_err(|e| e.to_string())? {
+                outln!("{line}");
+            }
+            Ok(())
+        }
         Cmd::Info { scene, image } => {
             let bytes = compile_scene(&scene)?;
             let view = SceneView::new(&bytes).map_err(|e| e.to_string())?;
-            let f = view.frame::<f32>();
-            outln!(
-                "{}: SceneImage {} bytes ({}x{})",
-                scene.scene.display(),
-                bytes.len(),
-                f.width,
-                f.height
-            );
-            outln!("  {:<12} {:>8} {:>10}", "section", "records", "bytes");
-            for s in Section::ALL {
-                if view.count(s) > 0 {
-                    outln!(
-                        "  {:<12} {:>8} {:>10}",
-                        s.name(),
-                        view.count(s),
-                        view.section_bytes(s)
-                    );
-                }
+            for line in cli_image::describe(&scene_path(&scene)?.display().to_string(), &view) {
+                outln!("{line}");
             }
             if let Some(path) = image {
                 std::fs::write(&path, &bytes).map_err(|e| format!("{}: {e}", path.display()))?;
@@ -485,7 +512,7 @@ fn run(cli: Cli) -> Result<(), String> {
                 .map_err(|e| e.to_string())?;
             outln!(
                 "{}: {}x{} {backend} vs f64: PSNR {:.1} dB, max channel error {}/255, {:.3}% pixels off by > 1/255, {} NaN/inf pixels, {} hit-mask mismatches ({} off silhouettes)",
-                scene.scene.display(),
+                scene_path(&scene)?.display(),
                 a.width,
                 a.height,
                 a.psnr_db,
@@ -539,8 +566,8 @@ fn run(cli: Cli) -> Result<(), String> {
             height,
         }) => {
             use links_host::chart;
-            let bench_csv = std::fs::read_to_string(&bench)
-                .map_err(|e| format!("{}: {e} (run scripts/qemu-bench first)", bench.display()))?;
+            let bench_csv = limits::read_text_bounded(&bench, limits::MAX_TEXT_BYTES, "CSV file")
+                .map_err(|e| format!("{e} (run scripts/qemu-bench first)"))?;
             let speed = chart::parse_bench(&bench_csv).map_err(|e| e.to_string())?;
             let images =
                 chart::bundled_images(&scenes, width, height).map_err(|e| e.to_string())?;
@@ -563,8 +590,8 @@ fn run(cli: Cli) -> Result<(), String> {
             chart::write(&csv_path, chart::csv(&acc, &speed).as_bytes())
                 .map_err(|e| e.to_string())?;
             if !doc.as_os_str().is_empty() {
-                let text =
-                    std::fs::read_to_string(&doc).map_err(|e| format!("{}: {e}", doc.display()))?;
+                let text = limits::read_text_bounded(&doc, limits::MAX_TEXT_BYTES, "document")
+                    .map_err(|e| e.to_string())?;
                 let new = chart::replace_table(&text, &chart::markdown(&acc, &speed))
                     .map_err(|e| format!("{}: {e}", doc.display()))?;
                 chart::write(&doc, new.as_bytes()).map_err(|e| e.to_string())?;
@@ -637,8 +664,8 @@ fn run(cli: Cli) -> Result<(), String> {
             Ok(())
         }
         Cmd::Calibrate { csv, target } => {
-            let text =
-                std::fs::read_to_string(&csv).map_err(|e| format!("{}: {e}", csv.display()))?;
+            let text = limits::read_text_bounded(&csv, limits::MAX_TEXT_BYTES, "CSV file")
+                .map_err(|e| e.to_string())?;
             let samples =
                 cost::parse_samples(&text).map_err(|e| format!("{}: {e}", csv.display()))?;
             let fitted = cost::fit(

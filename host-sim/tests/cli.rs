@@ -236,3 +236,429 @@ fn fixed_point_render_is_close_to_f64_and_compare_reports_it() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("nodes compute in f32"));
 }
+
+/// Runs `links` with `args` in `dir`: (exit code, stderr). `None` is death by a signal (an
+/// abort on a failed allocation).
+fn run_in(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
+    let o = links().current_dir(dir).args(args).output().unwrap();
+    (
+        o.status.code(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+fn run(args: &[&str]) -> (Option<i32>, String) {
+    run_in(&std::env::temp_dir(), args)
+}
+
+#[test]
+fn oversized_image_dimensions_are_refused_before_anything_is_allocated() {
+    let photo = scene("photo1.ron");
+    let p = photo.to_str().unwrap();
+    let out = tmp("huge.png");
+    let o = out.to_str().unwrap();
+    // Commands that write into their working directory run in a scratch one.
+    let dir = tmp("dims");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases: &[&[&str]] = &[
+        // The issue's command: a 65535 x 65535 frame is 12 GB.
+        &[
+            "render", p, "--width", "65535", "--height", "65535", "-o", o,
+        ],
+        &["render", p, "--width", "4097", "-o", o],
+        &["render", p, "--height", "0", "-o", o],
+        &["render", p, "--width", "4097", "--nodes", "2", "-o", o],
+        &["info", p, "--width", "4097"],
+        &["compare", p, "--height", "4097"],
+        &["upload", p, "--port", "/no/such/port", "--width", "4097"],
+        &[
+            "chart", "accuracy", "--width", "4097", "--bench", "none.csv",
+        ],
+        &["sweep", "ablation", p, "--height", "4097"],
+    ];
+    for args in cases {
+        let (code, err) = run_in(&dir, args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains("an image side is 1 to 4096 pixels"),
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!out.exists());
+    // 4096 itself is accepted (info compiles, nothing is rendered).
+    let (code, err) = run(&["info", p, "--width", "4096", "--height", "4096"]);
+    assert_eq!(code, Some(0), "{err}");
+}
+
+#[test]
+fn other_sizes_from_the_command_line_are_bounded() {
+    let photo = scene("photo1.ron");
+    let p = photo.to_str().unwrap();
+    let out = tmp("never-threads.png");
+    let o = out.to_str().unwrap();
+    let dir = tmp("sizes");
+    std::fs::create_dir_all(&dir).unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        // 100000 OS threads were started until the system refused.
+        (
+            &["render", p, "--threads", "100000", "-o", o],
+            "expected 0 (one per core) to 256 threads",
+        ),
+        (
+            &["compare", p, "--threads", "100000"],
+            "expected 0 (one per core) to 256 threads",
+        ),
+        // The model's per-node table was allocated for 4e9 nodes (a 32 GB abort).
+        (
+            &["sweep", "ablation", p, "--nodes", "4000000000"],
+            "a cluster has 1 to 256 node computers",
+        ),
+        (
+            &["info", p, "--max-depth", "17"],
+            "the recursion depth is 0 to 16",
+        ),
+        // A byte took longer than the u64 picoseconds of virtual time hold: a panic.
+        (
+            &[
+                "render",
+                p,
+                "--nodes",
+                "2",
+                "--bit-rate-mhz",
+                "1e-300",
+                "-o",
+                o,
+            ],
+            "the SPI bit rate is 0.001 to 10000 MHz",
+        ),
+        (
+            &[
+                "render",
+                p,
+                "--nodes",
+                "2",
+                "--bit-rate-mhz",
+                "NaN",
+                "-o",
+                o,
+            ],
+            "the SPI bit rate is 0.001 to 10000 MHz",
+        ),
+    ];
+    for (args, want) in cases {
+        let (code, err) = run_in(&dir, args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+    assert!(!out.exists());
+}
+
+#[cfg(unix)]
+#[test]
+fn scene_paths_that_are_not_regular_files_or_too_large_are_refused() {
+    let out = tmp("never-file.png");
+    let o = out.to_str().unwrap();
+    // /dev/zero never ends: it was read until memory ran out.
+    let (code, err) = run(&["render", "/dev/zero", "-o", o]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        "error: /dev/zero: cannot read the scene file: it is a character device, not a regular file"
+    );
+
+    // A FIFO: opening it waited forever for a writer. This writer is there so that a
+    // regression reads its text and fails the assertion instead of hanging the test.
+    let fifo = tmp("scene-fifo.ron");
+    let _ = std::fs::remove_file(&fifo);
+    assert!(Command::new("mkfifo")
+        .arg(&fifo)
+        .status()
+        .unwrap()
+        .success());
+    let writer = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || {
+            use std::io::Write;
+            let mut w = std::fs::OpenOptions::new().write(true).open(&fifo).unwrap();
+            let _ = w.write_all(b"Scene()");
+        })
+    };
+    let (code, err) = run(&["render", fifo.to_str().unwrap(), "-o", o]);
+    // Release the writer: a non-blocking open for reading never waits.
+    let release = {
+        use std::os::unix::fs::OpenOptionsExt;
+        std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(&fifo)
+            .unwrap()
+    };
+    writer.join().unwrap();
+    drop(release);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "error: {}: cannot read the scene file: it is a FIFO (named pipe), not a regular file",
+            fifo.display()
+        )
+    );
+
+    // 100 MB (sparse: no disk space, and nothing is read).
+    let big = tmp("big.ron");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(100_000_000)
+        .unwrap();
+    let (code, err) = run(&["render", big.to_str().unwrap(), "-o", o]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "error: {}: cannot read the scene file: it is 100000000 bytes, over the 16 MiB \
+             (16777216 bytes) limit for a scene file",
+            big.display()
+        )
+    );
+    assert!(!out.exists());
+}
+
+/// Byte offset of `section`'s record `record` in a SceneImage (the header's section table).
+fn record_at(image: &[u8], section: links_core::image::Section, record: usize) -> usize {
+    let t = 16 + 8 * section as usize;
+    let off = u32::from_le_bytes(image[t..t + 4].try_into().unwrap()) as usize;
+    off + record * section.record_size()
+}
+
+/// `info --image` writes a scene's SceneImage; returns the file and `info`'s table.
+fn compile_to_file(scene_name: &str, name: &str) -> (PathBuf, String) {
+    let bin = tmp(name);
+    let o = links()
+        .args(["info", scene(scene_name).to_str().unwrap()])
+        .args(["--width", "64", "--height", "60", "--image"])
+        .arg(&bin)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    (bin, String::from_utf8(o.stdout).unwrap())
+}
+
+/// Renders with `args` into a fresh PNG and returns its bytes.
+fn render_png(name: &str, args: &[&str]) -> Vec<u8> {
+    let out = tmp(name);
+    let _ = std::fs::remove_file(&out);
+    let o = links()
+        .arg("render")
+        .args(args)
+        .args(["--quiet", "-o"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    std::fs::read(&out).unwrap()
+}
+
+#[test]
+fn a_compiled_image_checks_and_renders_like_its_scene() {
+    let (bin, info) = compile_to_file("photo1.ron", "photo1.bin");
+    let b = bin.to_str().unwrap();
+
+    let o = links().args(["check-image", b]).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8(o.stdout).unwrap();
+    let len = std::fs::metadata(&bin).unwrap().len();
+    assert_eq!(
+        text.lines().next().unwrap(),
+        format!("{b}: SceneImage {len} bytes (64x60, f32)")
+    );
+    // The same table as `info`, then the verdict.
+    let table = |t: &str| t.lines().skip(1).map(String::from).collect::<Vec<_>>();
+    let mut want = table(&info);
+    want.push("valid".to_string());
+    assert_eq!(table(&text), want);
+    assert!(
+        text.contains("triangles") && text.contains(" 738 "),
+        "{text}"
+    );
+
+    // Host (f32, f64) and cluster renders of the image are the scene's.
+    let photo = scene("photo1.ron");
+    let p = photo.to_str().unwrap();
+    let dims = ["--width", "64", "--height", "60"];
+    let from_scene = render_png("scene-f32.png", &[&[p][..], &dims].concat());
+    assert_eq!(render_png("image-f32.png", &["--image", b]), from_scene);
+    assert_eq!(
+        render_png("image-f64.png", &["--image", b, "--precision", "f64"]),
+        render_png(
+            "scene-f64.png",
+            &[&[p, "--precision", "f64"][..], &dims].concat()
+        )
+    );
+    assert_eq!(
+        render_png("image-cluster.png", &["--image", b, "--nodes", "4"]),
+        from_scene
+    );
+
+    // An image that stores Q16.16 renders in fixed point, like the scene with --precision
+    // fixed, and nothing else reads it.
+    let (bin, _) = compile_to_file("ellipsoids.ron", "ellipsoids.bin");
+    let fixed = links_core::fixed_image::to_fixed(&std::fs::read(&bin).unwrap()).unwrap();
+    let fbin = tmp("ellipsoids-q16.bin");
+    std::fs::write(&fbin, &fixed.bytes).unwrap();
+    let f = fbin.to_str().unwrap();
+    let o = links().args(["check-image", f]).output().unwrap();
+    assert!(o.status.success());
+    let text = String::from_utf8(o.stdout).unwrap();
+    assert!(
+        text.lines().next().unwrap().ends_with(&format!(
+            "(64x60, q16.16, lengths scaled by 2^{})",
+            fixed.scale_exponent
+        )),
+        "{text}"
+    );
+    let e = scene("ellipsoids.ron");
+    assert_eq!(
+        render_png("image-fixed.png", &["--image", f]),
+        render_png(
+            "scene-fixed.png",
+            &[&[e.to_str().unwrap(), "--precision", "fixed"][..], &dims].concat()
+        )
+    );
+    for (extra, who) in [
+        (&["--precision", "f32"][..], "an f32 render"),
+        (&["--nodes", "2"][..], "the cluster's f32 nodes"),
+    ] {
+        let mut args = vec!["render", "--image", f, "-o", "never.png"];
+        args.extend_from_slice(extra);
+        let (code, err) = run(&args);
+        assert_eq!(code, Some(1), "{err}");
+        assert_eq!(
+            err.trim_end(),
+            format!(
+                "error: {f}: the image stores q16.16 scalars, which {who} can't read (render \
+                 it with --precision fixed, on the host)"
+            )
+        );
+    }
+}
+
+#[test]
+fn a_bad_image_file_is_refused_naming_what_is_wrong() {
+    use links_core::image::Section;
+    let (bin, _) = compile_to_file("photo1.ron", "photo1-bad.bin");
+    let good = std::fs::read(&bin).unwrap();
+    let out = tmp("never-image.png");
+    let o = out.to_str().unwrap();
+    // (bytes, the error after "FILE: ")
+    let mut bad_material = good.clone();
+    let at = record_at(&good, Section::Triangles, 3) + 36;
+    bad_material[at..at + 4].copy_from_slice(&99u32.to_le_bytes());
+    let cases: Vec<(Vec<u8>, String)> = vec![
+        (
+            bad_material,
+            "not a valid SceneImage: triangles record 3 refers to a missing record".into(),
+        ),
+        (
+            good[..1000].to_vec(),
+            format!(
+                "not a valid SceneImage: scene image says {} bytes but 1000 were given",
+                good.len()
+            ),
+        ),
+        // A scene file given for its image.
+        (
+            std::fs::read(scene("photo1.ron")).unwrap(),
+            "not a valid SceneImage: not a scene image (bad magic)".into(),
+        ),
+    ];
+    for (i, (bytes, want)) in cases.iter().enumerate() {
+        let file = tmp(&format!("bad-{i}.bin"));
+        std::fs::write(&file, bytes).unwrap();
+        let f = file.to_str().unwrap();
+        for args in [
+            vec!["check-image", f],
+            vec!["render", "--image", f, "-o", o],
+            vec!["render", "--image", f, "--nodes", "2", "-o", o],
+        ] {
+            let (code, err) = run(&args);
+            assert_eq!(code, Some(1), "{args:?}: {err}");
+            assert_eq!(err.trim_end(), format!("error: {f}: {want}"), "{args:?}");
+        }
+    }
+
+    // Files that are not regular or too large: refused unread.
+    let big = tmp("big.bin");
+    std::fs::File::create(&big)
+        .unwrap()
+        .set_len(300_000_000)
+        .unwrap();
+    for (path, want) in [
+        (
+            "/dev/zero".to_string(),
+            "it is a character device, not a regular file".to_string(),
+        ),
+        (
+            big.to_str().unwrap().to_string(),
+            "it is 300000000 bytes, over the 256 MiB (268435456 bytes) limit for a SceneImage \
+             file"
+                .to_string(),
+        ),
+    ] {
+        for args in [
+            vec!["check-image", &path],
+            vec!["render", "--image", &path, "-o", o],
+        ] {
+            let (code, err) = run(&args);
+            assert_eq!(code, Some(1), "{args:?}: {err}");
+            assert_eq!(
+                err.trim_end(),
+                format!("error: {path}: cannot read the SceneImage file: {want}")
+            );
+        }
+    }
+
+    // A valid image with a frame larger than the host renders: checked, not rendered.
+    let desc = links_host::scene_file::load_scene(&scene("reflections.ron")).unwrap();
+    let opts = links_core::dm::CompileOptions {
+        width: Some(5000),
+        height: Some(5000),
+        ..Default::default()
+    };
+    let wide = tmp("wide.bin");
+    std::fs::write(&wide, links_core::dm::compile(&desc, &opts).unwrap().bytes).unwrap();
+    let w = wide.to_str().unwrap();
+    let o2 = links().args(["check-image", w]).output().unwrap();
+    assert!(o2.status.success());
+    assert_eq!(
+        String::from_utf8(o2.stdout).unwrap().lines().last(),
+        Some("valid, but the host renders frames of at most 4096x4096 pixels")
+    );
+    let (code, err) = run(&["render", "--image", w, "-o", o]);
+    assert_eq!(code, Some(1), "{err}");
+    assert_eq!(
+        err.trim_end(),
+        format!(
+            "error: {w}: the frame is 5000x5000 pixels; the host renders 1 to 4096 pixels per side"
+        )
+    );
+    assert!(!out.exists());
+}
+
+#[test]
+fn render_takes_a_scene_or_an_image_not_both() {
+    let photo = scene("photo1.ron");
+    let p = photo.to_str().unwrap();
+    for args in [
+        vec!["render", "-o", "x.png"],
+        vec!["render", p, "--image", "x.bin", "-o", "x.png"],
+        vec!["render", "--image", "x.bin", "--width", "8", "-o", "x.png"],
+        vec!["render", "--image", "x.bin", "--no-shadows", "-o", "x.png"],
+    ] {
+        let (code, err) = run(&args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+    }
+}

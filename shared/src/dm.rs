@@ -73,6 +73,12 @@ pub enum DmError {
     TooLarge {
         what: String,
     },
+    /// A value beyond the f32 range in view coordinates (a transform carried a coordinate
+    /// of the scene past it): the image would hold an infinity.
+    BeyondF32 {
+        section: &'static str,
+        record: u32,
+    },
 }
 
 impl fmt::Display for DmError {
@@ -98,6 +104,11 @@ impl fmt::Display for DmError {
             DmError::BadIndex { what } => write!(f, "{what}"),
             DmError::BadSetting(s) => write!(f, "{s}"),
             DmError::TooLarge { what } => write!(f, "scene too large: {what}"),
+            DmError::BeyondF32 { section, record } => write!(
+                f,
+                "{section} record {record} holds a value beyond the f32 range (about ±3.4e38) \
+                 after the cluster and view transforms"
+            ),
         }
     }
 }
@@ -520,9 +531,18 @@ pub fn compile(desc: &SceneDesc, opts: &CompileOptions) -> Result<Compiled, DmEr
         rects: Vec::new(),
     };
     dm.run()?;
-    Ok(Compiled {
-        bytes: dm.w.finish(),
-    })
+    let bytes = dm.w.finish();
+    // Every scene-file number fits f32, but a transform can carry a coordinate past it.
+    match crate::fixed_image::first_non_finite(&bytes) {
+        Ok(None) => Ok(Compiled { bytes }),
+        Ok(Some((section, record))) => Err(DmError::BeyondF32 {
+            section: section.name(),
+            record,
+        }),
+        Err(e) => Err(DmError::TooLarge {
+            what: format!("the image the DM wrote is not valid: {e}"),
+        }),
+    }
 }
 
 impl Dm<'_> {
@@ -1546,5 +1566,65 @@ mod tests {
             ..Default::default()
         };
         assert!(matches!(compile(&s, &opts), Err(DmError::BadSetting(_))));
+    }
+
+    /// Every number of a scene file fits f32, but a transform can carry one beyond it: the
+    /// image would hold infinities (and f32 and f64 renders of it differ).
+    #[test]
+    fn values_beyond_f32_after_the_transforms_are_rejected() {
+        let sphere = |center| {
+            Node::Shape(Shape::Ellipsoid {
+                center,
+                radii: [1.0; 3],
+                rotate_deg: [0.0; 3],
+                cut: None,
+                material: 0,
+            })
+        };
+        // 3e38 is an f32; scaled by 10 it is not.
+        let s = scene(vec![Node::Cluster(Cluster {
+            name: "far".into(),
+            transform: Transform {
+                scale: [10.0; 3],
+                ..Transform::default()
+            },
+            children: vec![sphere([0.0, 0.0, -3e38])],
+        })]);
+        assert_eq!(
+            compile(&s, &CompileOptions::default()).unwrap_err(),
+            DmError::BeyondF32 {
+                section: Section::Ellipsoids.name(),
+                record: 0
+            }
+        );
+        // A point light 3e38 behind an eye at 3e38 is 6e38 away in view coordinates.
+        let mut s = scene(vec![sphere([0.0; 3])]);
+        s.camera.eye = [0.0, 0.0, 3e38];
+        s.lights = vec![Light::Point {
+            pos: [0.0, 0.0, -3e38],
+            color: [1.0; 3],
+            falloff: false,
+        }];
+        let e = compile(&s, &CompileOptions::default()).unwrap_err();
+        assert_eq!(
+            e,
+            DmError::BeyondF32 {
+                section: "lights",
+                record: 0
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "lights record 0 holds a value beyond the f32 range (about ±3.4e38) after the \
+             cluster and view transforms"
+        );
+        // The same scene nearer the origin compiles.
+        s.camera.eye = [0.0, 0.0, 3e37];
+        s.lights = vec![Light::Point {
+            pos: [0.0, 0.0, -3e37],
+            color: [1.0; 3],
+            falloff: false,
+        }];
+        compile(&s, &CompileOptions::default()).unwrap();
     }
 }

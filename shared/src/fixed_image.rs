@@ -205,6 +205,31 @@ pub fn scale_exponent_for(extent: f64) -> Option<i8> {
     Some(k.clamp(-100.0, 100.0) as i8)
 }
 
+/// The first record of an f32 image holding a scalar that is not finite, a node's box only
+/// when no other record has one (the DM refuses to write such an image: see
+/// [`crate::dm::DmError::BeyondF32`]).
+pub fn first_non_finite(image: &[u8]) -> Result<Option<(Section, u32)>, ImageError> {
+    let view = SceneView::new(image)?;
+    if view.storage() != Storage::F32 {
+        return Err(ImageError::UnsupportedFormat {
+            found: view.storage() as u8,
+        });
+    }
+    let bad = |&(_, _, base, words): &(Section, u32, usize, &[Word])| {
+        words
+            .iter()
+            .enumerate()
+            .any(|(w, kind)| *kind != U && !word_f32(image, base + 4 * w).is_finite())
+    };
+    // A shape, light or frame record first: the boxes of the nodes above it overflow with it.
+    let found = records(image, &view)
+        .filter(|r| r.0 != Section::Nodes)
+        .find(bad)
+        .or_else(|| records(image, &view).find(bad))
+        .map(|(s, r, _, _)| (s, r));
+    Ok(found)
+}
+
 /// Rewrite an f32 SceneImage as Q16.16, choosing the scale from the scene's extent.
 pub fn to_fixed(image: &[u8]) -> Result<FixedImage, FixedError> {
     let view = SceneView::new(image)?;

@@ -1,8 +1,9 @@
 //! [`SceneError`]: everything that can go wrong loading a scene, each with a place to look.
 
 use std::fmt;
-use std::io;
 use std::path::PathBuf;
+
+use crate::limits::ReadError;
 
 /// An error loading a scene. Every variant names a file; all but [`SceneError::Io`] and
 /// [`SceneError::Png`] also give a 1-based line and column (columns count characters).
@@ -12,8 +13,12 @@ use std::path::PathBuf;
 #[derive(Debug)]
 #[non_exhaustive]
 pub enum SceneError {
-    /// The scene file itself could not be read.
-    Io { path: PathBuf, source: io::Error },
+    /// The scene file itself could not be read: missing, not a regular file, or over
+    /// [`crate::limits::MAX_SCENE_BYTES`].
+    Io {
+        path: PathBuf,
+        source: Box<ReadError>,
+    },
     /// The text is not RON, or not the structure a scene file has (ron's own diagnosis: a
     /// missing comma, an unknown field, a string where a number belongs, ...).
     Syntax {
@@ -30,7 +35,8 @@ pub enum SceneError {
         col: usize,
         message: String,
     },
-    /// A mesh or texture file named in the scene at `file:line:col` could not be read.
+    /// A mesh or texture file named in the scene at `file:line:col` could not be read
+    /// (missing, not a regular file, or over its limit in [`crate::limits`]).
     Asset {
         file: String,
         line: usize,
@@ -39,7 +45,7 @@ pub enum SceneError {
         kind: &'static str,
         /// The path the scene gave, resolved against the scene's directory.
         path: PathBuf,
-        source: io::Error,
+        source: Box<ReadError>,
     },
     /// A Wavefront OBJ mesh is malformed. `line` is `None` for problems with the file as a
     /// whole (no faces); `col` is `None` when the whole line is at fault.
@@ -79,14 +85,20 @@ impl SceneError {
     /// The message without the position prefix.
     pub fn message(&self) -> String {
         match self {
-            SceneError::Io { source, .. } => format!("cannot read the scene file: {source}"),
+            SceneError::Io { source, .. } => {
+                format!("cannot read the scene file: {}", source.reason())
+            }
             SceneError::Syntax { message, .. }
             | SceneError::Invalid { message, .. }
             | SceneError::Obj { message, .. }
             | SceneError::Png { message, .. } => message.clone(),
             SceneError::Asset {
                 kind, path, source, ..
-            } => format!("cannot read {kind} file {}: {source}", path.display()),
+            } => format!(
+                "cannot read {kind} file {}: {}",
+                path.display(),
+                source.reason()
+            ),
         }
     }
 }
@@ -122,7 +134,7 @@ impl fmt::Display for SceneError {
 impl std::error::Error for SceneError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            SceneError::Io { source, .. } | SceneError::Asset { source, .. } => Some(source),
+            SceneError::Io { source, .. } | SceneError::Asset { source, .. } => Some(&**source),
             _ => None,
         }
     }

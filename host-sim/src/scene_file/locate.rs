@@ -70,24 +70,7 @@ pub(super) fn value_start(text: &str, target: usize) -> usize {
                     i += 1;
                 }
             }
-            b'/' if b.get(i + 1) == Some(&b'*') => {
-                // ron's block comments nest.
-                let mut depth = 0usize;
-                while i < n {
-                    if b[i] == b'/' && b.get(i + 1) == Some(&b'*') {
-                        depth += 1;
-                        i += 2;
-                    } else if b[i] == b'*' && b.get(i + 1) == Some(&b'/') {
-                        depth -= 1;
-                        i += 2;
-                        if depth == 0 {
-                            break;
-                        }
-                    } else {
-                        i += 1;
-                    }
-                }
-            }
+            b'/' if b.get(i + 1) == Some(&b'*') => i = skip_block_comment(b, i),
             b'"' => {
                 let start = i;
                 i = skip_string(b, i + 1);
@@ -102,17 +85,7 @@ pub(super) fn value_start(text: &str, target: usize) -> usize {
                     return start;
                 }
             }
-            b'\'' => {
-                // A char literal: 'x' or '\n' or '\u{..}'.
-                i += 1;
-                if b.get(i) == Some(&b'\\') {
-                    i += 2;
-                }
-                while i < n && b[i] != b'\'' && b[i] != b'\n' {
-                    i += 1;
-                }
-                i += 1;
-            }
+            b'\'' => i = skip_char(b, i),
             b'(' | b'[' | b'{' => {
                 stack.push(i);
                 i += 1;
@@ -135,6 +108,72 @@ pub(super) fn value_start(text: &str, target: usize) -> usize {
     target
 }
 
+/// The first number written in a way the scene format refuses but ron would read: hexadecimal,
+/// octal or binary (`0x10`, ron reads 16 as an integer and a 0 followed by junk as a float),
+/// or with `_` separators (`1_0`, read as 10). Returns its byte offset and the message.
+/// Strings, comments and identifiers are skipped.
+pub(super) fn non_decimal_number(text: &str) -> Option<(usize, String)> {
+    let b = text.as_bytes();
+    let n = b.len();
+    let mut i = 0;
+    while i < n {
+        let c = b[i];
+        match c {
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                while i < n && b[i] != b'\n' {
+                    i += 1;
+                }
+            }
+            b'/' if b.get(i + 1) == Some(&b'*') => i = skip_block_comment(b, i),
+            b'"' => i = skip_string(b, i + 1),
+            b'r' | b'b' if starts_raw_or_byte_string(b, i) => i = skip_raw_or_byte_string(b, i),
+            b'\'' => i = skip_char(b, i),
+            _ if c.is_ascii_alphabetic() || c == b'_' => {
+                while i < n && (b[i].is_ascii_alphanumeric() || b[i] == b'_') {
+                    i += 1;
+                }
+            }
+            _ if c.is_ascii_digit() => {
+                let start = i;
+                let radix = match b.get(i + 1) {
+                    Some(b'x' | b'X') if c == b'0' => Some("hexadecimal"),
+                    Some(b'b' | b'B') if c == b'0' => Some("binary"),
+                    Some(b'o' | b'O') if c == b'0' => Some("octal"),
+                    _ => None,
+                };
+                while i < n {
+                    let d = b[i];
+                    let exponent_sign = (d == b'+' || d == b'-')
+                        && radix.is_none()
+                        && matches!(b[i - 1], b'e' | b'E');
+                    if d.is_ascii_alphanumeric() || d == b'_' || d == b'.' || exponent_sign {
+                        i += 1;
+                    } else {
+                        break;
+                    }
+                }
+                let token = &text[start..i];
+                if let Some(radix) = radix {
+                    return Some((
+                        start,
+                        format!(
+                            "`{token}`: {radix} numbers are not accepted; write numbers in decimal"
+                        ),
+                    ));
+                }
+                if token.contains('_') {
+                    return Some((
+                        start,
+                        format!("`{token}`: `_` separators are not accepted in numbers"),
+                    ));
+                }
+            }
+            _ => i += 1,
+        }
+    }
+    None
+}
+
 /// The start of an identifier directly before the bracket at `open` (`Box(`, `Sphere (`), or
 /// `open` itself.
 fn name_before(text: &str, open: usize) -> usize {
@@ -150,6 +189,38 @@ fn name_before(text: &str, open: usize) -> usize {
         Some(s) if !trimmed[s..].starts_with(|c: char| c.is_ascii_digit()) => s,
         _ => open,
     }
+}
+
+/// Index just past the end of the block comment starting at `i` (ron's block comments nest).
+fn skip_block_comment(b: &[u8], mut i: usize) -> usize {
+    let mut depth = 0usize;
+    while i < b.len() {
+        if b[i] == b'/' && b.get(i + 1) == Some(&b'*') {
+            depth += 1;
+            i += 2;
+        } else if b[i] == b'*' && b.get(i + 1) == Some(&b'/') {
+            depth -= 1;
+            i += 2;
+            if depth == 0 {
+                break;
+            }
+        } else {
+            i += 1;
+        }
+    }
+    i
+}
+
+/// Index just past the char literal starting at `i`: 'x' or '\n' or '\u{..}'.
+fn skip_char(b: &[u8], mut i: usize) -> usize {
+    i += 1;
+    if b.get(i) == Some(&b'\\') {
+        i += 2;
+    }
+    while i < b.len() && b[i] != b'\'' && b[i] != b'\n' {
+        i += 1;
+    }
+    i + 1
 }
 
 /// Index just past the closing quote of a `"..."` string whose body starts at `i`.

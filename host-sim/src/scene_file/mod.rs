@@ -27,6 +27,8 @@ mod tests;
 use std::path::Path;
 
 use links_core::desc::SceneDesc;
+
+use crate::limits::{read_bounded, MAX_SCENE_BYTES};
 use ron::extensions::Extensions;
 
 pub use error::SceneError;
@@ -34,12 +36,15 @@ pub use error::SceneError;
 use format::{RefScope, SceneFile};
 
 /// Reads and validates the scene file at `path`; meshes and textures are found relative to the
-/// file's directory. Errors name `path` as given.
+/// file's directory. Errors name `path` as given. Files are read with
+/// [`crate::limits::read_bounded`]: a path that is not a regular file, or a scene, mesh or
+/// texture over its limit in [`crate::limits`], is refused before it is read.
 pub fn load_scene(path: &Path) -> Result<SceneDesc, SceneError> {
-    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes =
+        read_bounded(path, MAX_SCENE_BYTES, "scene file").map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source: Box::new(source),
+        })?;
     let file_name = path.display().to_string();
     let text = match std::str::from_utf8(&bytes) {
         Ok(t) => t,
@@ -63,6 +68,15 @@ pub fn load_scene(path: &Path) -> Result<SceneDesc, SceneError> {
 pub fn parse_scene(text: &str, file_name: &str, base_dir: &Path) -> Result<SceneDesc, SceneError> {
     // A byte-order mark is not RON; it is also not a column anybody can see.
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    if let Some((offset, message)) = locate::non_decimal_number(text) {
+        let (line, col) = locate::line_col(text, offset);
+        return Err(SceneError::Syntax {
+            file: file_name.to_string(),
+            line,
+            col,
+            message,
+        });
+    }
     let file = parse_file(text, file_name, None)?;
     resolve::Resolver::new(text, file_name, base_dir).scene(file)
 }

@@ -5,7 +5,7 @@
 use links_core::desc::{FaceVertex, Mesh, MeshGroup};
 
 use super::error::SceneError;
-use super::values::{degenerate_triangle, normalize};
+use super::values::{degenerate_triangle, f32_range_error, normalize};
 
 /// Statements that are accepted and ignored: smoothing groups, materials (the scene
 /// file assigns the material), and point/line/curve-parameter elements (nothing to render).
@@ -193,7 +193,8 @@ impl<'a> Iterator for Tokens<'a> {
     }
 }
 
-/// Reads `min..=max` finite numbers; errors carry a column.
+/// Reads `min..=max` finite numbers within the f32 range (the format the mesh compiles to, see
+/// [`f32_range_error`]); errors carry a column.
 fn numbers(
     tokens: &mut Tokens<'_>,
     min: usize,
@@ -212,6 +213,9 @@ fn numbers(
             .map_err(|_| (col, format!("expected a number, found `{tok}`")))?;
         if !v.is_finite() {
             return Err((col, format!("expected a finite number, found `{tok}`")));
+        }
+        if let Some(e) = f32_range_error(v, "a number", &format_args!("`{tok}`")) {
+            return Err((col, e));
         }
         out.push(v);
     }
@@ -391,6 +395,24 @@ mod tests {
         let (l, _, m) = obj_err("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n");
         assert_eq!(l, Some(4));
         assert!(m.contains("degenerate triangle"), "{m}");
+
+        // Beyond f32 (the vertex became infinite and the face "degenerate"), or a non-zero
+        // below the smallest normal f32.
+        let (l, c, m) = obj_err("v 0 0 0\nv 1e39 0 0\nv 0 1 0\nf 1 2 3\n");
+        assert_eq!((l, c), (Some(2), Some(3)), "{m}");
+        assert_eq!(
+            m,
+            "expected a number within the f32 range (about ±3.4e38), found `1e39`"
+        );
+        let (l, c, m) = obj_err("v 0 0 0\nvn 0 -1e-45 1\n");
+        assert_eq!((l, c), (Some(2), Some(6)), "{m}");
+        assert_eq!(
+            m,
+            "expected a number of at least about 1.2e-38 in magnitude (a smaller non-zero number \
+             underflows f32), found `-1e-45`"
+        );
+        let (l, c, _) = obj_err("v 0 0 0\nvt 0.5 3.5e38\n");
+        assert_eq!((l, c), (Some(2), Some(8)));
 
         let (l, c, m) = obj_err("v 0 NaN 0\n");
         assert_eq!((l, c), (Some(1), Some(5)));

@@ -1,8 +1,9 @@
 //! From the parsed file to [`desc::SceneDesc`]: names -> indices, meshes and textures loaded.
 
 use std::collections::HashMap;
-use std::fs;
 use std::path::{Path, PathBuf};
+
+use crate::limits::{read_bounded, ReadError, MAX_MESH_BYTES, MAX_TEXTURE_BYTES};
 
 use links_core::desc;
 
@@ -58,13 +59,7 @@ impl<'a> Resolver<'a> {
         }
     }
 
-    fn asset_error(
-        &self,
-        r: &Ref,
-        kind: &'static str,
-        path: PathBuf,
-        e: std::io::Error,
-    ) -> SceneError {
+    fn asset_error(&self, r: &Ref, kind: &'static str, path: PathBuf, e: ReadError) -> SceneError {
         let (line, col) = self.locate(r);
         SceneError::Asset {
             file: self.file.to_string(),
@@ -72,7 +67,7 @@ impl<'a> Resolver<'a> {
             col,
             kind,
             path,
-            source: e,
+            source: Box::new(e),
         }
     }
 
@@ -122,8 +117,8 @@ impl<'a> Resolver<'a> {
         let mut out = Vec::with_capacity(list.len());
         for (name, path) in list {
             let full = self.base_dir.join(&path.text);
-            let bytes =
-                fs::read(&full).map_err(|e| self.asset_error(&path, "texture", full.clone(), e))?;
+            let bytes = read_bounded(&full, MAX_TEXTURE_BYTES, "texture file")
+                .map_err(|e| self.asset_error(&path, "texture", full.clone(), e))?;
             let tex = texture::decode_png(&bytes, &full.display().to_string(), &name)?;
             self.texture_index.insert(name, out.len() as u32);
             out.push(tex);
@@ -233,7 +228,8 @@ impl<'a> Resolver<'a> {
         if let Some(m) = self.meshes.get(&full) {
             return Ok(m.clone());
         }
-        let bytes = fs::read(&full).map_err(|e| self.asset_error(r, "mesh", full.clone(), e))?;
+        let bytes = read_bounded(&full, MAX_MESH_BYTES, "mesh file")
+            .map_err(|e| self.asset_error(r, "mesh", full.clone(), e))?;
         let shown = full.display().to_string();
         let text = String::from_utf8(bytes).map_err(|e| {
             let valid = &e.as_bytes()[..e.utf8_error().valid_up_to()];

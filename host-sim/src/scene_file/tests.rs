@@ -436,6 +436,167 @@ fn zero_and_huge_radius() {
     );
 }
 
+/// Every number must survive the conversion to f32, the format the scene compiles to: not
+/// beyond f32::MAX (it would become infinite) and not a non-zero below f32::MIN_POSITIVE (it
+/// would become 0 or a subnormal).
+#[test]
+fn numbers_outside_the_f32_range_point_at_the_number() {
+    let big = |what: &str, v: &str| {
+        format!("expected {what} within the f32 range (about ±3.4e38), found {v}")
+    };
+    let tiny = |what: &str, v: &str| {
+        format!(
+            "expected {what} of at least about 1.2e-38 in magnitude (a smaller non-zero number \
+             underflows f32), found {v}"
+        )
+    };
+    let cases: &[(&str, &str, String)] = &[
+        (
+            "Sphere(center: (0, 0, 0), radius: 1e39),",
+            "1e39",
+            big("a radius", "1e39"),
+        ),
+        (
+            "Sphere(center: (0, 0, 0), radius: 1e-45),",
+            "1e-45",
+            tiny("a radius", "1e-45"),
+        ),
+        // Already refused, but by the DM, with no position.
+        (
+            "Sphere(center: (0, 0, 0), radius: 1e-300),",
+            "1e-300",
+            tiny("a radius", "1e-300"),
+        ),
+        (
+            "Sphere(center: (0, -1e39, 0), radius: 1),",
+            "-1e39",
+            big("a coordinate", "-1e39"),
+        ),
+        (
+            "Sphere(center: (0, 2e-40, 0), radius: 1),",
+            "2e-40",
+            tiny("a coordinate", "2e-40"),
+        ),
+        (
+            "Ellipsoid(center: (0, 0, 0), radii: (1, 3.5e38, 1)),",
+            "3.5e38",
+            big("a radius", "3.5e38"),
+        ),
+        (
+            "Triangle(v: ((0, 0, 0), (1e39, 0, 0), (0, 1, 0))),",
+            "1e39",
+            big("a coordinate", "1e39"),
+        ),
+        (
+            "Blobs(threshold: 1e-39, balls: [(center: (0, 0, 0), radius: 1)]),",
+            "1e-39",
+            tiny("a threshold", "1e-39"),
+        ),
+        (
+            "Cluster(transform: (scale: 1e39)),",
+            "1e39",
+            big("a scale factor", "1e39"),
+        ),
+        (
+            "Cluster(transform: (rotate: (0, 1e-40, 0))),",
+            "1e-40",
+            tiny("an angle", "1e-40"),
+        ),
+    ];
+    for (child, at, want) in cases {
+        let t = with_child(child);
+        let (l, c, m) = located(&t, true);
+        assert_eq!(&m, want, "{child}");
+        assert_eq!((l, c), pos_of(&t, at), "{child}: {m}");
+    }
+    let cam = "camera: (eye: (0, 0, -5), look_at: (0, 0, 0))";
+    let cases: &[(&str, &str, String)] = &[
+        (
+            "lights: [Point(pos: (1e39, 0, 0))]",
+            "1e39",
+            big("a coordinate", "1e39"),
+        ),
+        (
+            "lights: [Spot(pos: (0, 0, 0), dir: (0, 0, 1), outer: 30, inner: 1e-45)]",
+            "1e-45",
+            tiny("a cone angle in degrees", "1e-45"),
+        ),
+        (
+            "camera: (eye: (0, 0, -1e39), look_at: (0, 0, 0))",
+            "-1e39",
+            big("a coordinate", "-1e39"),
+        ),
+    ];
+    for (field, at, want) in cases {
+        let t = if field.starts_with("camera") {
+            format!("Scene({field})")
+        } else {
+            format!("Scene({cam}, {field})")
+        };
+        let (l, c, m) = located(&t, true);
+        assert_eq!(&m, want, "{field}");
+        assert_eq!((l, c), pos_of(&t, at), "{field}: {m}");
+    }
+    // The extremes themselves are fine.
+    let t = with_child("Sphere(center: (3.4028234e38, 1.1754944e-38, 0), radius: 1),");
+    parse_scene(&t, "t.ron", Path::new(".")).unwrap();
+}
+
+/// Hexadecimal, octal, binary and `_` are refused as documented, at the number, with what
+/// was wrong (ron read `0x10` as a 0 followed by junk, reported as "found 0", and `1_0` as
+/// 10).
+#[test]
+fn non_decimal_numbers_and_separators_are_refused_at_the_number() {
+    let cases: &[(&str, &str, &str)] = &[
+        (
+            "Sphere(center: (0, 0, 0), radius: 0x10),",
+            "0x10",
+            "`0x10`: hexadecimal numbers are not accepted; write numbers in decimal",
+        ),
+        (
+            "Sphere(center: (0, 0, 0), radius: 1_0),",
+            "1_0",
+            "`1_0`: `_` separators are not accepted in numbers",
+        ),
+        (
+            "Sphere(center: (0, -0b11, 0), radius: 1),",
+            "0b11",
+            "`0b11`: binary numbers are not accepted; write numbers in decimal",
+        ),
+        (
+            "Sphere(center: (0, 0, 0), radius: 0o7),",
+            "0o7",
+            "`0o7`: octal numbers are not accepted; write numbers in decimal",
+        ),
+        (
+            "Sphere(center: (0, 0, 1.5e1_0), radius: 1),",
+            "1.5e1_0",
+            "`1.5e1_0`: `_` separators are not accepted in numbers",
+        ),
+    ];
+    for (child, at, want) in cases {
+        let t = with_child(child);
+        let (l, c, m) = located(&t, false);
+        assert_eq!(&m, want, "{child}");
+        assert_eq!((l, c), pos_of(&t, at), "{child}");
+    }
+    // Integers too (ron reads `0x100` as 256).
+    let t = "Scene(camera: (eye: (0, 0, -5), look_at: (0, 0, 0)), image: (width: 0x100))";
+    let (l, c, m) = located(t, false);
+    assert_eq!(
+        m,
+        "`0x100`: hexadecimal numbers are not accepted; write numbers in decimal"
+    );
+    assert_eq!((l, c), pos_of(t, "0x100"));
+    // Digits and underscores inside names, strings and comments are not numbers.
+    let t = "Scene(camera: (eye: (0, 0, -5), look_at: (0, 0, 0)), max_depth: 3, // 0x10 1_0
+        /* 0b1 /* 2_2 */ */ materials: { \"m_1\": (), r\"0x_\": (), r#\"a\"0x1\"#: () },
+        transparency: NonRefractive, root: (name: \"c_0x1\", children: []))";
+    let s = parse_scene(t, "t.ron", Path::new(".")).unwrap();
+    assert_eq!(s.materials.len(), 3);
+    assert_eq!(s.root.name, "c_0x1");
+}
+
 #[test]
 fn zero_direction_points_at_the_vector() {
     let t = with_child("Sphere(center: (0, 0, 0), radius: 1, cut: (normal: (0, 0, 0))),");
@@ -524,6 +685,53 @@ fn missing_mesh_file_points_at_the_path() {
             .starts_with("t.ron:5:20: cannot read mesh file "),
         "{e}"
     );
+}
+
+#[test]
+fn oversized_and_special_asset_files_are_refused_at_the_path() {
+    let s = Scratch::new("big-assets");
+    // Sparse files one byte over the limits: nothing is written to disk or read.
+    let big = |rel: &str, len: u64| {
+        let f = std::fs::File::create(s.path().join(rel)).unwrap();
+        f.set_len(len).unwrap();
+    };
+    big("assets/big.obj", crate::limits::MAX_MESH_BYTES + 1);
+    big("assets/big.png", crate::limits::MAX_TEXTURE_BYTES + 1);
+
+    let t = with_child("Mesh(file: \"assets/big.obj\"),");
+    let e = error_in(&t, s.path());
+    assert!(matches!(e, SceneError::Asset { kind: "mesh", .. }), "{e:?}");
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "t.ron:5:20: cannot read mesh file {}: it is 67108865 bytes, over the 64 MiB \
+             (67108864 bytes) limit for a mesh file",
+            s.path().join("assets/big.obj").display()
+        )
+    );
+
+    let t = "Scene(camera: (eye: (0, 0, -5), look_at: (0, 0, 0)),\n  textures: {\"t\": \"assets/big.png\"})";
+    let e = error_in(t, s.path());
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "t.ron:2:19: cannot read texture file {}: it is 67108865 bytes, over the 64 MiB \
+             (67108864 bytes) limit for a texture file",
+            s.path().join("assets/big.png").display()
+        )
+    );
+
+    // A device never ends: refused unread (absolute paths are allowed).
+    #[cfg(unix)]
+    {
+        let t = with_child("Mesh(file: \"/dev/zero\"),");
+        let e = error_in(&t, s.path());
+        assert_eq!(
+            e.to_string(),
+            "t.ron:5:20: cannot read mesh file /dev/zero: it is a character device, not a \
+             regular file"
+        );
+    }
 }
 
 #[test]
@@ -734,6 +942,7 @@ fn more_range_checks() {
         ("materials: {\"m\": (shininess: -2)}", "expected a non-negative shininess exponent, found -2"),
         ("materials: {\"m\": (transmit: 3e38, diffuse: 1e39)}", "expected a colour coefficient between 0 and 1, found 3e38"),
         ("lights: [Point(pos: (0, 0, 0), color: 1e39)]", "expected a colour component within the f32 range (about ±3.4e38), found 1e39"),
+        ("lights: [Point(pos: (0, 0, 0), color: 1e-40)]", "expected a colour component of at least about 1.2e-38 in magnitude (a smaller non-zero number underflows f32), found 1e-40"),
         ("lights: [Spot(pos: (0, 0, 0), dir: (0, 0, 1), inner: 40, outer: 30)]", "a spot light's inner angle (40) must not exceed its outer angle (30)"),
         ("lights: [Spot(pos: (0, 0, 0), dir: (0, 0, 1), outer: 180)]", "expected a cone angle in degrees below 180, found 180"),
         ("root: (transform: (scale: (1, 0, 1)))", "expected a positive scale factor, found 0"),

@@ -3,10 +3,11 @@
 use std::io::Cursor;
 
 use links_core::desc::Texture;
-use png::{BitDepth, ColorType, Decoder, Transformations};
+use png::{BitDepth, ColorType, Decoder, Limits, Transformations};
 
 use super::error::SceneError;
 use super::values::MAX_IMAGE_SIDE;
+use crate::limits::MAX_TEXTURE_DECODE_BYTES;
 
 /// Decodes a PNG into RGB8, top row first. Palette and low-bit-depth images are expanded,
 /// 16-bit samples are cut to 8 bits, grey is replicated into R, G and B, alpha is dropped
@@ -16,7 +17,14 @@ pub(super) fn decode_png(bytes: &[u8], file: &str, name: &str) -> Result<Texture
         file: file.to_string(),
         message,
     };
-    let mut decoder = Decoder::new(Cursor::new(bytes));
+    // The decoder's own buffers are bounded; the output (at most MAX_IMAGE_SIDE² pixels, by
+    // the check below) is allocated here.
+    let mut decoder = Decoder::new_with_limits(
+        Cursor::new(bytes),
+        Limits {
+            bytes: MAX_TEXTURE_DECODE_BYTES,
+        },
+    );
     decoder.set_transformations(Transformations::EXPAND | Transformations::STRIP_16);
     let (width, height) = {
         let info = decoder
@@ -35,6 +43,7 @@ pub(super) fn decode_png(bytes: &[u8], file: &str, name: &str) -> Result<Texture
         .map_err(|e| err(format!("not a readable PNG: {e}")))?;
     let size = reader
         .output_buffer_size()
+        .filter(|&n| n <= MAX_TEXTURE_DECODE_BYTES)
         .ok_or_else(|| err("the image is too large to decode".to_string()))?;
     let mut buf = vec![0u8; size];
     let frame = reader

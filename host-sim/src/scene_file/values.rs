@@ -14,8 +14,8 @@ use std::fmt;
 use serde::de::{self, DeserializeSeed, Deserializer, SeqAccess, Visitor};
 use serde::Deserialize;
 
-/// Largest accepted image side and texture side, in pixels.
-pub(super) const MAX_IMAGE_SIDE: i64 = 4096;
+/// Largest accepted image side and texture side, in pixels ([`crate::limits::MAX_IMAGE_SIDE`]).
+pub(super) const MAX_IMAGE_SIDE: i64 = crate::limits::MAX_IMAGE_SIDE as i64;
 /// Largest accepted `max_depth`: the deepest recursion a SceneImage may ask for.
 pub(super) const MAX_DEPTH: i64 = links_core::image::MAX_DEPTH_LIMIT as i64;
 
@@ -77,18 +77,34 @@ pub(super) enum Check {
     NonZero,
 }
 
-/// Checks one number; `what` names it in the message ("radius", "x of scale").
-/// `f32` additionally requires the value to fit an `f32`.
-pub(super) fn check_number(v: f64, what: &str, check: Check, f32: bool) -> Result<f64, String> {
+/// Why a finite number does not survive the conversion to f32, the format every scene
+/// compiles to (a Q16.16 image is made from the f32 one): beyond `f32::MAX` it would become
+/// infinite, and a non-zero below `f32::MIN_POSITIVE` would become 0 or a subnormal (tiny
+/// lengths and directions are refused rather than silently zeroed). `what` is "a radius".
+pub(super) fn f32_range_error(v: f64, what: &str, shown: &dyn fmt::Display) -> Option<String> {
+    let m = v.abs();
+    if m > f64::from(f32::MAX) {
+        Some(format!(
+            "expected {what} within the f32 range (about ±3.4e38), found {shown}"
+        ))
+    } else if m != 0.0 && m < f64::from(f32::MIN_POSITIVE) {
+        Some(format!(
+            "expected {what} of at least about 1.2e-38 in magnitude (a smaller non-zero number \
+             underflows f32), found {shown}"
+        ))
+    } else {
+        None
+    }
+}
+
+/// Checks one number; `what` names it in the message ("radius", "x of scale"). Every number
+/// must be finite and within the f32 range ([`f32_range_error`]).
+pub(super) fn check_number(v: f64, what: &str, check: Check) -> Result<f64, String> {
     if !v.is_finite() {
         return Err(format!("expected a finite {what}, found {}", Num(v)));
     }
-    if f32 && !(v as f32).is_finite() {
-        return Err(format!(
-            "expected {} {what} within the f32 range (about ±3.4e38), found {}",
-            a(what),
-            Num(v)
-        ));
+    if let Some(e) = f32_range_error(v, &format!("{} {what}", a(what)), &Num(v)) {
+        return Err(e);
     }
     let ok = match check {
         Check::Finite => true,
@@ -132,7 +148,6 @@ pub(super) fn check_number(v: f64, what: &str, check: Check, f32: bool) -> Resul
 struct NumberSeed<'a> {
     what: &'a str,
     check: Check,
-    f32: bool,
 }
 
 impl<'de> DeserializeSeed<'de> for NumberSeed<'_> {
@@ -140,17 +155,12 @@ impl<'de> DeserializeSeed<'de> for NumberSeed<'_> {
 
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<f64, D::Error> {
         let v = f64::deserialize(d)?;
-        check_number(v, self.what, self.check, self.f32).map_err(de::Error::custom)
+        check_number(v, self.what, self.check).map_err(de::Error::custom)
     }
 }
 
-fn number<'de, D: Deserializer<'de>>(
-    d: D,
-    what: &str,
-    check: Check,
-    f32: bool,
-) -> Result<f64, D::Error> {
-    NumberSeed { what, check, f32 }.deserialize(d)
+fn number<'de, D: Deserializer<'de>>(d: D, what: &str, check: Check) -> Result<f64, D::Error> {
+    NumberSeed { what, check }.deserialize(d)
 }
 
 /// Reads `N` numbers written `(a, b, c)` or `[a, b, c]`; with `splat`, a single number `a` stands
@@ -158,7 +168,6 @@ fn number<'de, D: Deserializer<'de>>(
 struct VectorVisitor<'a, const N: usize> {
     what: &'a str,
     check: Check,
-    f32: bool,
     splat: bool,
 }
 
@@ -173,7 +182,7 @@ impl<const N: usize> VectorVisitor<'_, N> {
                 example = example(N)
             )));
         }
-        let v = check_number(v, self.what, self.check, self.f32).map_err(de::Error::custom)?;
+        let v = check_number(v, self.what, self.check).map_err(de::Error::custom)?;
         Ok([v; N])
     }
 }
@@ -227,7 +236,6 @@ impl<'de, const N: usize> Visitor<'de> for VectorVisitor<'_, N> {
             let seed = NumberSeed {
                 what: self.what,
                 check: self.check,
-                f32: self.f32,
             };
             *slot = seq
                 .next_element_seed(seed)?
@@ -248,15 +256,9 @@ fn vector<'de, D: Deserializer<'de>, const N: usize>(
     d: D,
     what: &str,
     check: Check,
-    f32: bool,
     splat: bool,
 ) -> Result<[f64; N], D::Error> {
-    d.deserialize_any(VectorVisitor::<N> {
-        what,
-        check,
-        f32,
-        splat,
-    })
+    d.deserialize_any(VectorVisitor::<N> { what, check, splat })
 }
 
 fn to_f32<const N: usize>(v: [f64; N]) -> [f32; N] {
@@ -312,17 +314,17 @@ pub(super) fn degenerate_triangle(v: &[[f64; 3]; 3]) -> bool {
 
 /// A point in scene units: `(x, y, z)`.
 pub(super) fn point<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
-    vector(d, "coordinate", Check::Finite, false, false)
+    vector(d, "coordinate", Check::Finite, false)
 }
 
 /// Rotation angles in degrees: `(x, y, z)`.
 pub(super) fn angles<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
-    vector(d, "angle", Check::Finite, false, false)
+    vector(d, "angle", Check::Finite, false)
 }
 
 /// A direction: any non-zero vector, returned normalised.
 pub(super) fn direction<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
-    let v = vector(d, "direction component", Check::Finite, false, false)?;
+    let v = vector(d, "direction component", Check::Finite, false)?;
     normalize(v).ok_or_else(|| {
         de::Error::custom(format!(
             "expected a direction (a non-zero vector), found {}",
@@ -333,28 +335,28 @@ pub(super) fn direction<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::
 
 /// Per-axis scale factors: a number (uniform) or `(x, y, z)`, each > 0.
 pub(super) fn scale3<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
-    vector(d, "scale factor", Check::Positive, false, true)
+    vector(d, "scale factor", Check::Positive, true)
 }
 
 /// Ellipsoid radii: a number (sphere) or `(x, y, z)`, each > 0.
 pub(super) fn radii<'de, D: Deserializer<'de>>(d: D) -> Result<[f64; 3], D::Error> {
-    vector(d, "radius", Check::Positive, false, true)
+    vector(d, "radius", Check::Positive, true)
 }
 
 pub(super) fn radius<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    number(d, "radius", Check::Positive, false)
+    number(d, "radius", Check::Positive)
 }
 
 pub(super) fn threshold<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    number(d, "threshold", Check::Positive, false)
+    number(d, "threshold", Check::Positive)
 }
 
 pub(super) fn strength<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    number(d, "strength", Check::NonZero, false)
+    number(d, "strength", Check::NonZero)
 }
 
 pub(super) fn offset<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    number(d, "offset", Check::Finite, false)
+    number(d, "offset", Check::Finite)
 }
 
 pub(super) fn fov<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
@@ -362,13 +364,12 @@ pub(super) fn fov<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
         d,
         "vertical field of view in degrees",
         Check::Between(0.0, 180.0),
-        false,
     )
 }
 
 /// A spot light's cone half-angle in degrees, [0, 180).
 pub(super) fn cone_angle<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
-    let v = number(d, "cone angle in degrees", Check::NonNegative, false)?;
+    let v = number(d, "cone angle in degrees", Check::NonNegative)?;
     if v >= 180.0 {
         return Err(de::Error::custom(format!(
             "expected a cone angle in degrees below 180, found {}",
@@ -380,34 +381,34 @@ pub(super) fn cone_angle<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Erro
 
 /// A colour or light intensity: a number (grey) or `(r, g, b)`, each >= 0, no upper bound.
 pub(super) fn color<'de, D: Deserializer<'de>>(d: D) -> Result<[f32; 3], D::Error> {
-    vector(d, "colour component", Check::NonNegative, true, true).map(to_f32)
+    vector(d, "colour component", Check::NonNegative, true).map(to_f32)
 }
 
 /// A reflectance per channel: a number (grey) or `(r, g, b)`, each in [0, 1].
 pub(super) fn rgb01<'de, D: Deserializer<'de>>(d: D) -> Result<[f32; 3], D::Error> {
-    vector(d, "colour coefficient", Check::Unit, true, true).map(to_f32)
+    vector(d, "colour coefficient", Check::Unit, true).map(to_f32)
 }
 
 /// A coefficient in [0, 1].
 pub(super) fn coef<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
-    number(d, "coefficient", Check::Unit, true).map(|v| v as f32)
+    number(d, "coefficient", Check::Unit).map(|v| v as f32)
 }
 
 pub(super) fn shininess<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
-    number(d, "shininess exponent", Check::NonNegative, true).map(|v| v as f32)
+    number(d, "shininess exponent", Check::NonNegative).map(|v| v as f32)
 }
 
 pub(super) fn exponent<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
-    number(d, "exponent", Check::NonNegative, true).map(|v| v as f32)
+    number(d, "exponent", Check::NonNegative).map(|v| v as f32)
 }
 
 pub(super) fn ior<'de, D: Deserializer<'de>>(d: D) -> Result<f32, D::Error> {
-    number(d, "index of refraction", Check::AtLeast(1.0), true).map(|v| v as f32)
+    number(d, "index of refraction", Check::AtLeast(1.0)).map(|v| v as f32)
 }
 
 /// Texture repeats per unit of (u, v): a number or `(u, v)`, each > 0.
 pub(super) fn map_scale<'de, D: Deserializer<'de>>(d: D) -> Result<[f32; 2], D::Error> {
-    vector(d, "texture scale", Check::Positive, true, true).map(to_f32)
+    vector(d, "texture scale", Check::Positive, true).map(to_f32)
 }
 
 fn integer<'de, D: Deserializer<'de>>(d: D, what: &str, lo: i64, hi: i64) -> Result<u32, D::Error> {
@@ -460,7 +461,7 @@ impl<'de, const N: usize> DeserializeSeed<'de> for VectorSeed<'_, N> {
     type Value = [f64; N];
 
     fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<[f64; N], D::Error> {
-        vector(d, self.what, Check::Finite, false, false)
+        vector(d, self.what, Check::Finite, false)
     }
 }
 
