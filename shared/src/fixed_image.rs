@@ -20,6 +20,7 @@ use crate::fixed::FRAC_BITS;
 use crate::image::{ImageError, SceneView, Section, HEADER_SIZE};
 use crate::num::Storage;
 use core::fmt;
+use core::ops::Range;
 
 /// The largest view-space coordinate after scaling.
 pub const TARGET_EXTENT: f64 = 32.0;
@@ -92,17 +93,61 @@ fn layout(s: Section) -> Option<&'static [Word]> {
     })
 }
 
-/// Every record that has a word layout: (section, record, byte offset, its words).
+/// Every record that has a word layout: (section, record, its byte range in the image,
+/// its words). The range comes from the validated view, checked (`None` never happens for
+/// a view of the same bytes; callers report it as an error rather than index blindly).
 fn records<'a>(
-    image: &'a [u8],
     view: &'a SceneView<'_>,
-) -> impl Iterator<Item = (Section, u32, usize, &'static [Word])> + 'a {
+) -> impl Iterator<Item = (Section, u32, Option<Range<usize>>, &'static [Word])> + 'a {
     Section::ALL.into_iter().flat_map(move |s| {
         let words = layout(s);
         (0..if words.is_some() { view.count(s) } else { 0 })
-            .map(move |r| (s, r, record_offset(image, s, r), words.unwrap_or(&[])))
+            .map(move |r| (s, r, view.record_range(s, r), words.unwrap_or(&[])))
     })
 }
+
+/// The words of record `r` of section `s` in `bytes`, 4 bytes each, or the error naming
+/// the section when the range is not in `bytes`.
+fn record_words(
+    bytes: &[u8],
+    s: Section,
+    range: Option<Range<usize>>,
+) -> Result<core::slice::ChunksExact<'_, u8>, FixedError> {
+    range
+        .and_then(|r| bytes.get(r))
+        .map(|rec| rec.chunks_exact(4))
+        .ok_or(FixedError::Image(ImageError::SectionOutOfBounds {
+            section: s as u8,
+        }))
+}
+
+/// As [`record_words`], to rewrite them.
+fn record_words_mut(
+    bytes: &mut [u8],
+    s: Section,
+    range: Option<Range<usize>>,
+) -> Result<core::slice::ChunksExactMut<'_, u8>, FixedError> {
+    range
+        .and_then(|r| bytes.get_mut(r))
+        .map(|rec| rec.chunks_exact_mut(4))
+        .ok_or(FixedError::Image(ImageError::SectionOutOfBounds {
+            section: s as u8,
+        }))
+}
+
+/// A 4-byte chunk as the f32 it stores.
+fn f32_of(w: &[u8]) -> f64 {
+    w.first_chunk::<4>()
+        .map_or(0.0, |b| f32::from_le_bytes(*b) as f64)
+}
+
+/// A 4-byte chunk as a u32.
+fn u32_of(w: &[u8]) -> u32 {
+    w.first_chunk::<4>().map_or(0, |b| u32::from_le_bytes(*b))
+}
+
+/// Words in the longest record layout (an ellipsoid's 27), rounded up.
+const MAX_WORDS: usize = 32;
 
 /// What a word is multiplied by when the scene's lengths are scaled by `scale` and the
 /// camera's directions by `dir_scale` (`None` for an integer).
@@ -192,10 +237,6 @@ pub struct FixedImage {
     pub min_detail_steps: f64,
 }
 
-fn word_f32(b: &[u8], at: usize) -> f64 {
-    f32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]) as f64
-}
-
 /// The power of two that brings `extent` closest to [`TARGET_EXTENT`] from below.
 pub fn scale_exponent_for(extent: f64) -> Option<i8> {
     if !(extent.is_finite() && extent > 0.0) {
@@ -215,10 +256,10 @@ pub fn to_fixed(image: &[u8]) -> Result<FixedImage, FixedError> {
     }
     // Extent: every length-valued word (coordinates, box corners, axes, radii).
     let mut extent: f64 = 0.0;
-    for (_, _, base, words) in records(image, &view) {
-        for (w, kind) in words.iter().enumerate() {
+    for (s, _, range, words) in records(&view) {
+        for (kind, word) in words.iter().zip(record_words(image, s, range)?) {
             if matches!(kind, L | Lo | Hi) {
-                let v = word_f32(image, base + 4 * w);
+                let v = f32_of(word);
                 if !v.is_finite() {
                     return Err(FixedError::NoExtent);
                 }
@@ -238,10 +279,13 @@ pub fn to_fixed_with_scale(image: &[u8], k: i8) -> Result<FixedImage, FixedError
 
 /// 2^j for the frame's direction components: with x0 and dx stored as plain Q16.16, a
 /// pixel step of 0.002 would be rounded by 0.4% and the last column's ray bent by a pixel.
-fn direction_scale(image: &[u8], view: &SceneView<'_>) -> f64 {
+fn direction_scale(image: &[u8], view: &SceneView<'_>) -> Result<f64, FixedError> {
     let f = view.frame::<f32>();
-    let base = record_offset(image, Section::Frame, 0);
-    let w = |i: usize| word_f32(image, base + 4 * i);
+    let frame: Vec<f64> =
+        record_words(image, Section::Frame, view.record_range(Section::Frame, 0))?
+            .map(f32_of)
+            .collect();
+    let w = |i: usize| frame.get(i).copied().unwrap_or(0.0);
     let (x0, y0, dx, dy, dz) = (w(2), w(3), w(4), w(5), w(14));
     let m = [
         x0,
@@ -252,11 +296,11 @@ fn direction_scale(image: &[u8], view: &SceneView<'_>) -> f64 {
     ]
     .iter()
     .fold(0f64, |m, v| m.max(v.abs()));
-    if m.is_finite() && m > 0.0 {
+    Ok(if m.is_finite() && m > 0.0 {
         2f64.powi((TARGET_DIRECTION / m).log2().floor().clamp(-60.0, 60.0) as i32)
     } else {
         1.0
-    }
+    })
 }
 
 /// The same f32 image with every length multiplied by 2^k (exact in binary floating point).
@@ -266,13 +310,12 @@ pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
     let view = SceneView::new(image)?;
     let scale = 2f64.powi(k as i32);
     let mut out = image.to_vec();
-    for (s, _, base, words) in records(image, &view) {
-        let falloff = is_falloff_light(image, s, base);
-        for (w, kind) in words.iter().enumerate() {
+    for (s, _, range, words) in records(&view) {
+        let falloff = is_falloff_light(image, s, range.clone())?;
+        for (kind, word) in words.iter().zip(record_words_mut(&mut out, s, range)?) {
             if let Some(f) = factor(*kind, falloff, scale, 1.0) {
-                let at = base + 4 * w;
-                let x = word_f32(image, at) * f;
-                out[at..at + 4].copy_from_slice(&(x as f32).to_le_bytes());
+                let x = f32_of(word) * f;
+                word.copy_from_slice(&(x as f32).to_le_bytes());
             }
         }
     }
@@ -280,18 +323,18 @@ pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
 }
 
 /// A point light whose colour falls off with distance squared.
-fn is_falloff_light(image: &[u8], s: Section, base: usize) -> bool {
-    let u = |w: usize| {
-        let at = base + 4 * w;
-        u32::from_le_bytes([image[at], image[at + 1], image[at + 2], image[at + 3]])
-    };
-    s == Section::Lights && u(0) == 1 && u(13) != 0
-}
-
-fn record_offset(image: &[u8], s: Section, r: u32) -> usize {
-    let t = 16 + 8 * s as usize;
-    let off = u32::from_le_bytes([image[t], image[t + 1], image[t + 2], image[t + 3]]);
-    off as usize + r as usize * s.record_size()
+fn is_falloff_light(
+    image: &[u8],
+    s: Section,
+    range: Option<Range<usize>>,
+) -> Result<bool, FixedError> {
+    if s != Section::Lights {
+        return Ok(false);
+    }
+    let mut words = record_words(image, s, range)?;
+    let kind = words.next().map_or(0, u32_of);
+    let falloff = words.nth(12).map_or(0, u32_of);
+    Ok(kind == 1 && falloff != 0)
 }
 
 fn convert(
@@ -301,20 +344,26 @@ fn convert(
     extent: f64,
 ) -> Result<FixedImage, FixedError> {
     let scale = 2f64.powi(k as i32);
-    let dir_scale = direction_scale(image, view);
+    let dir_scale = direction_scale(image, view)?;
     let mut out = image.to_vec();
-    out[6] = Storage::Q16_16 as u8;
-    out[7] = k as u8;
+    // The header's format and scale bytes (a view exists, so the header does too).
+    if let Some(h) = out.get_mut(6..8) {
+        h.copy_from_slice(&[Storage::Q16_16 as u8, k as u8]);
+    }
     let one = (1u64 << FRAC_BITS) as f64;
     let mut min_detail = f64::INFINITY;
-    for (s, r, base, words) in records(image, view) {
-        let falloff_light = is_falloff_light(image, s, base);
-        for (w, kind) in words.iter().enumerate() {
+    for (s, r, range, words) in records(view) {
+        let falloff_light = is_falloff_light(image, s, range.clone())?;
+        // The f32 words of the record, read before they are rewritten.
+        let mut f32s = [0f64; MAX_WORDS];
+        for (v, word) in f32s.iter_mut().zip(record_words(image, s, range.clone())?) {
+            *v = f32_of(word);
+        }
+        let rec = record_words_mut(&mut out, s, range)?;
+        for (w, ((kind, word), &v)) in words.iter().zip(rec).zip(f32s.iter()).enumerate() {
             let Some(f) = factor(*kind, falloff_light, scale, dir_scale) else {
                 continue;
             };
-            let at = base + 4 * w;
-            let v = word_f32(image, at);
             let x = v * f;
             let steps = x * one;
             let raw = match kind {
@@ -330,7 +379,7 @@ fn convert(
                     value: if x.is_finite() { x } else { v },
                 });
             }
-            out[at..at + 4].copy_from_slice(&(raw as i32).to_le_bytes());
+            word.copy_from_slice(&(raw as i32).to_le_bytes());
         }
         // Detail: the smallest axis of an ellipsoid or box (1 / largest row of its
         // view-to-unit matrix) and a ball's radius, in steps after scaling.
@@ -339,13 +388,13 @@ fn convert(
                 let mut worst: f64 = 0.0;
                 for row in 0..3 {
                     let n2: f64 = (0..3)
-                        .map(|c| word_f32(image, base + 4 * (3 + 3 * row + c)).powi(2))
+                        .map(|c| f32s.get(3 + 3 * row + c).map_or(0.0, |v| v.powi(2)))
                         .sum();
                     worst = worst.max(n2.sqrt());
                 }
                 Some(scale / worst * one)
             }
-            Section::Balls => Some(word_f32(image, base + 12).abs() * scale * one),
+            Section::Balls => Some(f32s.get(3).map_or(0.0, |v| v.abs()) * scale * one),
             _ => None,
         };
         if let Some(steps) = detail {
@@ -390,6 +439,7 @@ mod tests {
         for s in Section::ALL {
             if let Some(words) = layout(s) {
                 assert_eq!(words.len() * 4, s.record_size(), "{}", s.name());
+                assert!(words.len() <= MAX_WORDS, "{}", s.name());
             }
         }
     }
