@@ -568,7 +568,10 @@ mod tests {
         assert_eq!(Fx::dot3([m, m, -m], big).raw(), Fx::INFINITY.raw());
         // In range, the one rounding of the exact sum as before.
         let h = Fx::from_f64(100.0);
-        assert_eq!(Fx::dot3([h, h, -h], [h, h, h]).raw(), Fx::from_f64(10000.0).raw());
+        assert_eq!(
+            Fx::dot3([h, h, -h], [h, h, h]).raw(),
+            Fx::from_f64(10000.0).raw()
+        );
         let e = Fx::from_raw(3);
         assert_eq!(Fx::dot3([e, e, e], [Fx::HALF; 3]).raw(), 5);
     }
