@@ -17,7 +17,7 @@
 //! the format can't resolve), is a [`FixedError`] naming the record.
 
 use crate::fixed::FRAC_BITS;
-use crate::image::{ImageError, SceneView, Section, HEADER_SIZE};
+use crate::image::{ImageError, SceneView, Section};
 use crate::num::Storage;
 use core::fmt;
 use core::ops::Range;
@@ -184,6 +184,9 @@ pub enum FixedError {
         /// The feature's size in steps of the format after scaling.
         steps: f64,
     },
+    /// The rewritten image does not validate (possible only for an input whose sections
+    /// share bytes, so that a word has two meanings and is rewritten as both).
+    Rewritten(ImageError),
 }
 
 impl fmt::Display for FixedError {
@@ -212,6 +215,10 @@ impl fmt::Display for FixedError {
                  scene's extent allows (at least {MIN_DETAIL_STEPS} needed): the scene spans \
                  more orders of magnitude than the fixed-point format holds",
                 section.name()
+            ),
+            FixedError::Rewritten(e) => write!(
+                f,
+                "the rewritten image is not valid ({e}): the input's sections share bytes"
             ),
         }
     }
@@ -319,6 +326,7 @@ pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
             }
         }
     }
+    SceneView::new(&out).map_err(FixedError::Rewritten)?;
     Ok(out)
 }
 
@@ -408,7 +416,8 @@ fn convert(
             }
         }
     }
-    debug_assert!(out.len() >= HEADER_SIZE);
+    // Only a valid image leaves the DM.
+    SceneView::new(&out).map_err(FixedError::Rewritten)?;
     Ok(FixedImage {
         bytes: out,
         scale_exponent: k,
@@ -432,6 +441,63 @@ mod tests {
         assert_eq!(scale_exponent_for(0.001), Some(14));
         assert_eq!(scale_exponent_for(0.0), None);
         assert_eq!(scale_exponent_for(f64::INFINITY), None);
+    }
+
+    /// A valid f32 image whose light record shares its bytes with the frame record (the
+    /// validator checks each section, not that they are disjoint): the light's colour words
+    /// are the frame's height, x0, y0.
+    fn light_over_frame() -> Vec<u8> {
+        use crate::image::{writer::ImageWriter, NONE};
+        let mut w = ImageWriter::new();
+        // Width 2 reads as a spot light's kind.
+        w.push(Section::Frame)
+            .1
+            .u(2)
+            .u(3)
+            .fs(&[-1.0, 1.0, 0.5, 0.5])
+            .fs(&[0.0; 6])
+            .u(2)
+            .u(0)
+            .fs(&[1.0]);
+        w.push(Section::Materials)
+            .1
+            .fs(&[0.5; 12])
+            .u(NONE)
+            .u(0)
+            .fs(&[1.0, 1.0]);
+        w.push(Section::Triangles)
+            .1
+            .fs(&[-1.0, -1.0, 2.0, 1.0, -1.0, 2.0, 0.0, 1.0, 2.0])
+            .u(0)
+            .u(NONE)
+            .u(NONE);
+        w.push(Section::Nodes)
+            .1
+            .fs(&[-1.0, -1.0, 1.0, 1.0, 1.0, 3.0])
+            .u(1)
+            .u(0);
+        let mut img = w.finish();
+        let frame_at = img[16..20].to_vec();
+        let lights = 16 + 8 * Section::Lights as usize;
+        img[lights..lights + 4].copy_from_slice(&frame_at);
+        img[lights + 4..lights + 8].copy_from_slice(&1u32.to_le_bytes());
+        img
+    }
+
+    #[test]
+    fn a_rewrite_that_would_not_validate_is_an_error() {
+        // Found by the image fuzzer: converting the light's colour turned the frame's
+        // height (3, a subnormal as an f32) into 0, and to_fixed returned that image.
+        let img = light_over_frame();
+        let view = SceneView::new(&img).expect("the input is valid");
+        assert_eq!(view.light_count(), 1);
+        assert_eq!(
+            to_fixed(&img).err(),
+            Some(FixedError::Rewritten(ImageError::BadValue {
+                section: Section::Frame as u8,
+                record: 0
+            }))
+        );
     }
 
     #[test]
