@@ -1667,10 +1667,29 @@ fn wire() {
             let data = rng.bytes(3 * MAX_RUN);
             let seq = small_or_edge(rng, 8) as u16;
             let ack = small_or_edge(rng, 8) as u16;
-            let f = if rng.chance(50) {
-                wire_frame(seq, ack, &some_down(rng, &data, w, h))
-            } else {
-                wire_frame(seq, ack, &some_up(rng, &data, w, h))
+            let f = match rng.below(5) {
+                0 | 1 => wire_frame(seq, ack, &some_down(rng, &data, w, h)),
+                2 | 3 => wire_frame(seq, ack, &some_up(rng, &data, w, h)),
+                _ => {
+                    // A run the node's own coding produced (random bytes rarely are one).
+                    let len = rng.range(1, MAX_RUN as u64) as usize;
+                    let grey = rng.range(2, 200) as u8;
+                    let px: Vec<u8> = (0..3 * len)
+                        .map(|k| if rng.chance(80) { grey } else { k as u8 })
+                        .collect();
+                    let mut coded = vec![0u8; 4 * len];
+                    let n = wire::rle_encode(&px, &mut coded).expect("room for every pixel");
+                    let up = Up::PixelsRle {
+                        job: small_or_edge(rng, 64),
+                        frame: 0,
+                        y: small_or_edge(rng, h as u64) as u16,
+                        x: small_or_edge(rng, w as u64) as u16,
+                        len: len as u16,
+                        data: &coded[..n],
+                        done: rng.chance(30),
+                    };
+                    wire_frame(seq, ack, &up)
+                }
             };
             input.extend(f);
         } else {
