@@ -612,7 +612,9 @@ impl Dm<'_> {
             .fs(&[1.0]);
 
         for (i, t) in d.textures.iter().enumerate() {
-            if t.width == 0 || t.height == 0 || t.rgb.len() != (t.width * t.height * 3) as usize {
+            // The byte count in u32, checked: the image's texel section counts bytes in u32.
+            let bytes = t.width.checked_mul(t.height).and_then(|n| n.checked_mul(3));
+            if t.width == 0 || t.height == 0 || bytes.map(|n| n as usize) != Some(t.rgb.len()) {
                 return Err(DmError::BadIndex {
                     what: format!("texture {i} ('{}') has a bad size", t.name),
                 });
@@ -1510,6 +1512,34 @@ mod tests {
             }
             assert!(!pts.is_empty());
             contains_all(&pts, leaf);
+        }
+    }
+
+    #[test]
+    fn texture_sizes_whose_byte_count_overflows_are_rejected() {
+        let quad = || {
+            Node::Shape(Shape::Mesh {
+                mesh: quad_mesh([0.0, 0.0, 1.0]),
+                material: 0,
+                smooth: false,
+            })
+        };
+        // 65536 x 65536 x 3 wraps a u32 to 0 bytes: no texels "needed".
+        for (width, height) in [(65_536, 65_536), (u32::MAX, 2), (3, 4)] {
+            let mut s = scene(vec![quad()]);
+            s.textures = vec![Texture {
+                name: "t".into(),
+                width,
+                height,
+                rgb: vec![],
+            }];
+            assert_eq!(
+                compile(&s, &CompileOptions::default()).err(),
+                Some(DmError::BadIndex {
+                    what: "texture 0 ('t') has a bad size".into()
+                }),
+                "{width} x {height}"
+            );
         }
     }
 

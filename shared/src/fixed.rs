@@ -97,6 +97,18 @@ impl Fx {
         }
     }
 
+    /// The sum of three products that overflowed an i64 somewhere: it is at least 2^62 in
+    /// magnitude (one partial sum passed 2^63 and each product is below 2^62), far beyond
+    /// the format, so the infinity of its sign.
+    #[cold]
+    fn dot3_overflow(p0: i64, p1: i64, p2: i64) -> Fx {
+        if p0 as i128 + p1 as i128 + p2 as i128 > 0 {
+            Fx::INFINITY
+        } else {
+            Fx::NEG_INFINITY
+        }
+    }
+
     #[cold]
     fn mul_special(self, o: Fx) -> Fx {
         if self.is_nan() || o.is_nan() || self.0 == 0 || o.0 == 0 {
@@ -370,11 +382,17 @@ impl Real for Fx {
         {
             return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         }
-        // Three exact 62-bit products fit an i64 sum; one rounding at the end.
-        let p = a[0].0 as i64 * b[0].0 as i64
-            + a[1].0 as i64 * b[1].0 as i64
-            + a[2].0 as i64 * b[2].0 as i64;
-        Fx::from_wide((p + (1 << (FRAC_BITS - 1))) >> FRAC_BITS)
+        // Three exact products below 2^62 each; their sum fits an i64 unless it is far
+        // beyond the format (then an infinity); one rounding at the end.
+        let (p0, p1, p2) = (
+            a[0].0 as i64 * b[0].0 as i64,
+            a[1].0 as i64 * b[1].0 as i64,
+            a[2].0 as i64 * b[2].0 as i64,
+        );
+        match p0.checked_add(p1).and_then(|s| s.checked_add(p2)) {
+            Some(p) => Fx::from_wide(p.saturating_add(1 << (FRAC_BITS - 1)) >> FRAC_BITS),
+            None => Fx::dot3_overflow(p0, p1, p2),
+        }
     }
 
     #[inline]
@@ -536,6 +554,27 @@ impl Real for Fx {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dot3_of_large_vectors_saturates_instead_of_wrapping() {
+        // Found by the image fuzzer (an ellipsoid with coordinates near the format's limit):
+        // three products of nearly 2^62 each overflowed the i64 sum.
+        let m = Fx::MAX;
+        let big = [m, m, m];
+        assert_eq!(Fx::dot3(big, big).raw(), Fx::INFINITY.raw());
+        assert_eq!(Fx::dot3(big, [-m, -m, -m]).raw(), Fx::NEG_INFINITY.raw());
+        // The first two products overflow, the third brings the sum back to 2^62: still
+        // far beyond the range.
+        assert_eq!(Fx::dot3([m, m, -m], big).raw(), Fx::INFINITY.raw());
+        // In range, the one rounding of the exact sum as before.
+        let h = Fx::from_f64(100.0);
+        assert_eq!(
+            Fx::dot3([h, h, -h], [h, h, h]).raw(),
+            Fx::from_f64(10000.0).raw()
+        );
+        let e = Fx::from_raw(3);
+        assert_eq!(Fx::dot3([e, e, e], [Fx::HALF; 3]).raw(), 5);
+    }
 
     fn fx(v: f64) -> Fx {
         Fx::from_f64(v)

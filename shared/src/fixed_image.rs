@@ -17,9 +17,10 @@
 //! the format can't resolve), is a [`FixedError`] naming the record.
 
 use crate::fixed::FRAC_BITS;
-use crate::image::{ImageError, SceneView, Section, HEADER_SIZE};
+use crate::image::{ImageError, SceneView, Section};
 use crate::num::Storage;
 use core::fmt;
+use core::ops::Range;
 
 /// The largest view-space coordinate after scaling.
 pub const TARGET_EXTENT: f64 = 32.0;
@@ -92,17 +93,61 @@ fn layout(s: Section) -> Option<&'static [Word]> {
     })
 }
 
-/// Every record that has a word layout: (section, record, byte offset, its words).
+/// Every record that has a word layout: (section, record, its byte range in the image,
+/// its words). The range comes from the validated view, checked (`None` never happens for
+/// a view of the same bytes; callers report it as an error rather than index blindly).
 fn records<'a>(
-    image: &'a [u8],
     view: &'a SceneView<'_>,
-) -> impl Iterator<Item = (Section, u32, usize, &'static [Word])> + 'a {
+) -> impl Iterator<Item = (Section, u32, Option<Range<usize>>, &'static [Word])> + 'a {
     Section::ALL.into_iter().flat_map(move |s| {
         let words = layout(s);
         (0..if words.is_some() { view.count(s) } else { 0 })
-            .map(move |r| (s, r, record_offset(image, s, r), words.unwrap_or(&[])))
+            .map(move |r| (s, r, view.record_range(s, r), words.unwrap_or(&[])))
     })
 }
+
+/// The words of record `r` of section `s` in `bytes`, 4 bytes each, or the error naming
+/// the section when the range is not in `bytes`.
+fn record_words(
+    bytes: &[u8],
+    s: Section,
+    range: Option<Range<usize>>,
+) -> Result<core::slice::ChunksExact<'_, u8>, FixedError> {
+    range
+        .and_then(|r| bytes.get(r))
+        .map(|rec| rec.chunks_exact(4))
+        .ok_or(FixedError::Image(ImageError::SectionOutOfBounds {
+            section: s as u8,
+        }))
+}
+
+/// As [`record_words`], to rewrite them.
+fn record_words_mut(
+    bytes: &mut [u8],
+    s: Section,
+    range: Option<Range<usize>>,
+) -> Result<core::slice::ChunksExactMut<'_, u8>, FixedError> {
+    range
+        .and_then(|r| bytes.get_mut(r))
+        .map(|rec| rec.chunks_exact_mut(4))
+        .ok_or(FixedError::Image(ImageError::SectionOutOfBounds {
+            section: s as u8,
+        }))
+}
+
+/// A 4-byte chunk as the f32 it stores.
+fn f32_of(w: &[u8]) -> f64 {
+    w.first_chunk::<4>()
+        .map_or(0.0, |b| f32::from_le_bytes(*b) as f64)
+}
+
+/// A 4-byte chunk as a u32.
+fn u32_of(w: &[u8]) -> u32 {
+    w.first_chunk::<4>().map_or(0, |b| u32::from_le_bytes(*b))
+}
+
+/// Words in the longest record layout (an ellipsoid's 27), rounded up.
+const MAX_WORDS: usize = 32;
 
 /// What a word is multiplied by when the scene's lengths are scaled by `scale` and the
 /// camera's directions by `dir_scale` (`None` for an integer).
@@ -139,6 +184,9 @@ pub enum FixedError {
         /// The feature's size in steps of the format after scaling.
         steps: f64,
     },
+    /// The rewritten image does not validate (possible only for an input whose sections
+    /// share bytes, so that a word has two meanings and is rewritten as both).
+    Rewritten(ImageError),
 }
 
 impl fmt::Display for FixedError {
@@ -168,6 +216,10 @@ impl fmt::Display for FixedError {
                  more orders of magnitude than the fixed-point format holds",
                 section.name()
             ),
+            FixedError::Rewritten(e) => write!(
+                f,
+                "the rewritten image is not valid ({e}): the input's sections share bytes"
+            ),
         }
     }
 }
@@ -190,10 +242,6 @@ pub struct FixedImage {
     pub extent: f64,
     /// The smallest feature the check measured, in steps of the format after scaling.
     pub min_detail_steps: f64,
-}
-
-fn word_f32(b: &[u8], at: usize) -> f64 {
-    f32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]) as f64
 }
 
 /// The power of two that brings `extent` closest to [`TARGET_EXTENT`] from below.
@@ -240,10 +288,10 @@ pub fn to_fixed(image: &[u8]) -> Result<FixedImage, FixedError> {
     }
     // Extent: every length-valued word (coordinates, box corners, axes, radii).
     let mut extent: f64 = 0.0;
-    for (_, _, base, words) in records(image, &view) {
-        for (w, kind) in words.iter().enumerate() {
+    for (s, _, range, words) in records(&view) {
+        for (kind, word) in words.iter().zip(record_words(image, s, range)?) {
             if matches!(kind, L | Lo | Hi) {
-                let v = word_f32(image, base + 4 * w);
+                let v = f32_of(word);
                 if !v.is_finite() {
                     return Err(FixedError::NoExtent);
                 }
@@ -263,10 +311,13 @@ pub fn to_fixed_with_scale(image: &[u8], k: i8) -> Result<FixedImage, FixedError
 
 /// 2^j for the frame's direction components: with x0 and dx stored as plain Q16.16, a
 /// pixel step of 0.002 would be rounded by 0.4% and the last column's ray bent by a pixel.
-fn direction_scale(image: &[u8], view: &SceneView<'_>) -> f64 {
+fn direction_scale(image: &[u8], view: &SceneView<'_>) -> Result<f64, FixedError> {
     let f = view.frame::<f32>();
-    let base = record_offset(image, Section::Frame, 0);
-    let w = |i: usize| word_f32(image, base + 4 * i);
+    let frame: Vec<f64> =
+        record_words(image, Section::Frame, view.record_range(Section::Frame, 0))?
+            .map(f32_of)
+            .collect();
+    let w = |i: usize| frame.get(i).copied().unwrap_or(0.0);
     let (x0, y0, dx, dy, dz) = (w(2), w(3), w(4), w(5), w(14));
     let m = [
         x0,
@@ -277,11 +328,11 @@ fn direction_scale(image: &[u8], view: &SceneView<'_>) -> f64 {
     ]
     .iter()
     .fold(0f64, |m, v| m.max(v.abs()));
-    if m.is_finite() && m > 0.0 {
+    Ok(if m.is_finite() && m > 0.0 {
         2f64.powi((TARGET_DIRECTION / m).log2().floor().clamp(-60.0, 60.0) as i32)
     } else {
         1.0
-    }
+    })
 }
 
 /// The same f32 image with every length multiplied by 2^k (exact in binary floating point).
@@ -291,32 +342,32 @@ pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
     let view = SceneView::new(image)?;
     let scale = 2f64.powi(k as i32);
     let mut out = image.to_vec();
-    for (s, _, base, words) in records(image, &view) {
-        let falloff = is_falloff_light(image, s, base);
-        for (w, kind) in words.iter().enumerate() {
+    for (s, _, range, words) in records(&view) {
+        let falloff = is_falloff_light(image, s, range.clone())?;
+        for (kind, word) in words.iter().zip(record_words_mut(&mut out, s, range)?) {
             if let Some(f) = factor(*kind, falloff, scale, 1.0) {
-                let at = base + 4 * w;
-                let x = word_f32(image, at) * f;
-                out[at..at + 4].copy_from_slice(&(x as f32).to_le_bytes());
+                let x = f32_of(word) * f;
+                word.copy_from_slice(&(x as f32).to_le_bytes());
             }
         }
     }
+    SceneView::new(&out).map_err(FixedError::Rewritten)?;
     Ok(out)
 }
 
 /// A point light whose colour falls off with distance squared.
-fn is_falloff_light(image: &[u8], s: Section, base: usize) -> bool {
-    let u = |w: usize| {
-        let at = base + 4 * w;
-        u32::from_le_bytes([image[at], image[at + 1], image[at + 2], image[at + 3]])
-    };
-    s == Section::Lights && u(0) == 1 && u(13) != 0
-}
-
-fn record_offset(image: &[u8], s: Section, r: u32) -> usize {
-    let t = 16 + 8 * s as usize;
-    let off = u32::from_le_bytes([image[t], image[t + 1], image[t + 2], image[t + 3]]);
-    off as usize + r as usize * s.record_size()
+fn is_falloff_light(
+    image: &[u8],
+    s: Section,
+    range: Option<Range<usize>>,
+) -> Result<bool, FixedError> {
+    if s != Section::Lights {
+        return Ok(false);
+    }
+    let mut words = record_words(image, s, range)?;
+    let kind = words.next().map_or(0, u32_of);
+    let falloff = words.nth(12).map_or(0, u32_of);
+    Ok(kind == 1 && falloff != 0)
 }
 
 fn convert(
@@ -326,20 +377,26 @@ fn convert(
     extent: f64,
 ) -> Result<FixedImage, FixedError> {
     let scale = 2f64.powi(k as i32);
-    let dir_scale = direction_scale(image, view);
+    let dir_scale = direction_scale(image, view)?;
     let mut out = image.to_vec();
-    out[6] = Storage::Q16_16 as u8;
-    out[7] = k as u8;
+    // The header's format and scale bytes (a view exists, so the header does too).
+    if let Some(h) = out.get_mut(6..8) {
+        h.copy_from_slice(&[Storage::Q16_16 as u8, k as u8]);
+    }
     let one = (1u64 << FRAC_BITS) as f64;
     let mut min_detail = f64::INFINITY;
-    for (s, r, base, words) in records(image, view) {
-        let falloff_light = is_falloff_light(image, s, base);
-        for (w, kind) in words.iter().enumerate() {
+    for (s, r, range, words) in records(view) {
+        let falloff_light = is_falloff_light(image, s, range.clone())?;
+        // The f32 words of the record, read before they are rewritten.
+        let mut f32s = [0f64; MAX_WORDS];
+        for (v, word) in f32s.iter_mut().zip(record_words(image, s, range.clone())?) {
+            *v = f32_of(word);
+        }
+        let rec = record_words_mut(&mut out, s, range)?;
+        for (w, ((kind, word), &v)) in words.iter().zip(rec).zip(f32s.iter()).enumerate() {
             let Some(f) = factor(*kind, falloff_light, scale, dir_scale) else {
                 continue;
             };
-            let at = base + 4 * w;
-            let v = word_f32(image, at);
             let x = v * f;
             let steps = x * one;
             let raw = match kind {
@@ -355,7 +412,7 @@ fn convert(
                     value: if x.is_finite() { x } else { v },
                 });
             }
-            out[at..at + 4].copy_from_slice(&(raw as i32).to_le_bytes());
+            word.copy_from_slice(&(raw as i32).to_le_bytes());
         }
         // Detail: the smallest axis of an ellipsoid or box (1 / largest row of its
         // view-to-unit matrix) and a ball's radius, in steps after scaling.
@@ -364,13 +421,13 @@ fn convert(
                 let mut worst: f64 = 0.0;
                 for row in 0..3 {
                     let n2: f64 = (0..3)
-                        .map(|c| word_f32(image, base + 4 * (3 + 3 * row + c)).powi(2))
+                        .map(|c| f32s.get(3 + 3 * row + c).map_or(0.0, |v| v.powi(2)))
                         .sum();
                     worst = worst.max(n2.sqrt());
                 }
                 Some(scale / worst * one)
             }
-            Section::Balls => Some(word_f32(image, base + 12).abs() * scale * one),
+            Section::Balls => Some(f32s.get(3).map_or(0.0, |v| v.abs()) * scale * one),
             _ => None,
         };
         if let Some(steps) = detail {
@@ -384,7 +441,8 @@ fn convert(
             }
         }
     }
-    debug_assert!(out.len() >= HEADER_SIZE);
+    // Only a valid image leaves the DM.
+    SceneView::new(&out).map_err(FixedError::Rewritten)?;
     Ok(FixedImage {
         bytes: out,
         scale_exponent: k,
@@ -410,11 +468,69 @@ mod tests {
         assert_eq!(scale_exponent_for(f64::INFINITY), None);
     }
 
+    /// A valid f32 image whose light record shares its bytes with the frame record (the
+    /// validator checks each section, not that they are disjoint): the light's colour words
+    /// are the frame's height, x0, y0.
+    fn light_over_frame() -> Vec<u8> {
+        use crate::image::{writer::ImageWriter, NONE};
+        let mut w = ImageWriter::new();
+        // Width 2 reads as a spot light's kind.
+        w.push(Section::Frame)
+            .1
+            .u(2)
+            .u(3)
+            .fs(&[-1.0, 1.0, 0.5, 0.5])
+            .fs(&[0.0; 6])
+            .u(2)
+            .u(0)
+            .fs(&[1.0]);
+        w.push(Section::Materials)
+            .1
+            .fs(&[0.5; 12])
+            .u(NONE)
+            .u(0)
+            .fs(&[1.0, 1.0]);
+        w.push(Section::Triangles)
+            .1
+            .fs(&[-1.0, -1.0, 2.0, 1.0, -1.0, 2.0, 0.0, 1.0, 2.0])
+            .u(0)
+            .u(NONE)
+            .u(NONE);
+        w.push(Section::Nodes)
+            .1
+            .fs(&[-1.0, -1.0, 1.0, 1.0, 1.0, 3.0])
+            .u(1)
+            .u(0);
+        let mut img = w.finish();
+        let frame_at = img[16..20].to_vec();
+        let lights = 16 + 8 * Section::Lights as usize;
+        img[lights..lights + 4].copy_from_slice(&frame_at);
+        img[lights + 4..lights + 8].copy_from_slice(&1u32.to_le_bytes());
+        img
+    }
+
+    #[test]
+    fn a_rewrite_that_would_not_validate_is_an_error() {
+        // Found by the image fuzzer: converting the light's colour turned the frame's
+        // height (3, a subnormal as an f32) into 0, and to_fixed returned that image.
+        let img = light_over_frame();
+        let view = SceneView::new(&img).expect("the input is valid");
+        assert_eq!(view.light_count(), 1);
+        assert_eq!(
+            to_fixed(&img).err(),
+            Some(FixedError::Rewritten(ImageError::BadValue {
+                section: Section::Frame as u8,
+                record: 0
+            }))
+        );
+    }
+
     #[test]
     fn layouts_cover_whole_records() {
         for s in Section::ALL {
             if let Some(words) = layout(s) {
                 assert_eq!(words.len() * 4, s.record_size(), "{}", s.name());
+                assert!(words.len() <= MAX_WORDS, "{}", s.name());
             }
         }
     }

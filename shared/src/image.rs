@@ -455,6 +455,17 @@ fn rd_u32(b: &[u8], at: usize) -> u32 {
     }
 }
 
+/// The texel bytes `start..end` (within the texel section) of a `w` x `h` texture at
+/// offset `off`: `None` for an empty texture or when any step of `off + w * h * 3` leaves
+/// u32 (so a 32-bit usize holds every bound and `w`, `h` < 2^31).
+fn texel_range(w: u32, h: u32, off: u32) -> Option<(u32, u32)> {
+    if w == 0 || h == 0 {
+        return None;
+    }
+    let end = w.checked_mul(h)?.checked_mul(3)?.checked_add(off)?;
+    Some((off, end))
+}
+
 /// Zeros standing in for a record outside its section (at least the largest record).
 static ZERO_RECORD: [u8; 128] = [0; 128];
 
@@ -509,10 +520,10 @@ impl<'a> SceneView<'a> {
             return Err(ImageError::UnsupportedFormat { found: bytes[6] });
         }
         let total = rd_u32(bytes, 8);
-        if total as usize != bytes.len() {
+        if usize::try_from(total).ok() != Some(bytes.len()) {
             return Err(ImageError::LengthMismatch {
                 header: total,
-                actual: bytes.len() as u32,
+                actual: u32::try_from(bytes.len()).unwrap_or(u32::MAX),
             });
         }
         let mut table = [(0u32, 0u32); SECTION_COUNT];
@@ -520,19 +531,23 @@ impl<'a> SceneView<'a> {
         for (i, s) in Section::ALL.iter().enumerate() {
             let off = rd_u32(bytes, 16 + 8 * i);
             let count = rd_u32(bytes, 20 + 8 * i);
-            let size = (count as u64) * (s.record_size() as u64);
-            if count > 0 && ((off as u64) < HEADER_SIZE as u64 || off as u64 + size > total as u64)
-            {
-                return Err(ImageError::SectionOutOfBounds { section: i as u8 });
-            }
             if !off.is_multiple_of(4) {
                 return Err(ImageError::Misaligned { section: i as u8 });
             }
-            table[i] = (off, count);
             if count > 0 {
-                // In bounds: checked just above.
-                sections[i] = &bytes[off as usize..(off as u64 + size) as usize];
+                // Every size in u32 (the image is at most u32::MAX bytes long), checked: the
+                // section's bytes, then a slice that exists (so a 32-bit usize holds it too).
+                let out = ImageError::SectionOutOfBounds { section: i as u8 };
+                let end = (s.record_size() as u32)
+                    .checked_mul(count)
+                    .and_then(|size| off.checked_add(size))
+                    .ok_or(out)?;
+                if (off as usize) < HEADER_SIZE {
+                    return Err(out);
+                }
+                sections[i] = bytes.get(off as usize..end as usize).ok_or(out)?;
             }
+            table[i] = (off, count);
         }
         let view = Self {
             bytes,
@@ -590,7 +605,7 @@ impl<'a> SceneView<'a> {
 
     /// Bytes a section occupies.
     pub fn section_bytes(&self, s: Section) -> usize {
-        self.count(s) as usize * s.record_size()
+        self.sections.0[s as usize].len()
     }
 
     fn check_references(&self) -> Result<(), ImageError> {
@@ -629,16 +644,14 @@ impl<'a> SceneView<'a> {
                 return Err(badv(Section::Lights, i));
             }
         }
-        let ntexels = self.count(Section::Texels) as u64;
+        // Each texture's texels lie inside the texel section ([`texel_range`], the same
+        // checked arithmetic [`Self::texture`] uses), so sampling stays inside them.
+        let ntexels = self.count(Section::Texels);
         for i in 0..ntex {
-            let at = self.rec(Section::Textures, i);
-            let (w, h, off) = (
-                self.u(at) as u64,
-                self.u(at + 4) as u64,
-                self.u(at + 8) as u64,
-            );
-            if w == 0 || h == 0 || off + w * h * 3 > ntexels {
-                return Err(bad(Section::Textures, i));
+            let r = self.record::<TEXTURE_SIZE>(Section::Textures, i);
+            match texel_range(r.u(0), r.u(4), r.u(8)) {
+                Some((_, end)) if end <= ntexels => {}
+                _ => return Err(bad(Section::Textures, i)),
             }
         }
         let nnodes = self.count(Section::Nodes);
@@ -704,20 +717,30 @@ impl<'a> SceneView<'a> {
                 return Err(bad(Section::Boxes, i));
             }
         }
-        let nballs = self.count(Section::Balls) as u64;
+        // A group's balls are records first..first + count, so `first + k` never wraps.
+        let nballs = self.count(Section::Balls);
         for i in 0..self.count(Section::BlobGroups) {
             let at = self.rec(Section::BlobGroups, i);
-            let (m, k, first, count) = (
-                self.u(at),
-                self.u(at + 4),
-                self.u(at + 12) as u64,
-                self.u(at + 16) as u64,
-            );
-            if m >= nmat || k > 1 || count == 0 || first + count > nballs {
+            let (m, k, first, count) =
+                (self.u(at), self.u(at + 4), self.u(at + 12), self.u(at + 16));
+            let end = first.checked_add(count);
+            if m >= nmat || k > 1 || count == 0 || end.is_none_or(|e| e > nballs) {
                 return Err(bad(Section::BlobGroups, i));
             }
         }
         Ok(())
+    }
+
+    /// The bytes of record `i` of section `s` within [`Self::bytes`] (`None` unless `i` is
+    /// one of the section's records), for tools that rewrite records in place.
+    pub fn record_range(&self, s: Section, i: u32) -> Option<core::ops::Range<usize>> {
+        if i >= self.count(s) {
+            return None;
+        }
+        let size = s.record_size();
+        let start =
+            (self.table[s as usize].0 as usize).checked_add((i as usize).checked_mul(size)?)?;
+        Some(start..start.checked_add(size)?)
     }
 
     /// Byte offset of record `i` of section `s` (saturating: an impossible index reads
@@ -818,14 +841,26 @@ impl<'a> SceneView<'a> {
         }
     }
 
+    /// Texture `i`: its size and exactly its `width * height * 3` texel bytes. A texture
+    /// a validated image does not hold (never the case for indices from its records) reads
+    /// as one black texel.
     pub fn texture(&self, i: u32) -> TextureView<'a> {
-        let at = self.rec(Section::Textures, i);
-        let (w, h, off) = (self.u(at), self.u(at + 4), self.u(at + 8) as usize);
-        let base = self.table[Section::Texels as usize].0 as usize + off;
-        TextureView {
-            width: w,
-            height: h,
-            rgb: &self.bytes[base..base + (w * h * 3) as usize],
+        let r = self.record::<TEXTURE_SIZE>(Section::Textures, i);
+        let (w, h) = (r.u(0), r.u(4));
+        let texels = self.sections.0[Section::Texels as usize];
+        let rgb = texel_range(w, h, r.u(8))
+            .and_then(|(start, end)| texels.get(start as usize..end as usize));
+        match rgb {
+            Some(rgb) => TextureView {
+                width: w,
+                height: h,
+                rgb,
+            },
+            None => TextureView {
+                width: 1,
+                height: 1,
+                rgb: &ZERO_RECORD[..3],
+            },
         }
     }
 
@@ -1100,6 +1135,113 @@ mod tests {
         w.finish()
     }
 
+    /// A 4 x 4 frame filled by one triangle whose material is texture 0 (`tex` = width,
+    /// height, texel offset) over `texels`, lit by ambient light only (so a pixel is its
+    /// texel's colour), stored as f32 or Q16.16.
+    fn textured(storage: Storage, tex: (u32, u32, u32), texels: &[u8]) -> std::vec::Vec<u8> {
+        let s = |x: f32| match storage {
+            Storage::F32 => x.to_bits(),
+            Storage::Q16_16 => ((x * 65536.0).round() as i32) as u32,
+        };
+        let mut w = ImageWriter::new();
+        let mut r = w.push(Section::Frame).1.u(4).u(4);
+        for x in [-1.0, 1.0, 0.5, 0.5, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0] {
+            r = r.u(s(x));
+        }
+        r.u(2).u(0).u(s(1.0));
+        let mut r = w.push(Section::Materials).1;
+        // diffuse 1, no specular (shininess 1), no reflection or transmission, ior 1.
+        for x in [1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0] {
+            r = r.u(s(x));
+        }
+        r.u(0).u(MapTarget::Diffuse as u32).u(s(1.0)).u(s(1.0));
+        w.push(Section::Textures).1.u(tex.0).u(tex.1).u(tex.2);
+        w.push_texels(texels);
+        let mut r = w.push(Section::Triangles).1;
+        for x in [-10.0, -10.0, 2.0, 10.0, -10.0, 2.0, 0.0, 10.0, 2.0] {
+            r = r.u(s(x));
+        }
+        r.u(0).u(NONE).u(NONE);
+        let mut r = w.push(Section::Nodes).1;
+        for x in [-10.0, -10.0, 1.0, 10.0, 10.0, 3.0] {
+            r = r.u(s(x));
+        }
+        r.u(1).u(0);
+        let mut img = w.finish();
+        img[6] = storage as u8;
+        img
+    }
+
+    /// Every pixel of an image with number type `T`.
+    fn render_every_pixel<T: Real>(view: SceneView<'_>) -> std::vec::Vec<crate::render::Rgb8> {
+        let f = view.frame::<f32>();
+        let mut tracer = crate::render::Tracer::<T>::new(view);
+        let mut row = std::vec![[0u8; 3]; f.width as usize];
+        let mut out = std::vec::Vec::new();
+        for y in 0..f.height {
+            crate::render::render_run(&mut tracer, y, 0, &mut row).unwrap();
+            out.extend_from_slice(&row);
+        }
+        out
+    }
+
+    #[test]
+    fn a_texture_that_fits_its_texels_is_sampled_in_every_number_format() {
+        let texels = [200, 100, 50].repeat(4);
+        for storage in [Storage::F32, Storage::Q16_16] {
+            let img = textured(storage, (2, 2, 0), &texels);
+            let view = SceneView::new(&img).unwrap();
+            let px: std::vec::Vec<_> = match storage {
+                Storage::F32 => {
+                    let a = render_every_pixel::<f32>(view);
+                    assert_eq!(a, render_every_pixel::<f64>(view));
+                    a
+                }
+                Storage::Q16_16 => render_every_pixel::<crate::num::Fx>(view),
+            };
+            assert_eq!(px.len(), 16);
+            for p in px {
+                for (got, want) in p.iter().zip([200u8, 100, 50]) {
+                    assert!(got.abs_diff(want) <= 1, "{storage:?}: {p:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn texture_sizes_whose_arithmetic_overflows_are_rejected() {
+        let texels = [7u8; 36];
+        let textures = |section: u8| ImageError::BadReference { section, record: 0 };
+        let t = Section::Textures as u8;
+        // 1684887088 x 3649452082 x 3 = 2^64 + 32: a u64 product wraps to 32 bytes, which
+        // the 36 texels "hold"; sampling then indexes gigabytes past them.
+        let wraps_u64 = (1_684_887_088, 3_649_452_082, 0);
+        // w * h * 3 = 3 * 2^32: wraps a u32 (a 32-bit usize) to 0.
+        let wraps_u32 = (65_536, 65_536, 0);
+        // The offset plus the texture's bytes pass u32::MAX.
+        let offset_wraps = (1, 1, u32::MAX - 1);
+        // One byte more than the texels: the exact bound.
+        let one_past = (3, 4, 1);
+        for storage in [Storage::F32, Storage::Q16_16] {
+            for tex in [wraps_u64, wraps_u32, offset_wraps, one_past] {
+                let img = textured(storage, tex, &texels);
+                assert_eq!(
+                    SceneView::new(&img).err(),
+                    Some(textures(t)),
+                    "{storage:?} texture {tex:?}"
+                );
+            }
+            // The largest texture the texels hold is accepted and rendered.
+            let img = textured(storage, (3, 4, 0), &texels);
+            let view = SceneView::new(&img).unwrap();
+            let px = match storage {
+                Storage::F32 => render_every_pixel::<f32>(view),
+                Storage::Q16_16 => render_every_pixel::<crate::num::Fx>(view),
+            };
+            assert!(px.iter().flatten().all(|&c| c.abs_diff(7) <= 1), "{px:?}");
+        }
+    }
+
     #[test]
     fn a_well_formed_tree_is_accepted() {
         let img = image(8, &[(3, NONE), (3, NONE), (3, 0)]);
@@ -1138,5 +1280,13 @@ mod tests {
         assert_eq!(e.material, 0);
         assert_eq!(e.shape.center, Vec3::zero());
         assert_eq!(v.triangle::<f32>(u32::MAX).material, 0);
+        // No textures: one black texel, not an empty one (sampling divides by its size).
+        let t = v.texture(0);
+        assert_eq!((t.width, t.height, t.rgb), (1, 1, &[0u8, 0, 0][..]));
+        assert_eq!(v.record_range(Section::Ellipsoids, 0), None);
+        assert_eq!(
+            v.record_range(Section::Frame, 0),
+            Some(128..128 + FRAME_SIZE)
+        );
     }
 }

@@ -702,7 +702,14 @@ impl<'a, T: Real> Tracer<'a, T> {
     /// Bilinear, wrapping texture lookup; v = 0 is the bottom row of the image.
     fn texture_lookup(&self, index: u32, u: T, v: T) -> Vec3<T> {
         let tex = self.scene.texture(index);
-        let (w, h) = (tex.width as i32, tex.height as i32);
+        // A validated image's textures are 1 .. 2^31 texels wide and high and hold exactly
+        // w * h * 3 bytes (`SceneView::texture`); anything else reads black, never panics.
+        let (Ok(w), Ok(h)) = (i32::try_from(tex.width), i32::try_from(tex.height)) else {
+            return Vec3::zero();
+        };
+        if w == 0 || h == 0 {
+            return Vec3::zero();
+        }
         let u = u - u.floor();
         let v = v - v.floor();
         let x = u * T::from_i32(w) - T::HALF;
@@ -716,8 +723,13 @@ impl<'a, T: Real> Tracer<'a, T> {
         let texel = |xx: i32, yy: i32| -> Vec3<T> {
             let xx = xx.rem_euclid(w) as usize;
             let yy = yy.rem_euclid(h) as usize;
-            let at = (yy * w as usize + xx) * 3;
-            let c = |k: usize| T::from_i32(tex.rgb[at + k] as i32) / T::from_i32(255);
+            let rgb = yy
+                .checked_mul(w as usize)
+                .and_then(|i| i.checked_add(xx)?.checked_mul(3))
+                .and_then(|at| tex.rgb.get(at..)?.first_chunk::<3>())
+                .copied()
+                .unwrap_or([0; 3]);
+            let c = |k: usize| T::from_i32(rgb[k] as i32) / T::from_i32(255);
             Vec3::new(c(0), c(1), c(2))
         };
         let top = texel(xi, yi) * (T::ONE - fx) + texel(xi + 1, yi) * fx;

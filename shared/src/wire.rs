@@ -91,7 +91,8 @@ impl Region {
                 (lo < hi).then(|| (y, lo - row0, hi - lo))
             }
             Region::Rect { x, y, w, h } => {
-                (i < h as u32).then_some((y as u32 + i, x as u32, w as u32))
+                // The row only for an index inside the rectangle (y + i < 2^17 then).
+                (i < h as u32).then(|| (y as u32 + i, x as u32, w as u32))
             }
         }
     }
@@ -623,5 +624,19 @@ mod tests {
             .piece(16, 0),
             None
         );
+    }
+
+    #[test]
+    fn pieces_far_past_a_rectangles_end_are_none() {
+        // Found by the wire fuzzer: the row was computed before the index was checked.
+        let r = Region::Rect {
+            x: 0,
+            y: 5,
+            w: 1,
+            h: 1,
+        };
+        assert_eq!(r.piece(8, u32::MAX), None);
+        assert_eq!(r.piece(8, u32::MAX - 4), None);
+        assert_eq!(r.piece(8, 0), Some((5, 0, 1)));
     }
 }
