@@ -263,17 +263,20 @@ pub fn first_non_finite(image: &[u8]) -> Result<Option<(Section, u32)>, ImageErr
             found: view.storage() as u8,
         });
     }
-    let bad = |&(_, _, base, words): &(Section, u32, usize, &[Word])| {
-        words
-            .iter()
-            .enumerate()
-            .any(|(w, kind)| *kind != U && !word_f32(image, base + 4 * w).is_finite())
+    // A record whose range is not in the image counts as bad (never the case for a view of
+    // the same bytes): it is named rather than skipped.
+    let bad = |(s, _, range, words): &(Section, u32, Option<Range<usize>>, &[Word])| {
+        record_words(image, *s, range.clone()).map_or(true, |chunks| {
+            chunks
+                .zip(words.iter())
+                .any(|(w, kind)| *kind != U && !f32_of(w).is_finite())
+        })
     };
     // A shape, light or frame record first: the boxes of the nodes above it overflow with it.
-    let found = records(image, &view)
+    let found = records(&view)
         .filter(|r| r.0 != Section::Nodes)
         .find(bad)
-        .or_else(|| records(image, &view).find(bad))
+        .or_else(|| records(&view).find(bad))
         .map(|(s, r, _, _)| (s, r));
     Ok(found)
 }
