@@ -864,7 +864,7 @@ fn work_of_a_node_that_dies_is_reissued() {
             ..SimConfig::default()
         },
     );
-    assert!(matches!(e, Err(SimError::Exec(_))), "{e:?}");
+    assert!(matches!(e, Err(SimError::Unfinished(_))), "{e:?}");
 }
 
 #[test]
