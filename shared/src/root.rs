@@ -236,6 +236,8 @@ struct NodeSlot {
     repair: Option<(u16, [u32; wire::MAX_CHUNKS / 32])>,
     /// The chunk re-sent in the exchange in progress.
     repairing: Option<u32>,
+    /// How the node's scene is being repaired piece by piece.
+    pieces: Option<Pieces>,
     /// When the RC last exchanged with the node (µs); for a node declared dead, the moment
     /// its silence was counted from.
     heard_us: u64,
@@ -253,12 +255,40 @@ impl NodeSlot {
         ready: [None; 2],
         repair: None,
         repairing: None,
+        pieces: None,
         heard_us: 0,
         dead: false,
         dead_rendering: false,
     };
     fn ready_for(&self, frame: u16) -> bool {
         self.ready[(frame % 2) as usize] == Some(frame)
+    }
+}
+
+/// A node's scene repair on a noisy link: a chunk sent whole that the node still reports
+/// missing is sent again in halves, quarters, ... down to [`wire::SCENE_PIECE`] bytes, one
+/// piece per exchange, so that short frames get through where a whole chunk never would.
+#[derive(Clone, Copy, Debug)]
+struct Pieces {
+    /// The frame whose scene is being repaired.
+    frame: u16,
+    /// Piece size in bytes (a power of two, [`wire::SCENE_PIECE`]..=[`SCENE_CHUNK`]).
+    size: u16,
+    /// The chunk being sent piece by piece and the offset of its next piece.
+    cycle: Option<(u8, u16)>,
+    /// The highest chunk sent in full so far: a chunk at or below it asked for again was
+    /// lost on the way, so pieces get smaller.
+    high: Option<u8>,
+}
+
+impl Pieces {
+    fn new(frame: u16) -> Self {
+        Self {
+            frame,
+            size: SCENE_CHUNK as u16,
+            cycle: None,
+            high: None,
+        }
     }
 }
 
@@ -560,6 +590,7 @@ impl RootState {
                     slot.heard_us = since;
                     slot.repair = None;
                     slot.repairing = None;
+                    slot.pieces = None;
                     died += 1;
                     if rendering {
                         orphaned += 1;
@@ -802,11 +833,18 @@ impl RootState {
         let seq = self.report.exchanges as u16;
         let slot = &mut self.nodes[node as usize];
         slot.repairing = None;
+        let pieces = slot.pieces;
         let next = slot.repair.and_then(|(frame, map)| {
             // Only chunks the scene has (a node that heard nothing of it asks for all).
             let chunks = scenes
                 .scene(frame)
                 .map_or(0, |s| s.len().div_ceil(SCENE_CHUNK)) as u32;
+            // A chunk part-sent in pieces is finished first.
+            if let Some((c, _)) = pieces.filter(|p| p.frame == frame).and_then(|p| p.cycle) {
+                if (c as u32) < chunks {
+                    return Some((frame, c as u32));
+                }
+            }
             let c = (0..chunks.min(wire::MAX_CHUNKS as u32))
                 .find(|&c| map[(c / 32) as usize] & (1 << (c % 32)) != 0)?;
             Some((frame, c))
@@ -815,13 +853,36 @@ impl RootState {
             slot.repair = None;
         }
         if let Some((frame, c)) = next {
-            if let Some((_, map)) = &mut slot.repair {
-                map[(c / 32) as usize] &= !(1 << (c % 32));
-            }
             slot.repairing = Some(c);
             if let Some(scene) = scenes.scene(frame) {
-                let start = (c as usize * SCENE_CHUNK).min(scene.len());
-                let end = (start + SCENE_CHUNK).min(scene.len());
+                let mut p = match slot.pieces {
+                    Some(p) if p.frame == frame => p,
+                    _ => Pieces::new(frame),
+                };
+                let c8 = c as u8;
+                let at = match p.cycle {
+                    Some((cc, at)) if cc == c8 => at as usize,
+                    _ => {
+                        if p.high.is_some_and(|h| c8 <= h) {
+                            p.size = (p.size / 2).max(wire::SCENE_PIECE as u16);
+                        }
+                        0
+                    }
+                };
+                let chunk_start = (c as usize * SCENE_CHUNK).min(scene.len());
+                let chunk_end = (chunk_start + SCENE_CHUNK).min(scene.len());
+                let start = (chunk_start + at).min(chunk_end);
+                let end = (start + p.size as usize).min(chunk_end);
+                if end >= chunk_end {
+                    if let Some((_, map)) = &mut slot.repair {
+                        map[(c / 32) as usize] &= !(1 << (c % 32));
+                    }
+                    p.cycle = None;
+                    p.high = Some(p.high.map_or(c8, |h| h.max(c8)));
+                } else {
+                    p.cycle = Some((c8, (at + p.size as usize) as u16));
+                }
+                slot.pieces = Some(p);
                 let crc = self.scene_crc(frame, scene, scenes.scene_crc(frame));
                 let msg = Down::Scene {
                     frame,
@@ -875,8 +936,20 @@ impl RootState {
                     if slot.repair.is_some_and(|(f, _)| f == frame) {
                         slot.repair = None;
                     }
+                    if slot.pieces.is_some_and(|p| p.frame == frame) {
+                        slot.pieces = None;
+                    }
                 }
                 SceneState::Missing { frame, mut chunks } => {
+                    // A chunk being sent in pieces that the node now has is done.
+                    if let Some(p) = &mut slot.pieces {
+                        if let Some((c, _)) = p.cycle {
+                            if p.frame == frame && chunks[(c / 32) as usize] & (1 << (c % 32)) == 0
+                            {
+                                p.cycle = None;
+                            }
+                        }
+                    }
                     // The node wrote this before our reply in this exchange reached it.
                     if let Some(c) = slot.repairing {
                         chunks[(c / 32) as usize] &= !(1 << (c % 32));

@@ -6,7 +6,7 @@ use links_core::dm::{compile, CompileOptions};
 use links_core::image::SceneView;
 use links_core::render::{render_run, Tracer};
 use links_core::sched::{Policy, Shape};
-use links_host::cluster::star::{BroadcastDrop, NodeDeath};
+use links_host::cluster::star::{BroadcastDrop, BusCounters, Faults, NodeDeath, Noise};
 use links_host::cluster::{simulate_frame, RunCache, SimConfig, SimReport};
 use links_host::cost::{CycleModel, DEFAULT_CLOCK_HZ};
 use links_host::frame::{render_frame, Precision};
@@ -255,4 +255,174 @@ fn one_node_killed_at_any_moment_finishes_within_the_bound_under_every_policy() 
         "worst delay: {:.0}% of the bound's allowance",
         100.0 * worst
     );
+}
+
+/// Acceptance (issue 10): bit errors at a rate of 1e-3 in both directions, and a quarter of
+/// the nodes killed in the middle of that noisy frame: every frame bit-identical to the
+/// single-node render, within the recovery bound. Photo1's 116 KB scene gets through the
+/// broadcast to no node (a 1 KB chunk survives with probability 2.4e-4), so its frame is
+/// mostly scene repair, in pieces (the killed nodes die before they get the scene and hold
+/// no work); reflections' 1.5 KB scene leaves the frame to rendering, so its killed nodes
+/// die holding jobs that are re-issued. The cost is bounded here and reported in
+/// docs/reliability.md.
+#[test]
+fn bit_errors_of_1e_3_both_ways_and_a_quarter_of_the_nodes_killed_keep_the_frame_exact() {
+    for (scene, max_cost) in [("photo1.ron", 20.0), ("reflections.ron", 4.0)] {
+        let img = image(scene, 64, 60);
+        let want = reference(&img);
+        let cfg = SimConfig {
+            nodes: 8,
+            node_timeout_s: 0.05,
+            cache: Some(RunCache::new()),
+            ..SimConfig::default()
+        };
+        let clean = run(&img, &cfg);
+        for seed in [1, 2, 3] {
+            let noisy_cfg = SimConfig {
+                noise: Noise {
+                    ber_down: 1e-3,
+                    ber_up: 1e-3,
+                    drop_broadcast: 0.0,
+                    seed,
+                },
+                ..cfg.clone()
+            };
+            let noisy = run(&img, &noisy_cfg);
+            assert!(noisy.frames[0] == want, "{scene} seed {seed}");
+            let sum = |f: fn(&BusCounters) -> u64| noisy.bus.iter().map(f).sum::<u64>();
+            let (up, down, bcast) = (
+                sum(|b| b.corrupted_up),
+                sum(|b| b.corrupted_down),
+                sum(|b| b.corrupted_broadcast),
+            );
+            assert!(
+                up > 50 && down > 50 && bcast > 0,
+                "{scene} seed {seed}: {up} {down}"
+            );
+            // The RC catches every corrupted node frame, once.
+            assert_eq!(noisy.root.bad_frames as u64, up, "{scene} seed {seed}");
+            // What it costs (virtual time), bounded: 1 KB scene chunks alone would have
+            // taken photo1 hundreds of seconds.
+            let cost = noisy.time_s / clean.time_s;
+            assert!(cost < max_cost, "{scene} seed {seed}: {cost}");
+            // A quarter of the nodes (2 of 8) killed in the middle of the noisy frame.
+            let mid = noisy.time_s / 2.0;
+            let killed = [1u16, 5];
+            let r = run(
+                &img,
+                &SimConfig {
+                    deaths: killed
+                        .iter()
+                        .map(|&node| NodeDeath { node, at_s: mid })
+                        .collect(),
+                    ..noisy_cfg.clone()
+                },
+            );
+            assert!(r.frames[0] == want, "{scene} seed {seed}, 2 of 8 killed");
+            if scene == "reflections.ron" {
+                // At least one of them held jobs when it died (the other may just have
+                // finished its last one).
+                assert!(r.root.timeouts >= 1, "{scene} seed {seed}: {:?}", r.root);
+                assert!(r.root.reissued >= 1, "{scene} seed {seed}: {:?}", r.root);
+            }
+            let work: f64 = killed
+                .iter()
+                .map(|&n| noisy.node_compute_s[n as usize])
+                .sum();
+            let bound = noisy.time_s + 2.0 * r.root.timeout_us as f64 * 1e-6 + work;
+            assert!(
+                r.time_s <= bound,
+                "{scene} seed {seed}: {} s > {bound} s ({:?})",
+                r.time_s,
+                r.root
+            );
+            println!(
+                "{scene} seed {seed}: fault-free {:.4} s; bit errors 1e-3 both ways {:.4} s ({cost:.2}x; {up} up / {down} down / {bcast} broadcast frames corrupted, {} scene repairs); and nodes 1, 5 killed at {mid:.4} s: {:.4} s ({:.2}x; {} declared dead, {} re-issued)",
+                clean.time_s,
+                noisy.time_s,
+                noisy.root.repairs,
+                r.time_s,
+                r.time_s / clean.time_s,
+                r.root.timeouts,
+                r.root.reissued,
+            );
+        }
+    }
+}
+
+/// A job list lost on its way to an idle node (the RC's reply to the `Poll` with which the
+/// node answered a roll call, corrupted) left the node silent with nothing to do while the RC
+/// believed it was rendering the adopted job: a time-out later it was declared dead, the job
+/// re-issued again and the time-out raised (seen as a false alarm with bit errors and
+/// deaths). A node whose exchange brought an unreadable reply now asks again.
+#[test]
+fn an_idle_node_that_lost_its_job_list_asks_again() {
+    let img = image("reflections.ron", 64, 60);
+    let want = reference(&img);
+    let mut lost = 0;
+    for seed in 1..=8 {
+        let r = run(
+            &img,
+            &SimConfig {
+                nodes: 4,
+                policy: Policy::Static { shape: Shape::Span },
+                node_timeout_s: 0.02,
+                // Node 3 dies at once: its region is adopted by an idle node after a roll
+                // call, through exchanges that lose half the RC's replies.
+                deaths: vec![NodeDeath { node: 3, at_s: 0.0 }],
+                faults: Faults {
+                    down_every: 2,
+                    random: Some(seed),
+                    ..Faults::default()
+                },
+                ..SimConfig::default()
+            },
+        );
+        assert!(r.frames[0] == want);
+        lost += r.bus.iter().map(|b| b.corrupted_down).sum::<u64>();
+        assert_eq!(
+            (r.root.timeouts, r.root.revived),
+            (1, 0),
+            "seed {seed}: {:?}",
+            r.root
+        );
+    }
+    assert!(lost > 50, "{lost}");
+}
+
+/// Broadcast copies lost at random (a receiver off the bus for one broadcast): lost scene
+/// chunks are repaired, lost `Wake`s repeated, the frame exact, for every policy.
+#[test]
+fn lost_broadcasts_are_repaired_under_every_policy() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    for policy in [
+        Policy::DECREASING,
+        Policy::Static { shape: Shape::Rect },
+        Policy::Fixed {
+            divisions: 48,
+            shape: Shape::Span,
+        },
+    ] {
+        let cfg = SimConfig {
+            nodes: 6,
+            policy,
+            node_timeout_s: 0.05,
+            noise: Noise {
+                drop_broadcast: 0.3,
+                seed: 5,
+                ..Noise::default()
+            },
+            deaths: vec![NodeDeath {
+                node: 2,
+                at_s: 0.06,
+            }],
+            ..SimConfig::default()
+        };
+        let r = run(&img, &cfg);
+        assert!(r.frames[0] == want, "{policy:?}");
+        let dropped: u64 = r.bus.iter().map(|b| b.dropped_broadcast).sum();
+        assert!(dropped > 100, "{policy:?}: {dropped}");
+        assert!(r.root.repairs > 50, "{policy:?}: {:?}", r.root);
+    }
 }

@@ -7,6 +7,7 @@
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
 //! - [`sweep`]: the Fig. 5.1 / 5.2 analogs (node-count and division sweeps), CSV and charts.
+//! - [`reliability`]: the fault sweep of docs/reliability.md (deaths, bit errors).
 //!
 //! Node compute time is [`CycleModel::cycles`] of each run's operation counts at the
 //! configured core clock. A simulation is single-threaded and its results depend only on its
@@ -16,6 +17,7 @@ pub mod dm;
 pub mod exec;
 pub mod framemem;
 pub mod rccost;
+pub mod reliability;
 pub mod star;
 pub mod sweep;
 
@@ -36,7 +38,9 @@ use links_core::root::{
 use links_core::sched::Policy;
 use links_core::wire::{self, Job};
 use rccost::{RcClock, RcCost};
-use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, SimBus, SimNodeLink, Star};
+use star::{
+    BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, Noise, SimBus, SimNodeLink, Star,
+};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::fmt;
@@ -66,6 +70,8 @@ pub struct SimConfig {
     pub clock_hz: f64,
     pub model: CycleModel,
     pub faults: Faults,
+    /// Random bit errors per direction and lost broadcasts.
+    pub noise: Noise,
     /// Nodes that die (stop answering) during the run.
     pub deaths: Vec<NodeDeath>,
     /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
@@ -105,6 +111,7 @@ impl Default for SimConfig {
             clock_hz: DEFAULT_CLOCK_HZ,
             model: CycleModel::default(),
             faults: Faults::default(),
+            noise: Noise::default(),
             deaths: Vec::new(),
             drops: Vec::new(),
             bank_bytes: nc_fw::plan::SCENE_EVEN,
@@ -190,6 +197,15 @@ pub enum SimError {
     Root(RootError),
     /// The cluster could not finish: what it waited for when the simulation stopped.
     Unfinished(Box<Unfinished>),
+    /// A frame differs from the single-node render (a broken promise, never expected).
+    NotIdentical {
+        what: String,
+    },
+    /// An error of one point of a sweep.
+    Context {
+        what: String,
+        error: Box<SimError>,
+    },
 }
 
 /// What a cluster that cannot finish lacks, when the simulation stopped (stalled, no pixel
@@ -322,10 +338,14 @@ impl fmt::Display for SimError {
             SimError::Config(s) => write!(f, "{s}"),
             SimError::SceneTooBig { frame, bytes, bank } => write!(
                 f,
-                "frame {frame}'s scene image is {bytes} bytes; a node's scene bank holds {bank} bytes (make the scene smaller: fewer triangles or a smaller texture)"
+                "frame {frame}'s scene image is {bytes} bytes; a node's scene bank holds {bank} bytes: make the scene smaller (fewer triangles, a smaller texture)"
             ),
             SimError::Root(e) => write!(f, "root: {e}"),
             SimError::Unfinished(u) => write!(f, "{u}"),
+            SimError::NotIdentical { what } => {
+                write!(f, "{what}: the frame differs from the single-node render")
+            }
+            SimError::Context { what, error } => write!(f, "{what}: {error}"),
         }
     }
 }
@@ -472,6 +492,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
             d.node, d.at_s
         )));
     }
+    cfg.noise.check().map_err(SimError::Config)?;
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
     if let Some((frame, s)) = scenes
@@ -519,6 +540,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     for d in &cfg.drops {
         star.borrow_mut().drop_broadcasts(*d);
     }
+    star.borrow_mut().set_noise(cfg.noise);
     let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
     let buses = star.borrow().bus_count();
     let sink = RefCell::new(match cfg.collect {
