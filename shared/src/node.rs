@@ -185,6 +185,19 @@ impl Bank {
         self.total.div_ceil(SCENE_CHUNK as u32)
     }
 
+    /// Which pieces of chunk `c` are in (bit `i` = piece `i` of the chunk).
+    fn pieces_of(&self, c: u32) -> u16 {
+        let first = c * PIECES_PER_CHUNK as u32;
+        (0..PIECES_PER_CHUNK as u32).fold(0, |m, i| {
+            let p = first + i;
+            let have = self
+                .pieces
+                .get((p / 32) as usize)
+                .is_some_and(|w| w & (1 << (p % 32)) != 0);
+            m | (u16::from(have) << i)
+        })
+    }
+
     /// Note pieces `first..end` received; set their chunk's bit once all its pieces are in.
     fn got_pieces(&mut self, first: u32, end: u32) {
         for p in first..end {
@@ -383,7 +396,12 @@ impl Nc {
                         chunks[w] |= bit;
                     }
                 }
-                SceneState::Missing { frame, chunks }
+                let pieces = bank.first_missing().map_or(0, |c| bank.pieces_of(c));
+                SceneState::Missing {
+                    frame,
+                    chunks,
+                    pieces,
+                }
             }
         }
     }
@@ -509,6 +527,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                         _ => SceneState::Missing {
                             frame,
                             chunks: [u32::MAX; MAX_CHUNKS / 32],
+                            pieces: 0,
                         },
                     });
                 }
@@ -794,6 +813,7 @@ mod tests {
         b.got_pieces(per + per / 2, 2 * per);
         assert_eq!(b.first_missing(), Some(0));
         b.got_pieces(per, per + 1);
+        assert_eq!(b.pieces_of(1), 0xff01);
         b.got_pieces(per, per + per / 2);
         assert_eq!(b.got[0], 0b010);
         b.got_pieces(0, per);

@@ -267,7 +267,9 @@ impl NodeSlot {
 
 /// A node's scene repair on a noisy link: a chunk sent whole that the node still reports
 /// missing is sent again in halves, quarters, ... down to [`wire::SCENE_PIECE`] bytes, one
-/// piece per exchange, so that short frames get through where a whole chunk never would.
+/// piece per exchange and only the pieces the node lacks, so that short frames get through
+/// where a whole chunk never would; two chunks in a row that get through at the first try
+/// double the piece size again.
 #[derive(Clone, Copy, Debug)]
 struct Pieces {
     /// The frame whose scene is being repaired.
@@ -279,6 +281,11 @@ struct Pieces {
     /// The highest chunk sent in full so far: a chunk at or below it asked for again was
     /// lost on the way, so pieces get smaller.
     high: Option<u8>,
+    /// Chunks started at the first try since the piece size last changed.
+    streak: u8,
+    /// The node's last report of the pieces it holds of its first missing chunk: (chunk,
+    /// bitmap of pieces).
+    have: Option<(u8, u16)>,
 }
 
 impl Pieces {
@@ -288,6 +295,8 @@ impl Pieces {
             size: SCENE_CHUNK as u16,
             cycle: None,
             high: None,
+            streak: 0,
+            have: None,
         }
     }
 }
@@ -864,13 +873,32 @@ impl RootState {
                     Some((cc, at)) if cc == c8 => at as usize,
                     _ => {
                         if p.high.is_some_and(|h| c8 <= h) {
+                            // Sent in full and asked for again: lost on the way.
                             p.size = (p.size / 2).max(wire::SCENE_PIECE as u16);
+                            p.streak = 0;
+                        } else {
+                            p.streak = p.streak.saturating_add(1);
+                            if p.streak > 2 {
+                                p.size = (p.size * 2).min(SCENE_CHUNK as u16);
+                                p.streak = 0;
+                            }
                         }
                         0
                     }
                 };
                 let chunk_start = (c as usize * SCENE_CHUNK).min(scene.len());
                 let chunk_end = (chunk_start + SCENE_CHUNK).min(scene.len());
+                // Skip the pieces the node says it holds.
+                let held = p.have.filter(|h| h.0 == c8).map_or(0, |h| h.1);
+                let piece = wire::SCENE_PIECE;
+                let mut at = at;
+                while at < chunk_end - chunk_start && held & (1u16 << ((at / piece) % 16)) != 0 {
+                    at += piece;
+                }
+                if at >= chunk_end - chunk_start {
+                    // It holds them all by its last word: send the rest of the cycle anyway.
+                    at = p.cycle.filter(|c| c.0 == c8).map_or(0, |c| c.1 as usize);
+                }
                 let start = (chunk_start + at).min(chunk_end);
                 let end = (start + p.size as usize).min(chunk_end);
                 if end >= chunk_end {
@@ -940,7 +968,19 @@ impl RootState {
                         slot.pieces = None;
                     }
                 }
-                SceneState::Missing { frame, mut chunks } => {
+                SceneState::Missing {
+                    frame,
+                    mut chunks,
+                    pieces,
+                } => {
+                    // What it holds of its first missing chunk.
+                    let first = (0..wire::MAX_CHUNKS as u32)
+                        .find(|&c| chunks[(c / 32) as usize] & (1 << (c % 32)) != 0);
+                    if let (Some(p), Some(c)) = (&mut slot.pieces, first) {
+                        if p.frame == frame {
+                            p.have = Some((c as u8, pieces));
+                        }
+                    }
                     // A chunk being sent in pieces that the node now has is done.
                     if let Some(p) = &mut slot.pieces {
                         if let Some((c, _)) = p.cycle {

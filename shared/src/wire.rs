@@ -34,6 +34,7 @@ pub const SCENE_CHUNK: usize = 1024;
 pub const SCENE_PIECE: usize = 64;
 /// Pieces in a chunk.
 pub const PIECES_PER_CHUNK: usize = SCENE_CHUNK / SCENE_PIECE;
+const _: () = assert!(PIECES_PER_CHUNK <= 16 && SCENE_CHUNK.is_multiple_of(SCENE_PIECE));
 /// Largest scene image a node bank holds (the IMSU's 128 KB bank).
 pub const MAX_SCENE: usize = 128 * 1024;
 /// Scene chunks in a full bank.
@@ -121,10 +122,13 @@ pub enum SceneState {
     /// Complete, CRC-checked and validated.
     Ready { frame: u16 },
     /// The broadcast ended but these chunks are missing (bit `c` of word `c / 32` set =
-    /// chunk `c`, at byte `c · SCENE_CHUNK`, lost or corrupt).
+    /// chunk `c`, at byte `c · SCENE_CHUNK`, lost or corrupt). `pieces`: which
+    /// [`SCENE_PIECE`]-byte pieces of the first missing chunk the node already holds (bit
+    /// `i` = piece `i`), so a repair in pieces sends only the others.
     Missing {
         frame: u16,
         chunks: [u32; MAX_CHUNKS / 32],
+        pieces: u16,
     },
     /// Nothing received yet.
     None,
@@ -406,6 +410,7 @@ mod tests {
                 scene: SceneState::Missing {
                     frame: 2,
                     chunks: [1, 0, 0, 1 << 31],
+                    pieces: 0b1010_0000_0000_0001,
                 },
             },
             Up::Status {

@@ -676,6 +676,7 @@ mod hostile_bus {
                     scene: SceneState::Missing {
                         frame: small(r, 3) as u16,
                         chunks: [r.next_u64() as u32, r.next_u64() as u32, 0, u32::MAX],
+                        pieces: r.next_u64() as u16,
                     },
                 },
                 4 => Up::Poll,
