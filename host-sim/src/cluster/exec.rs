@@ -115,14 +115,14 @@ impl std::fmt::Display for ExecError {
         let at = self.at_s();
         match self {
             ExecError::Deadlock { .. } => {
-                write!(f, "stalled at {at:.3} s of virtual time (no event pending)")
+                write!(f, "stalled at {at:.3} s of virtual time: no event pending")
             }
             ExecError::TimeLimit { .. } => {
-                write!(f, "unfinished at the time limit, {at:.3} s of virtual time")
+                write!(f, "reached its time limit at {at:.3} s of virtual time")
             }
             ExecError::Livelock { .. } => write!(
                 f,
-                "no node frame accepted in a long run of events, stopped at {at:.3} s of virtual time (livelock)"
+                "stopped at {at:.3} s of virtual time: no node frame accepted in a long run of events (livelock)"
             ),
         }
     }

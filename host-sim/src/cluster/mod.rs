@@ -328,7 +328,7 @@ impl fmt::Display for Unfinished {
         if parts.is_empty() {
             parts.push("nothing is pending (the RC's last broadcast was lost)".into());
         }
-        write!(f, ": {} (simulation {})", parts.join("; "), self.cause)
+        write!(f, ": {} (the simulation {})", parts.join("; "), self.cause)
     }
 }
 

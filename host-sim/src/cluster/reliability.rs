@@ -502,7 +502,11 @@ pub fn faults_markdown(s: &FaultSweep, command: &str) -> String {
     bers.dedup();
     m.push_str("| killed | bound (s) |");
     for b in &bers {
-        let _ = write!(m, " frame, bit-error rate {b:e} (s) |");
+        if *b == 0.0 {
+            m.push_str(" frame, no bit errors (s) |");
+        } else {
+            let _ = write!(m, " frame, bit-error rate {b:e} both ways (s) |");
+        }
     }
     m.push_str("\n|---|---|");
     for _ in &bers {
@@ -545,16 +549,40 @@ fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
     SimError::Config(format!("chart: {e}"))
 }
 
-/// The three panels: kill moment, bit-error rate, fraction killed. An SVG file.
-pub fn write_faults_chart(path: &Path, s: &FaultSweep) -> Result<(), SimError> {
-    crate::chart::ensure_font().map_err(chart_err)?;
-    let root = SVGBackend::new(path, (820, 1500)).into_drawing_area();
+/// Size of the chart (pixels).
+const CHART: (u32, u32) = (820, 1500);
+
+fn draw_all<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    s: &FaultSweep,
+) -> Result<(), SimError>
+where
+    DB::ErrorType: 'static,
+{
     root.fill(&WHITE).map_err(chart_err)?;
     let panels = root.split_evenly((3, 1));
     draw_kills(&panels[0], s)?;
     draw_bers(&panels[1], s)?;
     draw_fractions(&panels[2], s)?;
     root.present().map_err(chart_err)
+}
+
+/// The three panels: kill moment, bit-error rate, fraction killed. An SVG file.
+pub fn write_faults_chart(path: &Path, s: &FaultSweep) -> Result<(), SimError> {
+    crate::chart::ensure_font().map_err(chart_err)?;
+    draw_all(SVGBackend::new(path, CHART).into_drawing_area(), s)
+}
+
+/// The same chart as a PNG.
+pub fn faults_png(s: &FaultSweep) -> Result<Vec<u8>, SimError> {
+    crate::chart::ensure_font().map_err(chart_err)?;
+    let (w, h) = CHART;
+    let mut rgb = vec![0u8; (w * h * 3) as usize];
+    draw_all(
+        BitMapBackend::with_buffer(&mut rgb, CHART).into_drawing_area(),
+        s,
+    )?;
+    crate::frame::encode_png(w, h, &rgb).map_err(chart_err)
 }
 
 fn draw_kills<DB: DrawingBackend>(
@@ -580,7 +608,7 @@ where
         .margin(15)
         .x_label_area_size(40)
         .y_label_area_size(60)
-        .build_cartesian_2d(0f64..1.0, 0f64..tmax * 1.1)
+        .build_cartesian_2d(0f64..1.0, 0f64..tmax * 1.4)
         .map_err(chart_err)?;
     chart
         .configure_mesh()
@@ -620,11 +648,11 @@ where
             BLACK,
         )))
         .map_err(chart_err)?
-        .label("dashed: the bound, clean + 2τ + W")
+        .label("dashed: each policy's bound, clean + 2τ + W")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.6)));
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
+        .position(SeriesLabelPosition::UpperLeft)
         .background_style(WHITE.mix(0.9))
         .border_style(BLACK.mix(0.3))
         .draw()
@@ -661,7 +689,7 @@ where
         .y_label_area_size(60)
         .build_cartesian_2d(
             (bmin * 0.7..bmax * 1.4).log_scale(),
-            (s.clean_s * 0.8..tmax * 1.3).log_scale(),
+            (s.clean_s * 0.6..tmax * 1.5).log_scale(),
         )
         .map_err(chart_err)?;
     chart
@@ -669,6 +697,8 @@ where
         .x_desc("bit-error rate (log)")
         .y_desc("frame time, s (virtual, log)")
         .x_label_formatter(&|x| format!("{x:.0e}"))
+        .y_label_formatter(&|y| format!("{y:.2}"))
+        .y_labels(7)
         .draw()
         .map_err(chart_err)?;
     chart
@@ -679,8 +709,10 @@ where
         .map_err(chart_err)?
         .label("fault-free")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.4)));
+    // "both" is drawn over "down" (they nearly coincide: the down-link's errors cost), thinner.
     for (i, dir) in ["down", "up", "both"].iter().enumerate() {
         let col = COLOURS[i];
+        let width = if i == 0 { 5 } else { 2 };
         let mut rates: Vec<f64> = s.bers.iter().map(|b| b.ber).collect();
         rates.dedup();
         let line: Vec<(f64, f64)> = rates
@@ -698,10 +730,10 @@ where
             })
             .collect();
         chart
-            .draw_series(LineSeries::new(line, col.stroke_width(2)))
+            .draw_series(LineSeries::new(line, col.stroke_width(width)))
             .map_err(chart_err)?
             .label(format!("{dir} (mean; dots: seeds)"))
-            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(2)));
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], col.stroke_width(width)));
         chart
             .draw_series(
                 s.bers
@@ -790,7 +822,7 @@ where
             BLACK.mix(0.6).stroke_width(1),
         ))
         .map_err(chart_err)?
-        .label("bound, clean + 2τ + ΣW")
+        .label("bound without bit errors, clean + 2τ + ΣW")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.6)));
     chart
         .configure_series_labels()
