@@ -138,8 +138,8 @@ pub struct RootConfig {
 
 impl RootConfig {
     /// 0.5 s: a live node rendering photo1 at 512x480 at 168 MHz is silent for at most
-    /// 0.15-0.2 s (its longest run), a 2.5x margin; a false alarm doubles the time-out
-    /// (see docs/cluster.md).
+    /// 0.15-0.2 s (its longest run), a 2.5x margin; a false alarm raises the time-out to
+    /// twice the silence it missed (see docs/reliability.md).
     pub const DEFAULT_TIMEOUT_US: u64 = 500_000;
 }
 
@@ -215,7 +215,8 @@ pub struct RootReport {
     pub polls: u32,
     /// Node frames accepted in sequence.
     pub accepted: u64,
-    /// Nodes declared dead (silent for the time-out while holding jobs).
+    /// Nodes declared dead (silent past their deadline while holding jobs or owing their
+    /// static region).
     pub timeouts: u32,
     /// Jobs of dead nodes handed to other nodes.
     pub reissued: u32,
