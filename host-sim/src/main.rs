@@ -116,9 +116,8 @@ enum Cmd {
         /// DM time per frame in ms: frame f's scene exists at (f+1) x this (cluster only)
         #[arg(long, default_value_t = 0.0)]
         dm_ms: f64,
-        /// A node that stops answering: NODE@SECONDS of virtual time (repeatable; cluster only)
-        #[arg(long = "kill", value_name = "NODE@SECONDS")]
-        kills: Vec<String>,
+        #[command(flatten)]
+        faults: cli_cluster::FaultArgs,
         /// How long the RC waits for a silent node holding work before re-issuing it, in ms
         #[arg(long, default_value_t = 500.0)]
         timeout_ms: f64,
@@ -272,6 +271,15 @@ enum SweepCmd {
         #[arg(short, long, default_value = "docs/cluster")]
         output: PathBuf,
     },
+    /// Reliability: frame time against the moment a node dies (every policy, with the
+    /// recovery bound), the bit-error rate and the fraction of nodes killed; writes the
+    /// table into docs/reliability.md and the chart beside it
+    Faults {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        #[command(flatten)]
+        opts: cli_cluster::FaultSweepArgs,
+    },
     /// LINKS-1 Fig. 5.2 analog: frame time against the number of sub-screens at 64 nodes
     Divisions {
         /// Scene file (.ron)
@@ -352,7 +360,7 @@ fn run(cli: Cli) -> Result<(), String> {
             bit_rate_mhz,
             policy,
             dm_ms,
-            kills,
+            faults,
             timeout_ms,
             rc_single_buffer,
         } => {
@@ -379,10 +387,7 @@ fn run(cli: Cli) -> Result<(), String> {
             cfg.dm_s_per_frame = dm_ms * 1e-3;
             cfg.node_timeout_s = timeout_ms * 1e-3;
             cfg.rc_double_buffer = !rc_single_buffer;
-            cfg.deaths = kills
-                .iter()
-                .map(|k| cli_cluster::parse_death(k))
-                .collect::<Result<_, _>>()?;
+            cli_cluster::apply_faults(&mut cfg, &faults)?;
             let start = std::time::Instant::now();
             let r = cli_cluster::render(&image, &cfg)?;
             let rep = &r.report;
@@ -391,7 +396,7 @@ fn run(cli: Cli) -> Result<(), String> {
             std::fs::write(&output, png).map_err(|e| format!("{}: {e}", output.display()))?;
             if !quiet {
                 eprintln!(
-                    "{}: {}x{} on {nodes} simulated nodes ({buses} bus(es) at {bit_rate_mhz} MHz, {policy}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered), {} bytes moved | host {:.2} s",
+                    "{}: {}x{} on {nodes} simulated nodes ({buses} bus(es) at {bit_rate_mhz} MHz, {policy}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered), {} bytes moved{} | host {:.2} s",
                     output.display(),
                     rep.width,
                     rep.height,
@@ -402,6 +407,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     100.0 * rep.rc_busy_s / rep.time_s,
                     if rc_single_buffer { "single" } else { "double" },
                     rep.bytes_moved(),
+                    cli_cluster::fault_summary(rep),
                     start.elapsed().as_secs_f64()
                 );
             }
@@ -646,6 +652,11 @@ fn run(cli: Cli) -> Result<(), String> {
                 cli_cluster::nodes_study(&image, &output, &|s| eprintln!("simulating {s} ..."))?;
             outln!("{text}");
             eprintln!("wrote {}/nodes.csv and nodes.svg", output.display());
+            Ok(())
+        }
+        Cmd::Sweep(SweepCmd::Faults { scene, opts }) => {
+            let text = cli_cluster::faults_study(&scene, &opts, &|s| eprintln!("{s}"))?;
+            outln!("{text}");
             Ok(())
         }
         Cmd::Sweep(SweepCmd::Divisions { scene, output }) => {

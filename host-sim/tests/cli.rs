@@ -662,3 +662,106 @@ fn render_takes_a_scene_or_an_image_not_both() {
         assert_eq!(code, Some(2), "{args:?}: {err}");
     }
 }
+
+/// Fault injection from the command line: bit errors both ways, lost broadcasts and nodes
+/// killed (one under the static split before it takes its region) give the host's image and
+/// a stats line that says what the faults did; bad fault options and a scene too large for
+/// a node's bank are one clear line each.
+#[test]
+fn cluster_render_with_faults_gives_the_host_render_and_bad_fault_options_say_why() {
+    let host = tmp("faults-host.png");
+    let base = |out: &Path| {
+        let mut c = links();
+        c.args([
+            "render",
+            scene("reflections.ron").to_str().unwrap(),
+            "--width",
+            "64",
+            "--height",
+            "60",
+            "-o",
+        ])
+        .arg(out);
+        c
+    };
+    assert!(base(&host).arg("--quiet").status().unwrap().success());
+    let want = std::fs::read(&host).unwrap();
+    let cases: [&[&str]; 2] = [
+        &[
+            "--nodes",
+            "8",
+            "--ber-down",
+            "1e-3",
+            "--ber-up",
+            "1e-3",
+            "--drop-broadcast",
+            "0.2",
+            "--fault-seed",
+            "3",
+            "--kill",
+            "1@0.02",
+            "--kill",
+            "5-6@0.025",
+            "--timeout-ms",
+            "50",
+        ],
+        // Static split, node 3 dead before it takes its region.
+        &[
+            "--nodes",
+            "4",
+            "--policy",
+            "static",
+            "--kill",
+            "3@0",
+            "--timeout-ms",
+            "20",
+        ],
+    ];
+    for (i, args) in cases.iter().enumerate() {
+        let out = tmp(&format!("faults-{i}.png"));
+        let o = base(&out).args(*args).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{args:?}: {err}");
+        assert_eq!(std::fs::read(&out).unwrap(), want, "{args:?}");
+        assert!(err.contains("| faults: "), "{err}");
+        assert!(err.contains("re-issued"), "{err}");
+    }
+    let fails = |args: &[&str], want: &str| {
+        let o = base(&tmp("bad.png")).args(args).output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    };
+    fails(
+        &["--nodes", "8", "--ber-up", "0.7"],
+        "--ber-up 0.7: a bit-error rate",
+    );
+    fails(
+        &["--nodes", "8", "--drop-broadcast", "1"],
+        "--drop-broadcast 1",
+    );
+    fails(
+        &["--nodes", "8", "--kill", "8@0.1"],
+        "node 8 does not exist (8 nodes: 0 to 7)",
+    );
+    fails(&["--nodes", "8", "--kill", "2@soon"], "NODE@SECONDS");
+    // photo2's scene image (187 KB) does not fit a node's 120 KB bank.
+    let o = links()
+        .args([
+            "render",
+            scene("photo2.ron").to_str().unwrap(),
+            "--nodes",
+            "4",
+            "-o",
+        ])
+        .arg(tmp("photo2.png"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        err.contains("187136 bytes") && err.contains("122880 bytes"),
+        "{err}"
+    );
+}

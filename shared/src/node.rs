@@ -18,7 +18,8 @@ use crate::link::{Incoming, LinkError, NodeLink};
 use crate::num::Real;
 use crate::render::{render_run, RenderError, Rgb8, Stats, Tracer};
 use crate::wire::{
-    self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_FRAME, MAX_RUN, SCENE_CHUNK,
+    self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_FRAME, MAX_RUN, MAX_SCENE,
+    PIECES_PER_CHUNK, SCENE_CHUNK, SCENE_PIECE,
 };
 use core::fmt;
 use core::marker::PhantomData;
@@ -162,6 +163,8 @@ struct Bank {
     /// CRC-32 of the whole scene (every chunk carries it).
     crc: u32,
     got: [u32; MAX_CHUNKS / 32],
+    /// Pieces ([`SCENE_PIECE`] bytes) received, for chunks repaired piece by piece.
+    pieces: [u32; MAX_SCENE / SCENE_PIECE / 32],
     /// The broadcast's SceneEnd was seen (so missing chunks are really missing).
     ended: bool,
     ready: bool,
@@ -173,12 +176,47 @@ impl Bank {
         total: 0,
         crc: 0,
         got: [0; MAX_CHUNKS / 32],
+        pieces: [0; MAX_SCENE / SCENE_PIECE / 32],
         ended: false,
         ready: false,
     };
 
     fn chunks(&self) -> u32 {
         self.total.div_ceil(SCENE_CHUNK as u32)
+    }
+
+    /// Which pieces of chunk `c` are in (bit `i` = piece `i` of the chunk).
+    fn pieces_of(&self, c: u32) -> u16 {
+        let first = c * PIECES_PER_CHUNK as u32;
+        (0..PIECES_PER_CHUNK as u32).fold(0, |m, i| {
+            let p = first + i;
+            let have = self
+                .pieces
+                .get((p / 32) as usize)
+                .is_some_and(|w| w & (1 << (p % 32)) != 0);
+            m | (u16::from(have) << i)
+        })
+    }
+
+    /// Note pieces `first..end` received; set their chunk's bit once all its pieces are in.
+    fn got_pieces(&mut self, first: u32, end: u32) {
+        for p in first..end {
+            if let Some(w) = self.pieces.get_mut((p / 32) as usize) {
+                *w |= 1 << (p % 32);
+            }
+        }
+        let all = self.total.div_ceil(SCENE_PIECE as u32);
+        let c = first / PIECES_PER_CHUNK as u32;
+        let lo = c * PIECES_PER_CHUNK as u32;
+        let hi = (lo + PIECES_PER_CHUNK as u32).min(all);
+        let complete = (lo..hi).all(|p| {
+            self.pieces
+                .get((p / 32) as usize)
+                .is_some_and(|w| w & (1 << (p % 32)) != 0)
+        });
+        if let (true, Some(w)) = (complete, self.got.get_mut((c / 32) as usize)) {
+            *w |= 1 << (c % 32);
+        }
     }
 
     fn first_missing(&self) -> Option<u32> {
@@ -195,6 +233,10 @@ impl Bank {
         }
     }
 }
+
+/// The shortest pixel run a node sends when its frames keep getting lost (see
+/// [`Nc::run_cap`]).
+pub const MIN_RUN: usize = 16;
 
 /// A frame kept until acknowledged.
 struct Slot {
@@ -245,6 +287,14 @@ struct Nc {
     status: Option<SceneState>,
     /// The RC broadcast [`Down::Wake`] for this frame: answer if idle.
     wake: Option<u16>,
+    /// The RC's half of the last exchange was unreadable: ask again (a `Poll`) even with
+    /// nothing to send, or a lost job list would leave an idle node silent until the RC
+    /// times it out.
+    reask: bool,
+    /// Longest pixel run to render next (pixels): halves (to [`MIN_RUN`]) whenever a frame
+    /// has to be sent again, grows by an eighth with every frame acknowledged at the first
+    /// try (to [`MAX_RUN`]), so on a noisy link frames shrink until most get through.
+    run_cap: usize,
     stopped: bool,
     report: NodeReport,
 }
@@ -287,18 +337,24 @@ impl Nc {
     /// Apply the RC's acknowledgement after exchange `ex` (`ack` = None when its frame was
     /// unreadable): drop what it covers, go back to the first frame it should have covered.
     fn acknowledge(&mut self, ack: Option<u16>, ex: u32) {
+        let mut acked = false;
         if let Some(a) = ack {
             for s in self.slots.iter_mut() {
                 if s.as_ref().is_some_and(|s| seq_le(s.seq, a)) {
                     *s = None;
+                    acked = true;
                 }
             }
         }
         self.order_slots();
         // A frame sent before this exchange and still unacknowledged was lost (or its
-        // acknowledgement was): send it and everything after it again.
+        // acknowledgement was): send it and everything after it again, and render shorter
+        // runs (a noisy link loses long frames first).
         if self.slots[0].as_ref().is_some_and(|s| s.sent_in < ex) {
             self.resend = 0;
+            self.run_cap = (self.run_cap / 2).max(MIN_RUN);
+        } else if acked {
+            self.run_cap = (self.run_cap + self.run_cap / 8 + 1).min(MAX_RUN);
         }
     }
 
@@ -340,7 +396,12 @@ impl Nc {
                         chunks[w] |= bit;
                     }
                 }
-                SceneState::Missing { frame, chunks }
+                let pieces = bank.first_missing().map_or(0, |c| bank.pieces_of(c));
+                SceneState::Missing {
+                    frame,
+                    chunks,
+                    pieces,
+                }
             }
         }
     }
@@ -361,13 +422,24 @@ fn scene_chunk(
 ) -> bool {
     let b = (frame % 2) as usize;
     let cap = banks[b].len() as u32;
-    let expect = (total.saturating_sub(offset)).min(SCENE_CHUNK as u32) as usize;
+    // A whole chunk (broadcast or repair), or, in an exchange, whole pieces of one chunk (the
+    // scene's last piece may be short).
+    let (chunk, piece) = (SCENE_CHUNK as u32, SCENE_PIECE as u32);
+    // Saturated on overflow: then past `total`, refused below.
+    let end = offset.saturating_add(u32::try_from(data.len()).unwrap_or(u32::MAX));
+    let whole_chunk =
+        offset.is_multiple_of(chunk) && end == total.min(offset.saturating_add(chunk));
+    let pieces = direct
+        && offset.is_multiple_of(piece)
+        && !data.is_empty()
+        && (end.is_multiple_of(piece) || end == total)
+        && offset / chunk == (end - 1) / chunk;
     if total as usize > wire::MAX_SCENE
         || total > cap
         || total == 0
-        || !offset.is_multiple_of(SCENE_CHUNK as u32)
         || offset >= total
-        || data.len() != expect
+        || end > total
+        || !(whole_chunk || pieces)
     {
         nc.report.bad_frames += 1;
         return false;
@@ -376,14 +448,12 @@ fn scene_chunk(
     if nc.banks[b].ready {
         return false;
     }
-    let end = offset as usize + data.len();
-    banks[b][offset as usize..end].copy_from_slice(data);
-    let c = offset / SCENE_CHUNK as u32;
-    nc.banks[b].got[(c / 32) as usize] |= 1 << (c % 32);
+    banks[b][offset as usize..end as usize].copy_from_slice(data);
+    nc.banks[b].got_pieces(offset / piece, end.div_ceil(piece));
     nc.report.chunks += 1;
     // Broadcasts go in order: the last chunk ends it even if its SceneEnd is lost. A chunk
     // sent point-to-point (a repair) means the broadcast is over, whether or not we heard it.
-    if end == total as usize || direct {
+    if end == total || direct {
         nc.banks[b].ended = true;
     }
     check_scene(nc, banks, b);
@@ -402,6 +472,7 @@ fn check_scene(nc: &mut Nc, banks: &[&mut [u8]; 2], b: usize) {
     } else {
         // Complete but wrong: take it all again.
         bank.got = [0; MAX_CHUNKS / 32];
+        bank.pieces = [0; MAX_SCENE / SCENE_PIECE / 32];
     }
 }
 
@@ -429,6 +500,8 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
         last_rc_seq: 0,
         status: None,
         wake: None,
+        reask: false,
+        run_cap: MAX_RUN,
         stopped: false,
         report: *report,
     };
@@ -454,6 +527,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                         _ => SceneState::Missing {
                             frame,
                             chunks: [u32::MAX; MAX_CHUNKS / 32],
+                            pieces: 0,
                         },
                     });
                 }
@@ -513,10 +587,11 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
         }
         if posted {
             nc.report.frames_posted += 1;
-        } else if nc.unacked() > 0 || woken {
+        } else if nc.unacked() > 0 || woken || nc.reask {
             let n = wire::encode(nc.next_seq, nc.last_rc_seq, &Up::Poll, &mut poll).unwrap_or(0);
             link.post(&poll[..n])?;
             nc.report.polls += 1;
+            nc.reask = false;
             posted = true;
         }
 
@@ -553,6 +628,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
             }
             *report = nc.report;
             if exchanged {
+                nc.reask = ack.is_none();
                 nc.acknowledge(ack, nc.exchanges);
                 nc.exchanges = nc.exchanges.wrapping_add(1);
                 // A scene still incomplete after its broadcast: keep telling the RC what is
@@ -615,7 +691,7 @@ async fn render_next<C: WorkClock, R: RunRenderer>(
         return false;
     };
     let x = x0 + cur.offset;
-    let n = (plen - cur.offset).min(MAX_RUN as u32) as usize;
+    let n = (plen - cur.offset).min(nc.run_cap.clamp(1, MAX_RUN) as u32) as usize;
     let (Ok(y16), Ok(x16)) = (u16::try_from(y), u16::try_from(x)) else {
         nc.report.bad_jobs += 1;
         nc.cursor = None;
@@ -724,5 +800,25 @@ mod tests {
         assert_eq!(b.first_missing(), None);
         b.expect(5, 5 * SCENE_CHUNK as u32 + 1, 0);
         assert_eq!(b.first_missing(), Some(0));
+    }
+
+    #[test]
+    fn a_chunk_arrives_in_pieces_in_any_order() {
+        let mut b = Bank::EMPTY;
+        // Two chunks and one byte: the last chunk is one short piece.
+        let total = 2 * SCENE_CHUNK as u32 + 1;
+        b.expect(0, total, 0);
+        let per = PIECES_PER_CHUNK as u32;
+        // Chunk 1 in pieces, the second half first, the first twice over.
+        b.got_pieces(per + per / 2, 2 * per);
+        assert_eq!(b.first_missing(), Some(0));
+        b.got_pieces(per, per + 1);
+        assert_eq!(b.pieces_of(1), 0xff01);
+        b.got_pieces(per, per + per / 2);
+        assert_eq!(b.got[0], 0b010);
+        b.got_pieces(0, per);
+        assert_eq!(b.first_missing(), Some(2));
+        b.got_pieces(2 * per, 2 * per + 1);
+        assert_eq!(b.first_missing(), None);
     }
 }

@@ -18,8 +18,15 @@
 //! [`RootConfig::timeout_us`] (checked only while no ready line on its bus is up, so bus
 //! congestion is never mistaken for silence) is declared dead; its jobs stay in its slot as
 //! orphans, are handed (with fresh ids) to the next live nodes that ask, and every bus
-//! broadcasts [`Down::Wake`] so idle nodes ask. A "dead" node that speaks again is live again
-//! and the time-out doubles (it was too short: this bounds the work lost to false alarms).
+//! broadcasts [`Down::Wake`] so idle nodes ask. Under a static split a node also owes the RC
+//! its region of the frame being handed out: silent for two time-outs after its bus
+//! broadcast that frame's scene (one for the roll call that reaches a node which missed the
+//! broadcast, one for its answer), it is declared dead and its region becomes an orphan.
+//! A "dead" node that speaks again is live again; if it was declared dead while holding
+//! jobs, the time-out becomes at least twice the silence it was declared dead for (it was
+//! too short). The time-out in force therefore never exceeds the larger of the configured
+//! one and twice the longest silence of a node that was rendering, however many false alarms
+//! there are (see docs/reliability.md for the recovery bound).
 
 use crate::image::SceneView;
 use crate::link::{LinkError, NodeId, RootBus, Transfer};
@@ -131,8 +138,8 @@ pub struct RootConfig {
 
 impl RootConfig {
     /// 0.5 s: a live node rendering photo1 at 512x480 at 168 MHz is silent for at most
-    /// 0.15-0.2 s (its longest run), a 2.5x margin; a false alarm doubles the time-out
-    /// (see docs/cluster.md).
+    /// 0.15-0.2 s (its longest run), a 2.5x margin; a false alarm raises the time-out to
+    /// twice the silence it missed (see docs/reliability.md).
     pub const DEFAULT_TIMEOUT_US: u64 = 500_000;
 }
 
@@ -143,9 +150,16 @@ pub enum RootError {
     TooManyNodes {
         nodes: u16,
     },
-    /// Frame `frame` has no scene, or it is not a valid SceneImage, or larger than a bank.
+    /// Frame `frame` has no scene, or it is not a valid SceneImage.
     BadScene {
         frame: u16,
+    },
+    /// Frame `frame`'s scene image is `len` bytes, more than the protocol carries (`max`,
+    /// [`wire::MAX_SCENE`]).
+    SceneTooLarge {
+        frame: u16,
+        len: u32,
+        max: u32,
     },
     /// Frames of one animation differ in screen size.
     SizeChanged {
@@ -162,6 +176,10 @@ impl fmt::Display for RootError {
                 write!(f, "{nodes} nodes (at most {MAX_NODES})")
             }
             RootError::BadScene { frame } => write!(f, "frame {frame} has no usable scene image"),
+            RootError::SceneTooLarge { frame, len, max } => write!(
+                f,
+                "frame {frame}'s scene image is {len} bytes, more than the {max} bytes a scene may have"
+            ),
             RootError::SizeChanged { frame } => write!(f, "frame {frame} changes the screen size"),
             RootError::Sched(e) => write!(f, "scheduling: {e}"),
             RootError::Link(e) => write!(f, "link: {e}"),
@@ -197,12 +215,15 @@ pub struct RootReport {
     pub polls: u32,
     /// Node frames accepted in sequence.
     pub accepted: u64,
-    /// Nodes declared dead (silent for the time-out while holding jobs).
+    /// Nodes declared dead (silent past their deadline while holding jobs or owing their
+    /// static region).
     pub timeouts: u32,
     /// Jobs of dead nodes handed to other nodes.
     pub reissued: u32,
     /// Nodes declared dead that spoke again (and were taken back).
     pub revived: u32,
+    /// The time-out in force (µs): the configured one, raised by false alarms.
+    pub timeout_us: u64,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -216,10 +237,16 @@ struct NodeSlot {
     repair: Option<(u16, [u32; wire::MAX_CHUNKS / 32])>,
     /// The chunk re-sent in the exchange in progress.
     repairing: Option<u32>,
-    /// When the RC last exchanged with the node (µs).
+    /// How the node's scene is being repaired piece by piece.
+    pieces: Option<Pieces>,
+    /// When the RC last exchanged with the node (µs); for a node declared dead, the moment
+    /// its silence was counted from.
     heard_us: u64,
     /// Declared dead: its jobs are orphans waiting to be re-issued.
     dead: bool,
+    /// Declared dead while holding jobs (it was rendering): if it speaks again, the
+    /// time-out was too short for its runs.
+    dead_rendering: bool,
 }
 
 impl NodeSlot {
@@ -229,11 +256,49 @@ impl NodeSlot {
         ready: [None; 2],
         repair: None,
         repairing: None,
+        pieces: None,
         heard_us: 0,
         dead: false,
+        dead_rendering: false,
     };
     fn ready_for(&self, frame: u16) -> bool {
         self.ready[(frame % 2) as usize] == Some(frame)
+    }
+}
+
+/// A node's scene repair on a noisy link: a chunk sent whole that the node still reports
+/// missing is sent again in halves, quarters, ... down to [`wire::SCENE_PIECE`] bytes, one
+/// piece per exchange and only the pieces the node lacks, so that short frames get through
+/// where a whole chunk never would; two chunks in a row that get through at the first try
+/// double the piece size again.
+#[derive(Clone, Copy, Debug)]
+struct Pieces {
+    /// The frame whose scene is being repaired.
+    frame: u16,
+    /// Piece size in bytes (a power of two, [`wire::SCENE_PIECE`]..=[`SCENE_CHUNK`]).
+    size: u16,
+    /// The chunk being sent piece by piece and the offset of its next piece.
+    cycle: Option<(u8, u16)>,
+    /// The highest chunk sent in full so far: a chunk at or below it asked for again was
+    /// lost on the way, so pieces get smaller.
+    high: Option<u8>,
+    /// Chunks started at the first try since the piece size last changed.
+    streak: u8,
+    /// The node's last report of the pieces it holds of its first missing chunk: (chunk,
+    /// bitmap of pieces).
+    have: Option<(u8, u16)>,
+}
+
+impl Pieces {
+    fn new(frame: u16) -> Self {
+        Self {
+            frame,
+            size: SCENE_CHUNK as u16,
+            cycle: None,
+            high: None,
+            streak: 0,
+            have: None,
+        }
     }
 }
 
@@ -260,10 +325,11 @@ pub struct RootState {
     complete: u16,
     next_job: u32,
     report: RootReport,
-    /// Nodes declared dead so far (each bus broadcasts `Wake` when this grows).
-    deaths: u16,
-    /// The time-out in force (µs): starts at `cfg.timeout_us`, doubles whenever a node
-    /// declared dead speaks again (it was too short).
+    /// Times jobs became orphans (a node declared dead holding jobs, a dead node's static
+    /// region issued to it): each bus broadcasts `Wake` when this grows.
+    orphaned: u16,
+    /// The time-out in force (µs): starts at `cfg.timeout_us`; a node declared dead while
+    /// rendering that speaks again raises it to twice the silence it was declared dead for.
     timeout_us: u64,
     /// Bus tasks waiting for the end (woken when the last frame completes).
     finish_wakers: [Option<Waker>; MAX_BUSES],
@@ -302,7 +368,11 @@ impl RootState {
         for frame in 0..cfg.frames {
             let bytes = scenes.scene(frame).ok_or(RootError::BadScene { frame })?;
             if bytes.len() > wire::MAX_SCENE {
-                return Err(RootError::BadScene { frame });
+                return Err(RootError::SceneTooLarge {
+                    frame,
+                    len: u32::try_from(bytes.len()).unwrap_or(u32::MAX),
+                    max: wire::MAX_SCENE as u32,
+                });
             }
             let v = SceneView::new(bytes).map_err(|_| RootError::BadScene { frame })?;
             let f = v.frame::<f32>();
@@ -334,7 +404,7 @@ impl RootState {
             complete: 0,
             next_job: 0,
             report: RootReport::default(),
-            deaths: 0,
+            orphaned: 0,
             timeout_us: cfg.timeout_us,
             finish_wakers: [const { None }; MAX_BUSES],
             scene_crc: [None; 2],
@@ -358,7 +428,10 @@ impl RootState {
     }
 
     pub fn report(&self) -> RootReport {
-        self.report
+        RootReport {
+            timeout_us: self.timeout_us,
+            ..self.report
+        }
     }
 
     /// Whether frame `f`'s scene may be broadcast (its node bank and frame-memory bank are
@@ -423,21 +496,31 @@ impl RootState {
         core::mem::take(&mut self.crc_work)
     }
 
-    /// Nodes declared dead so far.
-    pub fn deaths(&self) -> u16 {
-        self.deaths
+    /// How many times jobs became orphans (nodes declared dead holding jobs, static regions
+    /// of dead nodes): each bus calls a roll when this grows.
+    pub fn orphaned(&self) -> u16 {
+        self.orphaned
     }
 
-    /// Note an exchange with `node` at `now_us`; a node declared dead is live again.
+    /// Note an exchange with `node` at `now_us`; a node declared dead is live again. If it
+    /// was declared dead while rendering, the time-out was shorter than its run: the time-out
+    /// becomes at least twice the silence it was declared dead for. Silences of live nodes
+    /// are bounded by their longest run, so this cannot grow without bound, however many
+    /// nodes are falsely declared dead at once.
     pub fn heard(&mut self, node: NodeId, now_us: u64) {
-        if let Some(slot) = self.nodes.get_mut(node as usize) {
-            slot.heard_us = now_us;
-            if slot.dead {
-                slot.dead = false;
-                self.report.revived += 1;
-                self.timeout_us = self.timeout_us.saturating_mul(2);
+        let Some(slot) = self.nodes.get_mut(node as usize) else {
+            return;
+        };
+        if slot.dead {
+            slot.dead = false;
+            self.report.revived += 1;
+            if slot.dead_rendering {
+                let silence = now_us.saturating_sub(slot.heard_us);
+                self.timeout_us = self.timeout_us.max(silence.saturating_mul(2));
             }
+            slot.dead_rendering = false;
         }
+        slot.heard_us = now_us;
     }
 
     fn nodes_in(&self, first: NodeId, count: u16) -> core::ops::Range<usize> {
@@ -445,42 +528,165 @@ impl RootState {
         (first as usize).min(end)..end
     }
 
-    /// When the first live node of `first..first + count` holding jobs times out (µs).
-    pub fn next_deadline(&self, first: NodeId, count: u16) -> Option<u64> {
-        if self.timeout_us == 0 {
+    /// Static split: whether node `n`'s region of the frame being handed out is still
+    /// waiting for it.
+    fn owes_region(&self, n: usize) -> bool {
+        matches!(self.cfg.policy, Policy::Static { .. })
+            && u16::try_from(n).is_ok_and(|n| self.sched.reserved(n))
+    }
+
+    /// When live node `n` must have spoken by, if it owes the RC an exchange, as (silence
+    /// counted from, deadline): a node holding jobs a time-out after it was last heard; a
+    /// node owing its static region (`scene_sent_us`: when its bus finished broadcasting the
+    /// scene of the frame being handed out) two time-outs after the later of that and its
+    /// last exchange.
+    fn deadline(&self, n: usize, scene_sent_us: Option<u64>) -> Option<(u64, u64)> {
+        let slot = self.nodes.get(n)?;
+        if slot.dead || self.timeout_us == 0 {
             return None;
         }
-        self.nodes[self.nodes_in(first, count)]
-            .iter()
-            .filter(|s| !s.dead && s.jobs.iter().any(|j| j.is_some()))
-            .map(|s| s.heard_us.saturating_add(self.timeout_us))
+        if slot.jobs.iter().any(|j| j.is_some()) {
+            return Some((slot.heard_us, slot.heard_us.saturating_add(self.timeout_us)));
+        }
+        let sent = scene_sent_us?;
+        if !self.owes_region(n) {
+            return None;
+        }
+        let since = slot.heard_us.max(sent);
+        Some((
+            since,
+            since.saturating_add(self.timeout_us.saturating_mul(2)),
+        ))
+    }
+
+    /// When the first live node of `first..first + count` that owes the RC an exchange times
+    /// out (µs). `scene_sent_us`: when this bus finished broadcasting the scene of the frame
+    /// being handed out ([`RootState::handing_out`]), if it has.
+    pub fn next_deadline(
+        &self,
+        first: NodeId,
+        count: u16,
+        scene_sent_us: Option<u64>,
+    ) -> Option<u64> {
+        self.nodes_in(first, count)
+            .filter_map(|n| self.deadline(n, scene_sent_us))
+            .map(|(_, d)| d)
             .min()
     }
 
-    /// Declare dead every live node of `first..first + count` that holds jobs and has been
-    /// silent for the time-out at `now_us`. Call only while none of them has its ready line
-    /// up. Returns how many died.
-    pub fn expire(&mut self, first: NodeId, count: u16, now_us: u64) -> u16 {
+    /// Declare dead every live node of `first..first + count` that owes the RC an exchange
+    /// and has been silent past its deadline at `now_us` (see [`RootState::next_deadline`]),
+    /// and issue the static region a dead node owes to that node as an orphan. Call only
+    /// while none of them has its ready line up. Returns how many died.
+    pub fn expire(
+        &mut self,
+        first: NodeId,
+        count: u16,
+        now_us: u64,
+        scene_sent_us: Option<u64>,
+    ) -> u16 {
         if self.timeout_us == 0 {
             return 0;
         }
-        let mut died = 0;
-        let timeout = self.timeout_us;
-        let range = self.nodes_in(first, count);
-        for slot in &mut self.nodes[range] {
-            if !slot.dead
-                && slot.jobs.iter().any(|j| j.is_some())
-                && now_us >= slot.heard_us.saturating_add(timeout)
-            {
-                slot.dead = true;
-                slot.repair = None;
-                slot.repairing = None;
-                died += 1;
+        let mut died = 0u16;
+        let mut orphaned = 0u16;
+        for n in self.nodes_in(first, count) {
+            if let Some((since, deadline)) = self.deadline(n, scene_sent_us) {
+                if now_us >= deadline {
+                    let slot = &mut self.nodes[n];
+                    let rendering = slot.jobs.iter().any(|j| j.is_some());
+                    slot.dead = true;
+                    slot.dead_rendering = rendering;
+                    slot.heard_us = since;
+                    slot.repair = None;
+                    slot.repairing = None;
+                    slot.pieces = None;
+                    died += 1;
+                    if rendering {
+                        orphaned += 1;
+                    }
+                }
+            }
+            if self.nodes[n].dead && self.orphan_region(n) {
+                orphaned += 1;
             }
         }
-        self.deaths = self.deaths.saturating_add(died);
+        self.orphaned = self.orphaned.saturating_add(orphaned);
         self.report.timeouts += died as u32;
         died
+    }
+
+    /// Static split: issue dead node `n`'s region of the frame being handed out into its own
+    /// slot, as an orphan for a live node to adopt. Returns whether it did.
+    fn orphan_region(&mut self, n: usize) -> bool {
+        if !self.owes_region(n) {
+            return false;
+        }
+        let Some(free) = self.nodes[n].jobs.iter().position(|j| j.is_none()) else {
+            return false;
+        };
+        let Some(region) = self.sched.next_for(n as NodeId) else {
+            return false;
+        };
+        let frame = self.sched_frame;
+        self.nodes[n].jobs[free] = Some(Job {
+            id: self.next_job,
+            frame,
+            region,
+        });
+        self.next_job += 1;
+        self.report.jobs += 1;
+        if let Some(p) = self.prog(frame) {
+            p.issued += 1;
+        }
+        true
+    }
+
+    /// The frame whose jobs are being handed out.
+    pub fn handing_out(&self) -> u16 {
+        self.sched_frame
+    }
+
+    /// Sub-screens handed out and not yet returned, as (holder, job, holder declared dead):
+    /// what a run that cannot finish waits for (diagnostics).
+    pub fn pending(&self) -> impl Iterator<Item = (NodeId, Job, bool)> + '_ {
+        self.nodes[..self.cfg.nodes as usize]
+            .iter()
+            .enumerate()
+            .flat_map(|(n, s)| {
+                s.jobs
+                    .iter()
+                    .flatten()
+                    .map(move |j| (n as NodeId, *j, s.dead))
+            })
+    }
+
+    /// Sub-screens of the frame being handed out that no node has been given yet (about, for
+    /// the decreasing policy; see [`Scheduler::remaining`]).
+    pub fn unissued(&self) -> u32 {
+        if self.sched.exhausted() {
+            0
+        } else {
+            self.sched.remaining()
+        }
+    }
+
+    /// Static split: whether `node`'s region of the frame being handed out still waits for
+    /// it to ask.
+    pub fn reserved(&self, node: NodeId) -> bool {
+        self.sched.reserved(node)
+    }
+
+    /// Whether `node` is declared dead now.
+    pub fn is_dead(&self, node: NodeId) -> bool {
+        self.nodes.get(node as usize).is_some_and(|s| s.dead)
+    }
+
+    /// Whether `node` has reported frame `frame`'s scene ready.
+    pub fn has_scene(&self, node: NodeId, frame: u16) -> bool {
+        self.nodes
+            .get(node as usize)
+            .is_some_and(|s| s.ready_for(frame))
     }
 
     /// The frame to call a roll ([`Down::Wake`]) for on nodes `first..first + count`, if
@@ -510,7 +716,7 @@ impl RootState {
             .then_some(f)
     }
 
-    /// The time-out in force (µs; it doubles after each false alarm).
+    /// The time-out in force (µs; false alarms raise it, see [`RootState::heard`]).
     pub fn timeout_us(&self) -> u64 {
         self.timeout_us
     }
@@ -597,7 +803,7 @@ impl RootState {
             if held >= JOB_QUEUE || (held > 0 && !self.sched.may_prefetch()) {
                 return;
             }
-            if self.deaths > 0 && self.adopt(node) {
+            if self.orphaned > 0 && self.adopt(node) {
                 continue;
             }
             let slot = &self.nodes[node as usize];
@@ -637,11 +843,18 @@ impl RootState {
         let seq = self.report.exchanges as u16;
         let slot = &mut self.nodes[node as usize];
         slot.repairing = None;
+        let pieces = slot.pieces;
         let next = slot.repair.and_then(|(frame, map)| {
             // Only chunks the scene has (a node that heard nothing of it asks for all).
             let chunks = scenes
                 .scene(frame)
                 .map_or(0, |s| s.len().div_ceil(SCENE_CHUNK)) as u32;
+            // A chunk part-sent in pieces is finished first.
+            if let Some((c, _)) = pieces.filter(|p| p.frame == frame).and_then(|p| p.cycle) {
+                if (c as u32) < chunks {
+                    return Some((frame, c as u32));
+                }
+            }
             let c = (0..chunks.min(wire::MAX_CHUNKS as u32))
                 .find(|&c| map[(c / 32) as usize] & (1 << (c % 32)) != 0)?;
             Some((frame, c))
@@ -650,13 +863,55 @@ impl RootState {
             slot.repair = None;
         }
         if let Some((frame, c)) = next {
-            if let Some((_, map)) = &mut slot.repair {
-                map[(c / 32) as usize] &= !(1 << (c % 32));
-            }
             slot.repairing = Some(c);
             if let Some(scene) = scenes.scene(frame) {
-                let start = (c as usize * SCENE_CHUNK).min(scene.len());
-                let end = (start + SCENE_CHUNK).min(scene.len());
+                let mut p = match slot.pieces {
+                    Some(p) if p.frame == frame => p,
+                    _ => Pieces::new(frame),
+                };
+                let c8 = c as u8;
+                let at = match p.cycle {
+                    Some((cc, at)) if cc == c8 => at as usize,
+                    _ => {
+                        if p.high.is_some_and(|h| c8 <= h) {
+                            // Sent in full and asked for again: lost on the way.
+                            p.size = (p.size / 2).max(wire::SCENE_PIECE as u16);
+                            p.streak = 0;
+                        } else {
+                            p.streak = p.streak.saturating_add(1);
+                            if p.streak > 2 {
+                                p.size = (p.size * 2).min(SCENE_CHUNK as u16);
+                                p.streak = 0;
+                            }
+                        }
+                        0
+                    }
+                };
+                let chunk_start = (c as usize * SCENE_CHUNK).min(scene.len());
+                let chunk_end = (chunk_start + SCENE_CHUNK).min(scene.len());
+                // Skip the pieces the node says it holds.
+                let held = p.have.filter(|h| h.0 == c8).map_or(0, |h| h.1);
+                let piece = wire::SCENE_PIECE;
+                let mut at = at;
+                while at < chunk_end - chunk_start && held & (1u16 << ((at / piece) % 16)) != 0 {
+                    at += piece;
+                }
+                if at >= chunk_end - chunk_start {
+                    // It holds them all by its last word: send the rest of the cycle anyway.
+                    at = p.cycle.filter(|c| c.0 == c8).map_or(0, |c| c.1 as usize);
+                }
+                let start = (chunk_start + at).min(chunk_end);
+                let end = (start + p.size as usize).min(chunk_end);
+                if end >= chunk_end {
+                    if let Some((_, map)) = &mut slot.repair {
+                        map[(c / 32) as usize] &= !(1 << (c % 32));
+                    }
+                    p.cycle = None;
+                    p.high = Some(p.high.map_or(c8, |h| h.max(c8)));
+                } else {
+                    p.cycle = Some((c8, (at + p.size as usize) as u16));
+                }
+                slot.pieces = Some(p);
                 let crc = self.scene_crc(frame, scene, scenes.scene_crc(frame));
                 let msg = Down::Scene {
                     frame,
@@ -710,8 +965,32 @@ impl RootState {
                     if slot.repair.is_some_and(|(f, _)| f == frame) {
                         slot.repair = None;
                     }
+                    if slot.pieces.is_some_and(|p| p.frame == frame) {
+                        slot.pieces = None;
+                    }
                 }
-                SceneState::Missing { frame, mut chunks } => {
+                SceneState::Missing {
+                    frame,
+                    mut chunks,
+                    pieces,
+                } => {
+                    // What it holds of its first missing chunk.
+                    let first = (0..wire::MAX_CHUNKS as u32)
+                        .find(|&c| chunks[(c / 32) as usize] & (1 << (c % 32)) != 0);
+                    if let (Some(p), Some(c)) = (&mut slot.pieces, first) {
+                        if p.frame == frame {
+                            p.have = Some((c as u8, pieces));
+                        }
+                    }
+                    // A chunk being sent in pieces that the node now has is done.
+                    if let Some(p) = &mut slot.pieces {
+                        if let Some((c, _)) = p.cycle {
+                            if p.frame == frame && chunks[(c / 32) as usize] & (1 << (c % 32)) == 0
+                            {
+                                p.cycle = None;
+                            }
+                        }
+                    }
                     // The node wrote this before our reply in this exchange reached it.
                     if let Some(c) = slot.repairing {
                         chunks[(c / 32) as usize] &= !(1 << (c % 32));
@@ -833,11 +1112,15 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
     // Broadcast position: frame, byte offset (None = SceneEnd next).
     let mut bframe: u16 = 0;
     let mut boffset: Option<u32> = Some(0);
-    // Deaths this bus has broadcast `Wake` for.
+    // When this bus finished broadcasting each of the two latest frames' scenes (µs), by
+    // `frame % 2`: a node owing its static region is timed from then.
+    let mut scene_sent: [Option<(u16, u64)>; 2] = [None; 2];
+    // Orphaning events this bus has broadcast `Wake` for.
     let mut woken: u16 = 0;
     // Roll calls: when the next may go out while work waits (None: nothing waits), and the
-    // interval after it (doubles while the wait lasts: a lost `Wake` is repeated, a node
-    // that never answers costs a bounded number of broadcasts).
+    // interval after it (doubles while the wait lasts, up to two time-outs: a lost `Wake` is
+    // repeated within a bounded delay, a node that never answers costs one small broadcast
+    // per two time-outs).
     let mut call_at: Option<u64> = None;
     let mut call_every: u64 = 0;
     // The transfer on the wire (double buffering only).
@@ -860,16 +1143,20 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
         let mut wake: Option<u16> = None;
         if ready.is_none() {
             let now = clock.now_us();
-            root.borrow_mut().expire(first, count, now);
+            let f = root.borrow().handing_out();
+            let sent = scene_sent[(f % 2) as usize]
+                .filter(|&(g, _)| g == f)
+                .map(|(_, t)| t);
+            root.borrow_mut().expire(first, count, now, sent);
             let waiting = root.borrow().roll_call(first, count, bframe);
             let every = root.borrow().timeout_us();
             match waiting {
                 None => call_at = None,
                 Some(frame) => {
-                    // A node died (on any bus): idle nodes must be told to ask for its work
-                    // at once. Otherwise call once the wait has lasted a time-out.
-                    if root.borrow().deaths() > woken {
-                        woken = root.borrow().deaths();
+                    // Jobs became orphans (on any bus): idle nodes must be told to ask for
+                    // them at once. Otherwise call once the wait has lasted a time-out.
+                    if root.borrow().orphaned() > woken {
+                        woken = root.borrow().orphaned();
                         call_at = Some(now);
                         call_every = every;
                     }
@@ -880,7 +1167,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                     if now >= at {
                         wake = Some(frame);
                         call_at = Some(now.saturating_add(call_every));
-                        call_every = call_every.saturating_mul(2);
+                        call_every = call_every.saturating_mul(2).min(every.saturating_mul(2));
                     }
                 }
             }
@@ -892,7 +1179,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                     complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
                     continue;
                 }
-                let deadline = match (root.borrow().next_deadline(first, count), call_at) {
+                let deadline = match (root.borrow().next_deadline(first, count, sent), call_at) {
                     (Some(a), Some(b)) => Some(a.min(b)),
                     (a, b) => a.or(b),
                 };
@@ -980,6 +1267,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                             len: scene.len() as u32,
                             crc,
                         };
+                        scene_sent[(bframe % 2) as usize] = Some((bframe, clock.now_us()));
                         bframe += 1;
                         boffset = Some(0);
                         wire::encode(0, 0, &msg, tx).unwrap_or(0)

@@ -236,6 +236,15 @@ impl Scheduler {
         Some(region)
     }
 
+    /// Static split: whether `node`'s region is still waiting for it (not handed out yet).
+    /// Always `false` for the other policies (no region belongs to a node).
+    pub fn reserved(&self, node: NodeId) -> bool {
+        let n = node as u32;
+        matches!(self.policy, Policy::Static { .. })
+            && n < self.nodes
+            && self.given[(n / 32) as usize] & (1 << (n % 32)) == 0
+    }
+
     /// Whether every region has been handed out.
     pub fn exhausted(&self) -> bool {
         match self.policy {
@@ -383,6 +392,12 @@ mod tests {
         assert_eq!(s.next_for(2), None);
         assert_eq!(s.next_for(9), None);
         assert!(!s.may_prefetch());
+        // Regions not yet handed out are reserved for their nodes.
+        assert!(!s.reserved(2) && s.reserved(0) && s.reserved(3) && !s.reserved(4));
+        assert_eq!(s.next_for(0).map(|r| r.pixels()), Some(960));
+        assert!(!s.reserved(0));
+        let d = Scheduler::new(Policy::DECREASING, 64, 60, 4).unwrap();
+        assert!(!d.reserved(0));
     }
 
     #[test]

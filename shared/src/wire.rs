@@ -22,12 +22,19 @@
 use core::fmt;
 use serde::{Deserialize, Serialize};
 
-/// Protocol version carried in every frame.
-pub const PROTOCOL_VERSION: u8 = 3;
+/// Protocol version carried in every frame (4: scene repairs may come in pieces).
+pub const PROTOCOL_VERSION: u8 = 4;
 /// Most pixels in one [`Up::Pixels`] message (one full 512-pixel scanline).
 pub const MAX_RUN: usize = 512;
 /// Bytes of scene image in one broadcast chunk.
 pub const SCENE_CHUNK: usize = 1024;
+/// The smallest piece of a chunk the RC re-sends point-to-point on a noisy link: a
+/// [`Down::Scene`] sent in an exchange may carry any whole number of pieces of one chunk
+/// (the last piece of the scene may be short). Broadcasts carry whole chunks.
+pub const SCENE_PIECE: usize = 64;
+/// Pieces in a chunk.
+pub const PIECES_PER_CHUNK: usize = SCENE_CHUNK / SCENE_PIECE;
+const _: () = assert!(PIECES_PER_CHUNK <= 16 && SCENE_CHUNK.is_multiple_of(SCENE_PIECE));
 /// Largest scene image a node bank holds (the IMSU's 128 KB bank).
 pub const MAX_SCENE: usize = 128 * 1024;
 /// Scene chunks in a full bank.
@@ -116,10 +123,13 @@ pub enum SceneState {
     /// Complete, CRC-checked and validated.
     Ready { frame: u16 },
     /// The broadcast ended but these chunks are missing (bit `c` of word `c / 32` set =
-    /// chunk `c`, at byte `c · SCENE_CHUNK`, lost or corrupt).
+    /// chunk `c`, at byte `c · SCENE_CHUNK`, lost or corrupt). `pieces`: which
+    /// [`SCENE_PIECE`]-byte pieces of the first missing chunk the node already holds (bit
+    /// `i` = piece `i`), so a repair in pieces sends only the others.
     Missing {
         frame: u16,
         chunks: [u32; MAX_CHUNKS / 32],
+        pieces: u16,
     },
     /// Nothing received yet.
     None,
@@ -401,6 +411,7 @@ mod tests {
                 scene: SceneState::Missing {
                     frame: 2,
                     chunks: [1, 0, 0, 1 << 31],
+                    pieces: 0b1010_0000_0000_0001,
                 },
             },
             Up::Status {

@@ -676,6 +676,7 @@ mod hostile_bus {
                     scene: SceneState::Missing {
                         frame: small(r, 3) as u16,
                         chunks: [r.next_u64() as u32, r.next_u64() as u32, 0, u32::MAX],
+                        pieces: r.next_u64() as u16,
                     },
                 },
                 4 => Up::Poll,
@@ -864,7 +865,7 @@ fn work_of_a_node_that_dies_is_reissued() {
             ..SimConfig::default()
         },
     );
-    assert!(matches!(e, Err(SimError::Exec(_))), "{e:?}");
+    assert!(matches!(e, Err(SimError::Unfinished(_))), "{e:?}");
 }
 
 #[test]

@@ -904,6 +904,7 @@ fn some_scene_state(rng: &mut Rng) -> SceneState {
             SceneState::Missing {
                 frame: small_or_edge(rng, 3) as u16,
                 chunks,
+                pieces: if rng.chance(50) { 0 } else { rng.u32() as u16 },
             }
         }
         _ => SceneState::None,

@@ -101,6 +101,35 @@ pub enum ExecError {
     Livelock { at: Ps },
 }
 
+impl ExecError {
+    /// When the simulation stopped (s of virtual time).
+    pub fn at_s(&self) -> f64 {
+        let (ExecError::Deadlock { at } | ExecError::TimeLimit { at } | ExecError::Livelock { at }) =
+            *self;
+        at as f64 * 1e-12
+    }
+}
+
+impl std::fmt::Display for ExecError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let at = self.at_s();
+        match self {
+            ExecError::Deadlock { .. } => {
+                write!(f, "stalled at {at:.3} s of virtual time: no event pending")
+            }
+            ExecError::TimeLimit { .. } => {
+                write!(f, "reached its time limit at {at:.3} s of virtual time")
+            }
+            ExecError::Livelock { .. } => write!(
+                f,
+                "stopped at {at:.3} s of virtual time: no node frame accepted in a long run of events (livelock)"
+            ),
+        }
+    }
+}
+
+impl std::error::Error for ExecError {}
+
 /// Poll `tasks` until `done()` holds. `after_pass` runs after each quiescent pass (to take
 /// time stamps) and returns false to give up (no progress).
 pub fn run(

@@ -7,6 +7,7 @@
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
 //! - [`sweep`]: the Fig. 5.1 / 5.2 analogs (node-count and division sweeps), CSV and charts.
+//! - [`reliability`]: the fault sweep of docs/reliability.md (deaths, bit errors).
 //!
 //! Node compute time is [`CycleModel::cycles`] of each run's operation counts at the
 //! configured core clock. A simulation is single-threaded and its results depend only on its
@@ -16,6 +17,7 @@ pub mod dm;
 pub mod exec;
 pub mod framemem;
 pub mod rccost;
+pub mod reliability;
 pub mod star;
 pub mod sweep;
 
@@ -34,9 +36,11 @@ use links_core::root::{
     run_bus, PixelSink, RootConfig, RootError, RootReport, RootState, MAX_BUSES,
 };
 use links_core::sched::Policy;
-use links_core::wire;
+use links_core::wire::{self, Job};
 use rccost::{RcClock, RcCost};
-use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, SimBus, SimNodeLink, Star};
+use star::{
+    BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, Noise, SimBus, SimNodeLink, Star,
+};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::fmt;
@@ -66,10 +70,16 @@ pub struct SimConfig {
     pub clock_hz: f64,
     pub model: CycleModel,
     pub faults: Faults,
+    /// Random bit errors per direction and lost broadcasts.
+    pub noise: Noise,
     /// Nodes that die (stop answering) during the run.
     pub deaths: Vec<NodeDeath>,
     /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
     pub drops: Vec<BroadcastDrop>,
+    /// A node's scene bank (bytes): a larger scene is refused before the run. Default: the
+    /// NC board's even-frame bank, [`nc_fw::plan::SCENE_EVEN`] (the simulated nodes have two
+    /// banks this size).
+    pub bank_bytes: usize,
     /// The RC declares a node holding jobs dead after this long without an exchange (s) and
     /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
     pub node_timeout_s: f64,
@@ -101,8 +111,10 @@ impl Default for SimConfig {
             clock_hz: DEFAULT_CLOCK_HZ,
             model: CycleModel::default(),
             faults: Faults::default(),
+            noise: Noise::default(),
             deaths: Vec::new(),
             drops: Vec::new(),
+            bank_bytes: nc_fw::plan::SCENE_EVEN,
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
             collect: Collect::Snoop,
@@ -175,32 +187,165 @@ impl SimReport {
 #[derive(Debug)]
 pub enum SimError {
     Config(String),
+    /// Frame `frame`'s scene image (`bytes`) does not fit a node's scene bank (`bank`
+    /// bytes, [`SimConfig::bank_bytes`]); found before the cluster starts.
+    SceneTooBig {
+        frame: u16,
+        bytes: usize,
+        bank: usize,
+    },
     Root(RootError),
-    Exec(ExecError),
+    /// The cluster could not finish: what it waited for when the simulation stopped.
+    Unfinished(Box<Unfinished>),
+    /// A frame differs from the single-node render (a broken promise, never expected).
+    NotIdentical {
+        what: String,
+    },
+    /// An error of one point of a sweep.
+    Context {
+        what: String,
+        error: Box<SimError>,
+    },
+}
+
+/// What a cluster that cannot finish lacks, when the simulation stopped (stalled, no pixel
+/// accepted for a long time, or past its time limit).
+#[derive(Clone, Debug)]
+pub struct Unfinished {
+    /// Why the simulation stopped.
+    pub cause: ExecError,
+    /// The first frame not complete, and how many frames there are.
+    pub frame: u16,
+    pub frames: u16,
+    /// Sub-screens handed out and never returned: (holder, job, holder declared dead).
+    pub never_returned: Vec<(u16, Job, bool)>,
+    /// Sub-screens of the frame being handed out (`handing_out`) never handed out.
+    pub unissued: u32,
+    pub handing_out: u16,
+    /// Static split: nodes whose region of that frame still waits for them to ask.
+    pub reserved_for: Vec<u16>,
+    /// Nodes the RC has declared dead.
+    pub declared_dead: Vec<u16>,
+    /// Nodes not killed that never reported the scene of the frame being handed out.
+    pub no_scene: Vec<u16>,
+    /// Nodes killed by fault injection: (node, when, s).
+    pub killed: Vec<(u16, f64)>,
+}
+
+/// "node 3" or "nodes 0, 1, 2" (at most 12 listed).
+fn node_list(nodes: &[u16]) -> String {
+    let mut s = String::from(if nodes.len() == 1 { "node " } else { "nodes " });
+    let shown: Vec<String> = nodes.iter().take(12).map(|n| n.to_string()).collect();
+    s.push_str(&shown.join(", "));
+    if nodes.len() > 12 {
+        s.push_str(&format!(" and {} more", nodes.len() - 12));
+    }
+    s
+}
+
+fn region_text(r: &wire::Region) -> String {
+    match *r {
+        wire::Region::Span { start, len } => format!("pixels {start}..{}", start + len),
+        wire::Region::Rect { x, y, w, h } => format!("{w}x{h} at ({x}, {y})"),
+    }
+}
+
+impl fmt::Display for Unfinished {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "the cluster cannot finish frame {} of {}",
+            self.frame, self.frames
+        )?;
+        let mut parts: Vec<String> = Vec::new();
+        if !self.never_returned.is_empty() {
+            let items: Vec<String> = self
+                .never_returned
+                .iter()
+                .take(8)
+                .map(|(n, j, dead)| {
+                    format!(
+                        "frame {} {} held by node {n}{}",
+                        j.frame,
+                        region_text(&j.region),
+                        if *dead { " (declared dead)" } else { "" }
+                    )
+                })
+                .collect();
+            let more = self.never_returned.len().saturating_sub(8);
+            parts.push(format!(
+                "{} sub-screen(s) never returned: {}{}",
+                self.never_returned.len(),
+                items.join(", "),
+                if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                }
+            ));
+        }
+        if self.unissued > 0 {
+            let mut s = format!(
+                "{} sub-screen(s) of frame {} never handed out",
+                self.unissued, self.handing_out
+            );
+            if !self.reserved_for.is_empty() {
+                s.push_str(&format!(
+                    " (static regions of {}, who never asked)",
+                    node_list(&self.reserved_for)
+                ));
+            }
+            parts.push(s);
+        }
+        if !self.declared_dead.is_empty() {
+            parts.push(format!("{} declared dead", node_list(&self.declared_dead)));
+        }
+        if !self.no_scene.is_empty() {
+            parts.push(format!(
+                "{} never reported frame {}'s scene",
+                node_list(&self.no_scene),
+                self.handing_out
+            ));
+        }
+        if !self.killed.is_empty() {
+            let items: Vec<String> = self
+                .killed
+                .iter()
+                .take(12)
+                .map(|(n, t)| format!("node {n} killed at {t:.3} s"))
+                .collect();
+            let more = self.killed.len().saturating_sub(12);
+            parts.push(format!(
+                "{}{}",
+                items.join(", "),
+                if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                }
+            ));
+        }
+        if parts.is_empty() {
+            parts.push("nothing is pending (the RC's last broadcast was lost)".into());
+        }
+        write!(f, ": {} (the simulation {})", parts.join("; "), self.cause)
+    }
 }
 
 impl fmt::Display for SimError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             SimError::Config(s) => write!(f, "{s}"),
+            SimError::SceneTooBig { frame, bytes, bank } => write!(
+                f,
+                "frame {frame}'s scene image is {bytes} bytes; a node's scene bank holds {bank} bytes: make the scene smaller (fewer triangles, a smaller texture)"
+            ),
             SimError::Root(e) => write!(f, "root: {e}"),
-            SimError::Exec(ExecError::Deadlock { at }) => {
-                write!(f, "simulation stalled at {:.6} s", *at as f64 * 1e-12)
+            SimError::Unfinished(u) => write!(f, "{u}"),
+            SimError::NotIdentical { what } => {
+                write!(f, "{what}: the frame differs from the single-node render")
             }
-            SimError::Exec(ExecError::Livelock { at }) => {
-                write!(
-                    f,
-                    "no progress since {:.6} s (livelock)",
-                    *at as f64 * 1e-12
-                )
-            }
-            SimError::Exec(ExecError::TimeLimit { at }) => {
-                write!(
-                    f,
-                    "simulation passed its time limit at {:.3} s",
-                    *at as f64 * 1e-12
-                )
-            }
+            SimError::Context { what, error } => write!(f, "{what}: {error}"),
         }
     }
 }
@@ -347,8 +492,20 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
             d.node, d.at_s
         )));
     }
+    cfg.noise.check().map_err(SimError::Config)?;
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
+    if let Some((frame, s)) = scenes
+        .iter()
+        .enumerate()
+        .find(|(_, s)| s.as_ref().len() > cfg.bank_bytes)
+    {
+        return Err(SimError::SceneTooBig {
+            frame: frame as u16,
+            bytes: s.as_ref().len(),
+            bank: cfg.bank_bytes,
+        });
+    }
     let rc = RootConfig {
         policy: cfg.policy,
         nodes: cfg.nodes,
@@ -383,6 +540,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     for d in &cfg.drops {
         star.borrow_mut().drop_broadcasts(*d);
     }
+    star.borrow_mut().set_noise(cfg.noise);
     let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
     let buses = star.borrow().bus_count();
     let sink = RefCell::new(match cfg.collect {
@@ -476,7 +634,14 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         },
     );
     drop(tasks);
-    res.map_err(SimError::Exec)?;
+    if let Err(cause) = res {
+        return Err(SimError::Unfinished(Box::new(unfinished(
+            cause,
+            &root.borrow(),
+            cfg,
+            frames,
+        ))));
+    }
     for r in bus_results.borrow().iter().flatten() {
         if let Err(e) = r {
             return Err(SimError::Root(*e));
@@ -508,6 +673,43 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         frames: kept,
         stats,
     })
+}
+
+/// What the RC still waits for when a simulation stops unfinished.
+fn unfinished(cause: ExecError, root: &RootState, cfg: &SimConfig, frames: u16) -> Unfinished {
+    let killed_at = |n: u16| {
+        cfg.deaths
+            .iter()
+            .filter(|d| d.node == n)
+            .map(|d| d.at_s)
+            .fold(None, |a: Option<f64>, t| Some(a.map_or(t, |a| a.min(t))))
+    };
+    let stopped_s = cause.at_s();
+    let killed_at = |n: u16| killed_at(n).filter(|&t| t <= stopped_s);
+    let handing_out = root.handing_out();
+    let all = 0..cfg.nodes;
+    let mut killed: Vec<(u16, f64)> = all
+        .clone()
+        .filter_map(|n| killed_at(n).map(|t| (n, t)))
+        .collect();
+    killed.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    Unfinished {
+        cause,
+        frame: root.frames_complete(),
+        frames,
+        never_returned: root.pending().collect(),
+        unissued: root.unissued(),
+        handing_out,
+        reserved_for: all
+            .clone()
+            .filter(|&n| root.unissued() > 0 && root.reserved(n))
+            .collect(),
+        declared_dead: all.clone().filter(|&n| root.is_dead(n)).collect(),
+        no_scene: all
+            .filter(|&n| killed_at(n).is_none() && !root.has_scene(n, handing_out))
+            .collect(),
+        killed,
+    }
 }
 
 /// A cluster render with its single-node reference, for `links render --nodes N`.

@@ -1,5 +1,6 @@
 //! The emulated SPI star: buses, chip-selects, ready lines, DMA banks, fault injection (bit
-//! flips, node deaths), and the snooping pixel collector feeding the frame memory.
+//! flips, bit errors at a rate per direction, lost broadcasts, node deaths), and the snooping
+//! pixel collector feeding the frame memory.
 //!
 //! Timing of one transfer on a bus: `overhead` (handshake: chip-select set-up and hold, DMA
 //! start, transfer-complete interrupt) + `(header + body) · 8 / bit_rate`, where an exchange's
@@ -62,6 +63,152 @@ pub struct Faults {
     pub random: Option<u64>,
 }
 
+/// Random line noise (fault injection): every bit on a wire is flipped independently with
+/// the direction's bit-error rate, and every node's copy of every broadcast is lost whole
+/// with probability `drop_broadcast` (its receiver off the bus). Deterministic for a seed.
+///
+/// The bits exposed are each frame's and its `header_bytes` length header's. An error in the
+/// header loses the frame as the board link's header CRC would (`links_core::spi`): the
+/// receiver of an exchange gets an empty frame, which it counts as bad; a broadcast copy is
+/// dropped. The padding of the shorter side of an exchange, the board link's trailer byte,
+/// the chip-select and ready lines are taken to be error-free.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Noise {
+    /// Bit-error rate RC -> NC (MOSI): the RC's half of exchanges and every receiver's copy
+    /// of a broadcast, each receiver independently.
+    pub ber_down: f64,
+    /// Bit-error rate NC -> RC (MISO): the nodes' half of exchanges.
+    pub ber_up: f64,
+    /// Probability that a node loses a broadcast whole.
+    pub drop_broadcast: f64,
+    /// Seed of the generator (0 is taken as 1).
+    pub seed: u64,
+}
+
+impl Noise {
+    /// Whether any noise is on.
+    pub fn any(&self) -> bool {
+        self.ber_down > 0.0 || self.ber_up > 0.0 || self.drop_broadcast > 0.0
+    }
+
+    /// Check the rates: probabilities, a bit-error rate at most 0.5 (pure noise).
+    pub fn check(&self) -> Result<(), String> {
+        for (name, v, max) in [
+            ("bit-error rate down", self.ber_down, 0.5),
+            ("bit-error rate up", self.ber_up, 0.5),
+            ("broadcast loss", self.drop_broadcast, 1.0),
+        ] {
+            if !(v.is_finite() && (0.0..=max).contains(&v)) || (max == 1.0 && v >= 1.0) {
+                return Err(format!(
+                    "{name} {v}: must be a probability from 0 to {}",
+                    if max == 1.0 { "below 1" } else { "0.5" }
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What bit errors did to a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Hit {
+    None,
+    /// Bits of the frame flipped (its CRC-32 fails).
+    Bits,
+    /// Its header hit: the frame is lost (an exchange's receiver gets an empty frame).
+    Header,
+}
+
+/// The noise generator: xorshift64* and, per direction, the bits left before its next
+/// error (geometric gaps: each bit independently in error with the rate).
+struct NoiseGen {
+    noise: Noise,
+    rng: u64,
+    /// Bits before the next error: down, up (`None` until first drawn).
+    gap: [Option<u64>; 2],
+}
+
+impl NoiseGen {
+    fn new(noise: Noise) -> Self {
+        Self {
+            noise,
+            rng: noise.seed.max(1),
+            gap: [None; 2],
+        }
+    }
+
+    /// Uniform in (0, 1].
+    fn uniform(&mut self) -> f64 {
+        let mut x = self.rng;
+        x ^= x >> 12;
+        x ^= x << 25;
+        x ^= x >> 27;
+        self.rng = x;
+        let r = x.wrapping_mul(0x2545_F491_4F6C_DD1D);
+        ((r >> 11) as f64 + 1.0) / (1u64 << 53) as f64
+    }
+
+    /// Bits before the next error at rate `p` (> 0).
+    fn draw_gap(&mut self, p: f64) -> u64 {
+        if p >= 1.0 {
+            return 0;
+        }
+        let g = (self.uniform().ln() / (-p).ln_1p()).floor();
+        if g.is_finite() && g < u64::MAX as f64 {
+            g as u64
+        } else {
+            u64::MAX
+        }
+    }
+
+    /// Flip bits of one frame sent in direction `dir` (0 = down, 1 = up) behind a
+    /// `header`-byte length header.
+    fn corrupt(&mut self, dir: usize, header: usize, frame: &mut [u8]) -> Hit {
+        let p = if dir == 0 {
+            self.noise.ber_down
+        } else {
+            self.noise.ber_up
+        };
+        if p.is_nan() || p <= 0.0 || frame.is_empty() {
+            return Hit::None;
+        }
+        let hbits = header as u64 * 8;
+        let n = hbits + frame.len() as u64 * 8;
+        let mut pos = 0u64;
+        let mut hit = Hit::None;
+        loop {
+            let g = match self.gap[dir] {
+                Some(g) => g,
+                None => self.draw_gap(p),
+            };
+            if g >= n - pos {
+                self.gap[dir] = Some(g - (n - pos));
+                return hit;
+            }
+            pos += g;
+            if pos < hbits {
+                hit = Hit::Header;
+            } else {
+                let bit = pos - hbits;
+                frame[(bit / 8) as usize] ^= 1 << (bit % 8);
+                if hit == Hit::None {
+                    hit = Hit::Bits;
+                }
+            }
+            pos += 1;
+            self.gap[dir] = None;
+            if pos >= n {
+                return hit;
+            }
+        }
+    }
+
+    /// Whether the next broadcast copy is lost.
+    fn drop_broadcast(&mut self) -> bool {
+        self.noise.drop_broadcast > 0.0 && self.uniform() <= self.noise.drop_broadcast
+    }
+}
+
 /// Fault injection: node `node` dies (stops answering for good) at `at_s` seconds of
 /// virtual time.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,7 +244,7 @@ pub struct BusCounters {
     pub corrupted_up: u64,
     pub corrupted_down: u64,
     pub corrupted_broadcast: u64,
-    /// Broadcast copies lost by a receiver off the bus ([`BroadcastDrop`]).
+    /// Broadcast copies lost by a receiver off the bus ([`BroadcastDrop`], [`Noise`]).
     pub dropped_broadcast: u64,
 }
 
@@ -150,6 +297,7 @@ pub struct Star {
     /// transfer and posts nothing); `Ps::MAX` = never.
     dead_at: Vec<Ps>,
     drops: Vec<BroadcastDrop>,
+    noise: NoiseGen,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -195,7 +343,13 @@ impl Star {
             snoop,
             dead_at: vec![Ps::MAX; nodes as usize],
             drops: Vec::new(),
+            noise: NoiseGen::new(Noise::default()),
         }))
+    }
+
+    /// Random bit errors and broadcast losses from now on (fault injection).
+    pub fn set_noise(&mut self, noise: Noise) {
+        self.noise = NoiseGen::new(noise);
     }
 
     /// A node loses some broadcasts (fault injection).
@@ -255,6 +409,21 @@ impl Star {
                 let (fu, fd) = (self.faults.up_every, self.faults.down_every);
                 self.maybe_corrupt(0, fu, &mut t.up, bus);
                 self.maybe_corrupt(1, fd, &mut t.down, bus);
+                let header = self.timing.header_bytes as usize;
+                for (dir, f) in [(1, &mut t.up), (0, &mut t.down)] {
+                    let hit = self.noise.corrupt(dir, header, f);
+                    if hit == Hit::Header {
+                        f.clear();
+                    }
+                    if hit != Hit::None {
+                        let c = &mut self.buses[bus].counters;
+                        if dir == 1 {
+                            c.corrupted_up += 1;
+                        } else {
+                            c.corrupted_down += 1;
+                        }
+                    }
+                }
                 let c = &mut self.buses[bus].counters;
                 c.exchanges += 1;
                 c.up_bytes += t.up.len() as u64;
@@ -281,6 +450,7 @@ impl Star {
                         .drops
                         .iter()
                         .any(|d| d.node == n && (d.from..d.to).contains(&index))
+                        || self.noise.drop_broadcast()
                     {
                         self.buses[bus].counters.dropped_broadcast += 1;
                         continue;
@@ -290,6 +460,14 @@ impl Star {
                     let victim = self.bcast_victim % count as usize == (n - first) as usize;
                     if every > 0 && (victim || self.faults.random.is_some()) {
                         self.maybe_corrupt(2, every, &mut f, bus);
+                    }
+                    let header = self.timing.header_bytes as usize;
+                    let hit = self.noise.corrupt(0, header, &mut f);
+                    if hit != Hit::None {
+                        self.buses[bus].counters.corrupted_broadcast += 1;
+                    }
+                    if hit == Hit::Header {
+                        continue;
                     }
                     self.nodes[n as usize].inbox.push_back((false, f));
                 }
@@ -513,5 +691,103 @@ impl RootBus for SimBus {
         })?;
         dst.copy_from_slice(&t.up);
         Ok(t.up.len())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The generator flips each bit independently at the rate: over 8 million bits at 1e-3
+    /// about 8,000 flips (the Poisson spread is ~90), spread over every bit position, and the
+    /// same seed flips the same bits.
+    #[test]
+    fn bit_errors_come_at_the_rate_and_are_deterministic() {
+        let noise = Noise {
+            ber_down: 1e-3,
+            ber_up: 0.0,
+            drop_broadcast: 0.0,
+            seed: 42,
+        };
+        let run = || {
+            let mut g = NoiseGen::new(noise);
+            let (mut flips, mut hit, mut header) = (0u64, 0u32, 0u32);
+            let mut per_bit = [0u32; 8];
+            let mut first = Vec::new();
+            for i in 0..1000 {
+                let mut f = vec![0u8; 996];
+                match g.corrupt(0, 4, &mut f) {
+                    Hit::None => {}
+                    Hit::Bits => hit += 1,
+                    Hit::Header => {
+                        hit += 1;
+                        header += 1;
+                    }
+                }
+                let ones: u32 = f.iter().map(|b| b.count_ones()).sum();
+                flips += ones as u64;
+                for b in &f {
+                    for (k, c) in per_bit.iter_mut().enumerate() {
+                        *c += (b >> k) as u32 & 1;
+                    }
+                }
+                if i == 0 {
+                    first = f.clone();
+                }
+                // The up direction has rate 0: never touched.
+                let mut u = vec![0u8; 100];
+                assert_eq!(g.corrupt(1, 4, &mut u), Hit::None);
+            }
+            (flips, hit, per_bit, first, header)
+        };
+        let (flips, hit, per_bit, first, header) = run();
+        // 1000 frames x 996 bytes x 8 bits x 1e-3 = 7968 expected errors in the frames, and
+        // 1000 x 32 x 1e-3 = 32 header bits hit (1 - e^-0.032 of the frames, ~31).
+        assert!((7680..=8260).contains(&flips), "{flips}");
+        assert!((15..=50).contains(&header), "{header}");
+        // A frame of 8000 bits escapes with probability e^-8: essentially every one is hit.
+        assert!(hit >= 998, "{hit}");
+        assert!(
+            per_bit.iter().all(|&c| (850..=1150).contains(&c)),
+            "{per_bit:?}"
+        );
+        assert_eq!(run().3, first);
+        assert_eq!((run().0, run().4), (flips, header));
+    }
+
+    #[test]
+    fn lost_broadcasts_come_at_the_rate_and_rates_are_checked() {
+        let mut g = NoiseGen::new(Noise {
+            drop_broadcast: 0.25,
+            seed: 3,
+            ..Noise::default()
+        });
+        let lost = (0..10_000).filter(|_| g.drop_broadcast()).count();
+        assert!((2350..=2650).contains(&lost), "{lost}");
+        let mut none = NoiseGen::new(Noise::default());
+        assert!(!(0..1000).any(|_| none.drop_broadcast()));
+        let mut f = [0u8; 64];
+        assert!(none.corrupt(0, 4, &mut f) == Hit::None && f == [0u8; 64]);
+        assert!(Noise::default().check().is_ok());
+        for bad in [
+            Noise {
+                ber_up: 0.6,
+                ..Noise::default()
+            },
+            Noise {
+                ber_down: -1e-3,
+                ..Noise::default()
+            },
+            Noise {
+                drop_broadcast: 1.0,
+                ..Noise::default()
+            },
+            Noise {
+                ber_down: f64::NAN,
+                ..Noise::default()
+            },
+        ] {
+            assert!(bad.check().is_err(), "{bad:?}");
+        }
     }
 }

@@ -80,7 +80,7 @@ pub struct DivisionPoint {
 /// single time, steady time, bus utilisation, bytes, exchanges.
 type Measured = (f64, f64, f64, u64, u32);
 
-fn pool(threads: usize) -> Result<rayon::ThreadPool, SimError> {
+pub(crate) fn pool(threads: usize) -> Result<rayon::ThreadPool, SimError> {
     rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
