@@ -257,7 +257,7 @@ fn one_node_killed_at_any_moment_finishes_within_the_bound_under_every_policy() 
     );
 }
 
-/// Acceptance (issue 10): bit errors at a rate of 1e-3 in both directions, and a quarter of
+/// Acceptance: bit errors at a rate of 1e-3 in both directions, and a quarter of
 /// the nodes killed in the middle of that noisy frame: every frame bit-identical to the
 /// single-node render, within the recovery bound. Photo1's 116 KB scene gets through the
 /// broadcast to no node (a 1 KB chunk survives with probability 2.4e-4), so its frame is
