@@ -219,3 +219,25 @@ pub fn for_backend<T: Real>(img: Vec<u8>) -> Vec<u8> {
 pub fn length_scale(img: &[u8]) -> f64 {
     2f64.powi(SceneView::new(img).expect("valid image").scale_exponent() as i32)
 }
+
+/// A bundled scene (`scenes/<scene>`) compiled by the DM at `w` x `h` with default options.
+pub fn bundled_image(scene: &str, w: u32, h: u32) -> Vec<u8> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../scenes")
+        .join(scene);
+    let desc = links_host::scene_file::load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let opts = CompileOptions {
+        width: Some(w),
+        height: Some(h),
+        ..Default::default()
+    };
+    compile(&desc, &opts).expect("compiles").bytes
+}
+
+/// The host's f32 render of a compiled image on one thread: what every cluster frame must
+/// equal bit for bit.
+pub fn host_reference(img: &[u8]) -> Vec<u8> {
+    links_host::frame::render_frame(img, links_host::frame::Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb
+}

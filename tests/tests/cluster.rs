@@ -2,34 +2,13 @@
 //! count, bus count, scheduling policy and collection path; recovery from corrupted frames;
 //! exact broadcast byte counts; determinism.
 
-use links_core::dm::{compile, CompileOptions};
 use links_core::node::NodeConfig;
 use links_core::sched::{Policy, Shape};
 use links_core::wire::{self, Down, SCENE_CHUNK};
 use links_host::cluster::star::{BroadcastDrop, Faults, NodeDeath};
 use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimError, SimReport};
-use links_host::frame::{render_frame, Precision};
-use links_host::scene_file::load_scene;
-use std::path::Path;
 
-fn image(scene: &str, w: u32, h: u32) -> Vec<u8> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenes")
-        .join(scene);
-    let desc = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
-    let opts = CompileOptions {
-        width: Some(w),
-        height: Some(h),
-        ..Default::default()
-    };
-    compile(&desc, &opts).expect("compiles").bytes
-}
-
-fn reference(img: &[u8]) -> Vec<u8> {
-    render_frame(img, Precision::F32, 1, &|| {})
-        .expect("renders")
-        .rgb
-}
+use links_tests::{bundled_image as image, host_reference as reference};
 
 fn run(img: &[u8], cfg: SimConfig) -> SimReport {
     let cfg = SimConfig {

@@ -791,8 +791,13 @@ fn check_accepted(img: &[u8], view: SceneView<'_>, rng: &mut Rng, tally: &mut Ta
             assert_eq!(root.size(), (f.width, f.height));
             tally.note("RC accepted", 1);
         }
-        Err(RootError::BadScene { .. }) => {
-            assert!(img.len() > MAX_SCENE, "RC rejects a valid image");
+        Err(RootError::SceneTooLarge { len, max, .. }) => {
+            assert!(
+                img.len() > MAX_SCENE,
+                "RC rejects a valid image as too large"
+            );
+            assert_eq!((len as usize, max as usize), (img.len(), MAX_SCENE));
+            tally.note("RC refused a scene larger than a bank", 1);
         }
         Err(RootError::Sched(_)) => tally.note("RC scheduler refused the frame", 1),
         Err(e) => panic!("RC: {e}"),

@@ -2,35 +2,14 @@
 //! recovery bound, time-outs that false alarms cannot stretch, errors that name their cause.
 //! Every number is virtual time; every frame is compared with the single-node render.
 
-use links_core::dm::{compile, CompileOptions};
 use links_core::image::SceneView;
 use links_core::render::{render_run, Tracer};
 use links_core::sched::{Policy, Shape};
 use links_host::cluster::star::{BroadcastDrop, BusCounters, Faults, NodeDeath, Noise};
 use links_host::cluster::{simulate_frame, RunCache, SimConfig, SimReport};
 use links_host::cost::{CycleModel, DEFAULT_CLOCK_HZ};
-use links_host::frame::{render_frame, Precision};
-use links_host::scene_file::load_scene;
-use std::path::Path;
 
-fn image(scene: &str, w: u32, h: u32) -> Vec<u8> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../scenes")
-        .join(scene);
-    let desc = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
-    let opts = CompileOptions {
-        width: Some(w),
-        height: Some(h),
-        ..Default::default()
-    };
-    compile(&desc, &opts).expect("compiles").bytes
-}
-
-fn reference(img: &[u8]) -> Vec<u8> {
-    render_frame(img, Precision::F32, 1, &|| {})
-        .expect("renders")
-        .rgb
-}
+use links_tests::{bundled_image as image, host_reference as reference};
 
 fn run(img: &[u8], cfg: &SimConfig) -> SimReport {
     let cfg = SimConfig {
