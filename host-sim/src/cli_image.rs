@@ -131,20 +131,23 @@ pub fn precision_for(
 }
 
 /// The section table of `links info` and `links check-image`: a heading naming `name`, the
-/// size, the frame and the number format, then one row per non-empty section.
+/// size and the frame (`<name>: SceneImage <N> bytes (<W>x<H>)`), the number format, then one
+/// row per non-empty section.
 pub fn describe(name: &str, view: &SceneView<'_>) -> Vec<String> {
     let f = view.frame::<f32>();
     let format = match view.storage() {
         Storage::F32 => "f32".to_string(),
         Storage::Q16_16 => format!("q16.16, lengths scaled by 2^{}", view.scale_exponent()),
     };
+    // The first line's form is an interface (scripts and checks read it): keep it as is.
     let mut lines = vec![
         format!(
-            "{name}: SceneImage {} bytes ({}x{}, {format})",
+            "{name}: SceneImage {} bytes ({}x{})",
             view.bytes().len(),
             f.width,
             f.height
         ),
+        format!("  number format: {format}"),
         format!("  {:<12} {:>8} {:>10}", "section", "records", "bytes"),
     ];
     for s in Section::ALL {

@@ -471,9 +471,16 @@ fn a_compiled_image_checks_and_renders_like_its_scene() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8(o.stdout).unwrap();
     let len = std::fs::metadata(&bin).unwrap().len();
+    // The first line's form is an interface: `<file>: SceneImage <N> bytes (<W>x<H>)`.
     assert_eq!(
         text.lines().next().unwrap(),
-        format!("{b}: SceneImage {len} bytes (64x60, f32)")
+        format!("{b}: SceneImage {len} bytes (64x60)")
+    );
+    assert_eq!(text.lines().nth(1), Some("  number format: f32"));
+    let first = info.lines().next().unwrap();
+    assert!(
+        first.ends_with(&format!(": SceneImage {len} bytes (64x60)")),
+        "links info's first line: {first}"
     );
     // The same table as `info`, then the verdict.
     let table = |t: &str| t.lines().skip(1).map(String::from).collect::<Vec<_>>();
@@ -514,10 +521,18 @@ fn a_compiled_image_checks_and_renders_like_its_scene() {
     assert!(o.status.success());
     let text = String::from_utf8(o.stdout).unwrap();
     assert!(
-        text.lines().next().unwrap().ends_with(&format!(
-            "(64x60, q16.16, lengths scaled by 2^{})",
-            fixed.scale_exponent
-        )),
+        text.lines().next().unwrap().ends_with(" bytes (64x60)"),
+        "{text}"
+    );
+    assert_eq!(
+        text.lines().nth(1),
+        Some(
+            format!(
+                "  number format: q16.16, lengths scaled by 2^{}",
+                fixed.scale_exponent
+            )
+            .as_str()
+        ),
         "{text}"
     );
     let e = scene("ellipsoids.ron");
