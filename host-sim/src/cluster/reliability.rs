@@ -549,6 +549,22 @@ fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
     SimError::Config(format!("chart: {e}"))
 }
 
+/// The legend every panel draws: top left, on a translucent white box.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> Result<(), SimError>
+where
+    DB::ErrorType: 'static,
+{
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK.mix(0.3))
+        .draw()
+        .map_err(chart_err)
+}
+
 /// Size of the chart (pixels).
 const CHART: (u32, u32) = (820, 1500);
 
@@ -650,13 +666,7 @@ where
         .map_err(chart_err)?
         .label("dashed: each policy's bound, clean + 2τ + W")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.6)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(chart_err)
+    draw_legend(&mut chart)
 }
 
 fn draw_bers<DB: DrawingBackend>(
@@ -743,13 +753,7 @@ where
             )
             .map_err(chart_err)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(chart_err)
+    draw_legend(&mut chart)
 }
 
 fn draw_fractions<DB: DrawingBackend>(
@@ -824,13 +828,7 @@ where
         .map_err(chart_err)?
         .label("bound without bit errors, clean + 2τ + ΣW")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.6)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(chart_err)
+    draw_legend(&mut chart)
 }
 
 /// The generated section of docs/reliability.md lies between these markers.
