@@ -33,32 +33,71 @@ pub const MAX_CROSSINGS: u32 = 64;
 /// An 8-bit RGB pixel.
 pub type Rgb8 = [u8; 3];
 
-/// Deterministic operation counts (the cost model's input).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Stats {
-    pub primary_rays: u64,
-    pub shadow_rays: u64,
-    pub reflect_rays: u64,
-    pub refract_rays: u64,
-    /// Straight-through (non-refractive) transmission rays.
-    pub straight_rays: u64,
-    pub box_tests: u64,
-    pub triangle_tests: u64,
-    pub ellipsoid_tests: u64,
-    pub box_shape_tests: u64,
-    pub blob_tests: u64,
-    pub blob_field_evals: u64,
-    /// Evaluations of eq. 2.1 (one per shaded surface point).
-    pub shadings: u64,
-    /// Integer compares made by Y and X clipping.
-    pub clip_compares: u64,
-    /// Runs whose row kept more leaves than the clip buffer holds (plain traversal used).
-    pub clip_overflows: u64,
-    /// Shadow rays settled by the first pass (an opaque blocker, or nothing at all in the way).
-    pub shadow_early_exits: u64,
+/// Defines [`Stats`] from one list of counters: the struct, its field names in order, its
+/// values in the same order, and addition. Every other list of the counters (the cost model's
+/// CSV columns, the firmware's `RUN` line, the CLI's stats line) is derived from
+/// [`Stats::NAMES`] and [`Stats::values`], so a new counter is written here once.
+macro_rules! define_stats {
+    ($(#[$meta:meta])* pub struct $name:ident { $($(#[$fmeta:meta])* $field:ident,)* }) => {
+        $(#[$meta])*
+        pub struct $name {
+            $($(#[$fmeta])* pub $field: u64,)*
+        }
+
+        impl $name {
+            /// How many counters there are.
+            pub const COUNT: usize = [$(stringify!($field)),*].len();
+            /// The counters' field names, in declaration order.
+            pub const NAMES: [&'static str; Self::COUNT] = [$(stringify!($field)),*];
+
+            /// The counters' values, in [`Self::NAMES`] order.
+            pub fn values(&self) -> [u64; Self::COUNT] {
+                [$(self.$field),*]
+            }
+
+            /// The counts whose values are `values`, in [`Self::NAMES`] order.
+            pub fn from_values(values: [u64; Self::COUNT]) -> Self {
+                let [$($field),*] = values;
+                Self { $($field),* }
+            }
+
+            /// Adds `o`'s counts to these.
+            pub fn add(&mut self, o: &$name) {
+                $(self.$field += o.$field;)*
+            }
+        }
+    };
+}
+
+define_stats! {
+    /// Deterministic operation counts (the cost model's input).
+    #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+    pub struct Stats {
+        primary_rays,
+        shadow_rays,
+        reflect_rays,
+        refract_rays,
+        /// Straight-through (non-refractive) transmission rays.
+        straight_rays,
+        box_tests,
+        triangle_tests,
+        ellipsoid_tests,
+        box_shape_tests,
+        blob_tests,
+        blob_field_evals,
+        /// Evaluations of eq. 2.1 (one per shaded surface point).
+        shadings,
+        /// Integer compares made by Y and X clipping.
+        clip_compares,
+        /// Runs whose row kept more leaves than the clip buffer holds (plain traversal used).
+        clip_overflows,
+        /// Shadow rays settled by the first pass (an opaque blocker, or nothing at all in the way).
+        shadow_early_exits,
+    }
 }
 
 impl Stats {
+    /// Every ray traced: primary, shadow and the three secondary kinds.
     pub fn rays(&self) -> u64 {
         self.primary_rays
             + self.shadow_rays
@@ -66,22 +105,11 @@ impl Stats {
             + self.refract_rays
             + self.straight_rays
     }
-    pub fn add(&mut self, o: &Stats) {
-        self.primary_rays += o.primary_rays;
-        self.shadow_rays += o.shadow_rays;
-        self.reflect_rays += o.reflect_rays;
-        self.refract_rays += o.refract_rays;
-        self.straight_rays += o.straight_rays;
-        self.box_tests += o.box_tests;
-        self.triangle_tests += o.triangle_tests;
-        self.ellipsoid_tests += o.ellipsoid_tests;
-        self.box_shape_tests += o.box_shape_tests;
-        self.blob_tests += o.blob_tests;
-        self.blob_field_evals += o.blob_field_evals;
-        self.shadings += o.shadings;
-        self.clip_compares += o.clip_compares;
-        self.clip_overflows += o.clip_overflows;
-        self.shadow_early_exits += o.shadow_early_exits;
+
+    /// The value of the counter called `name` (one of [`Self::NAMES`]).
+    pub fn get(&self, name: &str) -> Option<u64> {
+        let at = Self::NAMES.iter().position(|n| *n == name)?;
+        Some(self.values()[at])
     }
 }
 
