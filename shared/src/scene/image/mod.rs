@@ -26,6 +26,9 @@ use crate::shape::ellipsoid::{CutPlane, Ellipsoid};
 use crate::shape::triangle::Triangle;
 use core::fmt;
 
+#[cfg(any(test, feature = "std"))]
+pub mod fixed;
+
 pub const MAGIC: [u8; 4] = *b"LNK1";
 pub const VERSION: u16 = 3;
 /// "No index" marker.

@@ -1,0 +1,11 @@
+//! The math layer, the bottom of the core: number formats and geometry, with no knowledge of
+//! scenes, images or rays' surroundings.
+//!
+//! - [`num`]: the [`num::Real`] trait the renderer is generic over (f64, f32, Q16.16) and the
+//!   storage formats of image scalars.
+//! - [`fixed`]: Q16.16 fixed point ([`fixed::Fx`]).
+//! - [`geom`]: vectors, matrices, rays, bounding boxes, error-bounded ray origins.
+
+pub mod fixed;
+pub mod geom;
+pub mod num;
