@@ -67,7 +67,7 @@ pub fn render_all<T: Real>(image: &[u8]) -> Vec<u8> {
 /// Render a whole compiled scene with chosen techniques: RGB8 rows and the counts.
 pub fn render_all_with<T: Real>(image: &[u8], techniques: Techniques) -> (Vec<u8>, Stats) {
     let view = SceneView::new(image).expect("valid image");
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let mut tracer = Tracer::<T>::with_techniques(view, techniques);
     let mut row = vec![[0u8; 3]; f.width as usize];
     let mut out = Vec::with_capacity((f.width * f.height * 3) as usize);

@@ -583,7 +583,7 @@ impl Dm<'_> {
             )));
         }
 
-        // Frame record: pixel centres on the z = 1 plane.
+        // Camera record: pixel centres on the z = 1 plane.
         let tan_half = (cam.fov_y_deg.to_radians() * 0.5).tan();
         let dy = 2.0 * tan_half / height as f64;
         let dx = dy;
@@ -600,7 +600,7 @@ impl Dm<'_> {
         let flags = u32::from(mode == TransparencyMode::NonRefractive)
             | (u32::from(self.opts.no_shadows) << 1);
         self.w
-            .push(Section::Frame)
+            .push(Section::Camera)
             .1
             .u(width)
             .u(height)

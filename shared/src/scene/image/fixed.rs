@@ -55,7 +55,7 @@ enum Word {
 
 use Word::*;
 
-const FRAME: [Word; 15] = [U, U, D, D, D, D, P, P, P, P, P, P, U, U, D];
+const CAMERA: [Word; 15] = [U, U, D, D, D, D, P, P, P, P, P, P, U, U, D];
 const MATERIAL: [Word; 16] = [P, P, P, P, P, P, P, P, P, P, P, P, U, U, P, P];
 const LIGHT: [Word; 14] = [U, C, C, C, L, L, L, P, P, P, P, P, P, U];
 const TEXTURE: [Word; 3] = [U, U, U];
@@ -76,7 +76,7 @@ const RECT: [Word; 2] = [U, U];
 /// The word layout of a section's records (`None` for raw bytes: texels).
 fn layout(s: Section) -> Option<&'static [Word]> {
     Some(match s {
-        Section::Frame => &FRAME,
+        Section::Camera => &CAMERA,
         Section::Materials => &MATERIAL,
         Section::Lights => &LIGHT,
         Section::Textures => &TEXTURE,
@@ -272,7 +272,7 @@ pub fn first_non_finite(image: &[u8]) -> Result<Option<(Section, u32)>, ImageErr
                 .any(|(w, kind)| *kind != U && !f32_of(w).is_finite())
         })
     };
-    // A shape, light or frame record first: the boxes of the nodes above it overflow with it.
+    // A shape, light or camera record first: the boxes of the nodes above it overflow with it.
     let found = records(&view)
         .filter(|r| r.0 != Section::Nodes)
         .find(bad)
@@ -312,15 +312,18 @@ pub fn to_fixed_with_scale(image: &[u8], k: i8) -> Result<FixedImage, FixedError
     convert(image, &view, k, f64::NAN)
 }
 
-/// 2^j for the frame's direction components: with x0 and dx stored as plain Q16.16, a
+/// 2^j for the camera's direction components: with x0 and dx stored as plain Q16.16, a
 /// pixel step of 0.002 would be rounded by 0.4% and the last column's ray bent by a pixel.
 fn direction_scale(image: &[u8], view: &SceneView<'_>) -> Result<f64, FixedError> {
-    let f = view.frame::<f32>();
-    let frame: Vec<f64> =
-        record_words(image, Section::Frame, view.record_range(Section::Frame, 0))?
-            .map(f32_of)
-            .collect();
-    let w = |i: usize| frame.get(i).copied().unwrap_or(0.0);
+    let f = view.camera::<f32>();
+    let camera: Vec<f64> = record_words(
+        image,
+        Section::Camera,
+        view.record_range(Section::Camera, 0),
+    )?
+    .map(f32_of)
+    .collect();
+    let w = |i: usize| camera.get(i).copied().unwrap_or(0.0);
     let (x0, y0, dx, dy, dz) = (w(2), w(3), w(4), w(5), w(14));
     let m = [
         x0,
@@ -471,14 +474,14 @@ mod tests {
         assert_eq!(scale_exponent_for(f64::INFINITY), None);
     }
 
-    /// A valid f32 image whose light record shares its bytes with the frame record (the
+    /// A valid f32 image whose light record shares its bytes with the camera record (the
     /// validator checks each section, not that they are disjoint): the light's colour words
-    /// are the frame's height, x0, y0.
-    fn light_over_frame() -> Vec<u8> {
+    /// are the camera's height, x0, y0.
+    fn light_over_camera() -> Vec<u8> {
         use crate::image::{writer::ImageWriter, NONE};
         let mut w = ImageWriter::new();
         // Width 2 reads as a spot light's kind.
-        w.push(Section::Frame)
+        w.push(Section::Camera)
             .1
             .u(2)
             .u(3)
@@ -505,24 +508,24 @@ mod tests {
             .u(1)
             .u(0);
         let mut img = w.finish();
-        let frame_at = img[16..20].to_vec();
+        let camera_at = img[16..20].to_vec();
         let lights = 16 + 8 * Section::Lights as usize;
-        img[lights..lights + 4].copy_from_slice(&frame_at);
+        img[lights..lights + 4].copy_from_slice(&camera_at);
         img[lights + 4..lights + 8].copy_from_slice(&1u32.to_le_bytes());
         img
     }
 
     #[test]
     fn a_rewrite_that_would_not_validate_is_an_error() {
-        // Found by the image fuzzer: converting the light's colour turned the frame's
+        // Found by the image fuzzer: converting the light's colour turned the camera's
         // height (3, a subnormal as an f32) into 0, and to_fixed returned that image.
-        let img = light_over_frame();
+        let img = light_over_camera();
         let view = SceneView::new(&img).expect("the input is valid");
         assert_eq!(view.light_count(), 1);
         assert_eq!(
             to_fixed(&img).err(),
             Some(FixedError::Rewritten(ImageError::BadValue {
-                section: Section::Frame as u8,
+                section: Section::Camera as u8,
                 record: 0
             }))
         );

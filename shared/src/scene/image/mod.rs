@@ -41,7 +41,7 @@ pub const MAX_DEPTH_LIMIT: u32 = 16;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(u8)]
 pub enum Section {
-    Frame = 0,
+    Camera = 0,
     Materials,
     Lights,
     Textures,
@@ -60,7 +60,7 @@ pub const SECTION_COUNT: usize = 14;
 
 impl Section {
     pub const ALL: [Section; SECTION_COUNT] = [
-        Section::Frame,
+        Section::Camera,
         Section::Materials,
         Section::Lights,
         Section::Textures,
@@ -78,7 +78,7 @@ impl Section {
     /// Bytes per record.
     pub const fn record_size(self) -> usize {
         match self {
-            Section::Frame => FRAME_SIZE,
+            Section::Camera => CAMERA_SIZE,
             Section::Materials => MATERIAL_SIZE,
             Section::Lights => LIGHT_SIZE,
             Section::Textures => TEXTURE_SIZE,
@@ -96,7 +96,7 @@ impl Section {
     }
     pub const fn name(self) -> &'static str {
         match self {
-            Section::Frame => "frame",
+            Section::Camera => "camera",
             Section::Materials => "materials",
             Section::Lights => "lights",
             Section::Textures => "textures",
@@ -118,7 +118,7 @@ impl Section {
 /// flags u (bit 0: non-refractive transparency everywhere; bit 1: no shadows), dz f (the z
 /// of every primary direction: 1 in f32 images; the fixed-point DM scales x0, y0, dx, dy and
 /// dz by one power of two so a pixel step keeps its precision).
-pub const FRAME_SIZE: usize = 4 * 15;
+pub const CAMERA_SIZE: usize = 4 * 15;
 /// diffuse f[3], specular f, specular_edge f, shininess f, reflect f, reflect_edge f,
 /// transmit f[3], ior f, texture u, target u, scale f[2].
 pub const MATERIAL_SIZE: usize = 4 * 16;
@@ -253,7 +253,7 @@ pub enum ImageError {
     Misaligned {
         section: u8,
     },
-    MissingFrame,
+    MissingCamera,
     BadReference {
         section: u8,
         record: u32,
@@ -293,7 +293,7 @@ impl fmt::Display for ImageError {
             ImageError::Misaligned { section } => {
                 write!(f, "section '{}' is not 4-byte aligned", name(section))
             }
-            ImageError::MissingFrame => write!(f, "scene image has no frame record"),
+            ImageError::MissingCamera => write!(f, "scene image has no camera record"),
             ImageError::BadReference { section, record } => {
                 write!(
                     f,
@@ -323,7 +323,7 @@ impl core::error::Error for ImageError {}
 
 /// Screen and global settings.
 #[derive(Clone, Copy, Debug)]
-pub struct Frame<T> {
+pub struct Camera<T> {
     pub width: u32,
     pub height: u32,
     /// Direction to pixel (x, y)'s centre: (x0 + (x + ½) dx, y0 - (y + ½) dy, dz).
@@ -620,17 +620,17 @@ impl<'a> SceneView<'a> {
             section: s as u8,
             record: i,
         };
-        if self.count(Section::Frame) != 1 {
-            return Err(ImageError::MissingFrame);
+        if self.count(Section::Camera) != 1 {
+            return Err(ImageError::MissingCamera);
         }
-        let frame = self.frame::<f32>();
+        let camera = self.camera::<f32>();
         // Pixel coordinates are u16 in screen rectangles and clipping.
         let side = 1..=u16::MAX as u32;
-        if frame.max_depth > MAX_DEPTH_LIMIT
-            || !side.contains(&frame.width)
-            || !side.contains(&frame.height)
+        if camera.max_depth > MAX_DEPTH_LIMIT
+            || !side.contains(&camera.width)
+            || !side.contains(&camera.height)
         {
-            return Err(badv(Section::Frame, 0));
+            return Err(badv(Section::Camera, 0));
         }
         let nmat = self.count(Section::Materials);
         let ntex = self.count(Section::Textures);
@@ -781,9 +781,9 @@ impl<'a> SceneView<'a> {
         Vec3::new(self.f(at), self.f(at + 4), self.f(at + 8))
     }
 
-    pub fn frame<T: Real>(&self) -> Frame<T> {
-        let at = self.rec(Section::Frame, 0);
-        Frame {
+    pub fn camera<T: Real>(&self) -> Camera<T> {
+        let at = self.rec(Section::Camera, 0);
+        Camera {
             width: self.u(at),
             height: self.u(at + 4),
             x0: self.f(at + 8),
@@ -1104,10 +1104,10 @@ mod tests {
     use super::writer::ImageWriter;
     use super::*;
 
-    /// A minimal image: a frame, one material, and the given nodes as (skip, shape word).
+    /// A minimal image: a camera, one material, and the given nodes as (skip, shape word).
     fn image(width: u32, nodes: &[(u32, u32)]) -> std::vec::Vec<u8> {
         let mut w = ImageWriter::new();
-        w.push(Section::Frame)
+        w.push(Section::Camera)
             .1
             .u(width)
             .u(8)
@@ -1138,7 +1138,7 @@ mod tests {
         w.finish()
     }
 
-    /// A 4 x 4 frame filled by one triangle whose material is texture 0 (`tex` = width,
+    /// A 4 x 4 picture filled by one triangle whose material is texture 0 (`tex` = width,
     /// height, texel offset) over `texels`, lit by ambient light only (so a pixel is its
     /// texel's colour), stored as f32 or Q16.16.
     fn textured(storage: Storage, tex: (u32, u32, u32), texels: &[u8]) -> std::vec::Vec<u8> {
@@ -1147,7 +1147,7 @@ mod tests {
             Storage::Q16_16 => ((x * 65536.0).round() as i32) as u32,
         };
         let mut w = ImageWriter::new();
-        let mut r = w.push(Section::Frame).1.u(4).u(4);
+        let mut r = w.push(Section::Camera).1.u(4).u(4);
         for x in [-1.0, 1.0, 0.5, 0.5, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0] {
             r = r.u(s(x));
         }
@@ -1177,7 +1177,7 @@ mod tests {
 
     /// Every pixel of an image with number type `T`.
     fn render_every_pixel<T: Real>(view: SceneView<'_>) -> std::vec::Vec<crate::render::Rgb8> {
-        let f = view.frame::<f32>();
+        let f = view.camera::<f32>();
         let mut tracer = crate::render::Tracer::<T>::new(view);
         let mut row = std::vec![[0u8; 3]; f.width as usize];
         let mut out = std::vec::Vec::new();
@@ -1266,7 +1266,7 @@ mod tests {
     }
 
     #[test]
-    fn frames_wider_than_the_u16_pixel_range_are_rejected() {
+    fn cameras_wider_than_the_u16_pixel_range_are_rejected() {
         assert!(SceneView::new(&image(65535, &[(1, NONE)])).is_ok());
         assert!(matches!(
             SceneView::new(&image(65536, &[(1, NONE)])),
@@ -1288,8 +1288,8 @@ mod tests {
         assert_eq!((t.width, t.height, t.rgb), (1, 1, &[0u8, 0, 0][..]));
         assert_eq!(v.record_range(Section::Ellipsoids, 0), None);
         assert_eq!(
-            v.record_range(Section::Frame, 0),
-            Some(128..128 + FRAME_SIZE)
+            v.record_range(Section::Camera, 0),
+            Some(128..128 + CAMERA_SIZE)
         );
     }
 }
