@@ -30,6 +30,8 @@ pub mod sched;
 pub mod serial;
 pub mod shape;
 pub mod spi;
+#[cfg(any(test, feature = "testkit"))]
+pub mod testkit;
 pub mod wire;
 
 pub use math::{fixed, geom, num};

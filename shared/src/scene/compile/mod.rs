@@ -12,6 +12,10 @@
 //! (LINKS-1 4.4) for the renderer's Y/X clipping of primary rays.
 
 use crate::desc::{self, Cluster, Light, Node, SceneDesc, Shape, TransparencyMode};
+use crate::image::layout::{
+    ball, blob_group, boxshape, camera, ellipsoid, light, material, node, normals, rect, texture,
+    triangle, uvs,
+};
 use crate::image::writer::ImageWriter;
 use crate::image::{Rect, Section, ShapeKind, ShapeRef, MAX_DEPTH_LIMIT, NONE};
 use core::fmt;
@@ -602,14 +606,17 @@ impl Dm<'_> {
         self.w
             .push(Section::Camera)
             .1
-            .u(width)
-            .u(height)
-            .fs(&[x0 as f32, tan_half as f32, dx as f32, dy as f32])
-            .fs(&d.background)
-            .fs(&d.ambient)
-            .u(max_depth)
-            .u(flags)
-            .fs(&[1.0]);
+            .u(camera::WIDTH, width)
+            .u(camera::HEIGHT, height)
+            .f(camera::X0, x0 as f32)
+            .f(camera::Y0, tan_half as f32)
+            .f(camera::DX, dx as f32)
+            .f(camera::DY, dy as f32)
+            .fs(camera::BACKGROUND, &d.background)
+            .fs(camera::AMBIENT, &d.ambient)
+            .u(camera::MAX_DEPTH, max_depth)
+            .u(camera::FLAGS, flags)
+            .f(camera::DZ, 1.0);
 
         for (i, t) in d.textures.iter().enumerate() {
             // The byte count in u32, checked: the image's texel section counts bytes in u32.
@@ -623,9 +630,9 @@ impl Dm<'_> {
             self.w
                 .push(Section::Textures)
                 .1
-                .u(t.width)
-                .u(t.height)
-                .u(off);
+                .u(texture::WIDTH, t.width)
+                .u(texture::HEIGHT, t.height)
+                .u(texture::TEXELS, off);
         }
         // The texel section must keep later sections aligned: the writer pads.
         for m in &d.materials {
@@ -636,12 +643,13 @@ impl Dm<'_> {
         }
         self.cluster(&d.root, &view, d.root.name.as_str())?;
         for r in std::mem::take(&mut self.rects) {
-            let b = [r.x_lo, r.x_hi, r.y_lo, r.y_hi];
-            let mut bytes = [0u8; 8];
-            for (k, v) in b.iter().enumerate() {
-                bytes[2 * k..2 * k + 2].copy_from_slice(&v.to_le_bytes());
-            }
-            self.w.push(Section::Rects).1.bytes(&bytes);
+            self.w
+                .push(Section::Rects)
+                .1
+                .h(rect::X_LO, r.x_lo)
+                .h(rect::X_HI, r.x_hi)
+                .h(rect::Y_LO, r.y_lo)
+                .h(rect::Y_HI, r.y_hi);
         }
         if self.w.count(Section::Nodes) >= (1 << ShapeRef::INDEX_BITS) {
             return Err(DmError::TooLarge {
@@ -666,19 +674,17 @@ impl Dm<'_> {
         self.w
             .push(Section::Materials)
             .1
-            .fs(&m.diffuse)
-            .fs(&[
-                m.specular,
-                m.specular_edge,
-                m.shininess,
-                m.reflect,
-                m.reflect_edge,
-            ])
-            .fs(&m.transmit)
-            .f(m.ior)
-            .u(tex)
-            .u(target)
-            .fs(&scale);
+            .fs(material::DIFFUSE, &m.diffuse)
+            .f(material::SPECULAR, m.specular)
+            .f(material::SPECULAR_EDGE, m.specular_edge)
+            .f(material::SHININESS, m.shininess)
+            .f(material::REFLECT, m.reflect)
+            .f(material::REFLECT_EDGE, m.reflect_edge)
+            .fs(material::TRANSMIT, &m.transmit)
+            .f(material::IOR, m.ior)
+            .u(material::TEXTURE, tex)
+            .u(material::TARGET, target)
+            .fs(material::SCALE, &scale);
         Ok(())
     }
 
@@ -726,19 +732,24 @@ impl Dm<'_> {
         self.w
             .push(Section::Lights)
             .1
-            .u(kind)
-            .fs(color)
-            .fs(&f32s(pos))
-            .fs(&f32s(dir))
-            .fs(&[ci as f32, co as f32, e])
-            .u(u32::from(fall));
+            .u(light::KIND, kind)
+            .fs(light::COLOR, color)
+            .fs(light::POS, &f32s(pos))
+            .fs(light::DIR, &f32s(dir))
+            .f(light::COS_INNER, ci as f32)
+            .f(light::COS_OUTER, co as f32)
+            .f(light::EXPONENT, e)
+            .u(light::FALLOFF, u32::from(fall));
         Ok(())
     }
 
     /// Start a cluster node; returns its index so `close` can patch skip and bounds.
     fn open_node(&mut self) -> u32 {
         let (i, r) = self.w.push(Section::Nodes);
-        r.fs(&[0.0; 6]).u(0).u(NONE);
+        r.fs(node::MIN, &[0.0; 3])
+            .fs(node::MAX, &[0.0; 3])
+            .u(node::SKIP, 0)
+            .u(node::SHAPE, NONE);
         self.rects.push(Rect::EMPTY);
         i
     }
@@ -750,12 +761,12 @@ impl Dm<'_> {
             .iter()
             .fold(Rect::EMPTY, |a, r| a.union(*r));
         self.rects[i as usize] = r;
-        self.w.patch_u32(Section::Nodes, i, 24, skip);
+        self.w.patch_u32(Section::Nodes, i, node::SKIP, skip);
         for k in 0..3 {
             self.w
-                .patch_u32(Section::Nodes, i, 4 * k, b.min[k].to_bits());
+                .patch_u32(Section::Nodes, i, node::MIN + 4 * k, b.min[k].to_bits());
             self.w
-                .patch_u32(Section::Nodes, i, 12 + 4 * k, b.max[k].to_bits());
+                .patch_u32(Section::Nodes, i, node::MAX + 4 * k, b.max[k].to_bits());
         }
     }
 
@@ -767,7 +778,10 @@ impl Dm<'_> {
 
     fn leaf_with_rect(&mut self, shape: ShapeRef, b: Bounds, rect: Rect) {
         let (i, r) = self.w.push(Section::Nodes);
-        r.fs(&b.min).fs(&b.max).u(i + 1).u(shape.encode());
+        r.fs(node::MIN, &b.min)
+            .fs(node::MAX, &b.max)
+            .u(node::SKIP, i + 1)
+            .u(node::SHAPE, shape.encode());
         self.rects.push(rect);
     }
 
@@ -919,13 +933,13 @@ impl Dm<'_> {
                     None => (0, [0.0; 3], 0.0),
                 };
                 let (i, r) = self.w.push(Section::Ellipsoids);
-                r.fs(&f32s(m.t))
-                    .fs(&mat_f32(&inv))
-                    .fs(&mat_f32(&m.a))
-                    .u(material)
-                    .u(flags)
-                    .fs(&f32s(cn))
-                    .f(cd as f32);
+                r.fs(ellipsoid::CENTER, &f32s(m.t))
+                    .fs(ellipsoid::M, &mat_f32(&inv))
+                    .fs(ellipsoid::L, &mat_f32(&m.a))
+                    .u(ellipsoid::MATERIAL, material)
+                    .u(ellipsoid::FLAGS, flags)
+                    .fs(ellipsoid::CUT_N, &f32s(cn))
+                    .f(ellipsoid::CUT_D, cd as f32);
                 // Half-extent of a transformed unit sphere along axis i: |row i of L|.
                 let half = [0, 1, 2].map(|k| dot(m.a[k], m.a[k]).sqrt());
                 let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
@@ -948,10 +962,10 @@ impl Dm<'_> {
                     what: "a box".into(),
                 })?;
                 let (i, r) = self.w.push(Section::Boxes);
-                r.fs(&f32s(m.t))
-                    .fs(&mat_f32(&inv))
-                    .fs(&mat_f32(&m.a))
-                    .u(material);
+                r.fs(boxshape::CENTER, &f32s(m.t))
+                    .fs(boxshape::M, &mat_f32(&inv))
+                    .fs(boxshape::L, &mat_f32(&m.a))
+                    .u(boxshape::MATERIAL, material);
                 let half = [0, 1, 2].map(|k| m.a[k].iter().map(|v| v.abs()).sum::<f64>());
                 let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
                 self.leaf(
@@ -998,9 +1012,9 @@ impl Dm<'_> {
                     self.w
                         .push(Section::Balls)
                         .1
-                        .fs(&f32s(c))
-                        .f(r as f32)
-                        .f(ball.strength as f32);
+                        .fs(ball::CENTER, &f32s(c))
+                        .f(ball::RADIUS, r as f32)
+                        .f(ball::STRENGTH, ball.strength as f32);
                     if ball.strength > 0.0 {
                         for k in 0..3 {
                             lo[k] = lo[k].min(c[k] - r);
@@ -1013,11 +1027,11 @@ impl Dm<'_> {
                     desc::BlobKernel::Links => 0,
                     desc::BlobKernel::Wyvill => 1,
                 };
-                r.u(material)
-                    .u(k)
-                    .f(*threshold as f32)
-                    .u(first)
-                    .u(balls.len() as u32);
+                r.u(blob_group::MATERIAL, material)
+                    .u(blob_group::KERNEL, k)
+                    .f(blob_group::THRESHOLD, *threshold as f32)
+                    .u(blob_group::FIRST, first)
+                    .u(blob_group::COUNT, balls.len() as u32);
                 // Grow by a relative margin: the root finder may stop a tolerance outside.
                 let pad = [0, 1, 2].map(|k| 1e-4 * (hi[k] - lo[k]).abs());
                 let b = if lo[0] > hi[0] {
@@ -1182,7 +1196,9 @@ impl Dm<'_> {
         let ni = match t.n {
             Some(n) => {
                 let (i, r) = self.w.push(Section::Normals);
-                r.fs(&n[0]).fs(&n[1]).fs(&n[2]);
+                r.fs(normals::N, &n[0])
+                    .fs(normals::N + normals::STRIDE, &n[1])
+                    .fs(normals::N + 2 * normals::STRIDE, &n[2]);
                 i
             }
             None => NONE,
@@ -1190,18 +1206,20 @@ impl Dm<'_> {
         let ui = match t.uv {
             Some(uv) => {
                 let (i, r) = self.w.push(Section::Uvs);
-                r.fs(&uv[0]).fs(&uv[1]).fs(&uv[2]);
+                r.fs(uvs::UV, &uv[0])
+                    .fs(uvs::UV + uvs::STRIDE, &uv[1])
+                    .fs(uvs::UV + 2 * uvs::STRIDE, &uv[2]);
                 i
             }
             None => NONE,
         };
         let (i, r) = self.w.push(Section::Triangles);
-        r.fs(&t.p[0])
-            .fs(&t.p[1])
-            .fs(&t.p[2])
-            .u(t.material)
-            .u(ni)
-            .u(ui);
+        r.fs(triangle::P, &t.p[0])
+            .fs(triangle::P + triangle::VERTEX_STRIDE, &t.p[1])
+            .fs(triangle::P + 2 * triangle::VERTEX_STRIDE, &t.p[2])
+            .u(triangle::MATERIAL, t.material)
+            .u(triangle::NORMALS, ni)
+            .u(triangle::UVS, ui);
         i
     }
 }
