@@ -5,12 +5,7 @@ use super::ellipsoid::{abs_mat_vec, storage_error, LocalSurface};
 use crate::geom::{Mat3, Ray, Vec3};
 use crate::num::Real;
 
-#[derive(Clone, Copy, Debug)]
-pub struct BoxShape<T> {
-    pub center: Vec3<T>,
-    pub m: Mat3<T>,
-    pub l: Mat3<T>,
-}
+pub use crate::math::solid::BoxShape;
 
 #[derive(Clone, Copy, Debug)]
 pub struct BoxHit<T> {

@@ -12,10 +12,8 @@
 //! - `fixed` (feature `std`): the rewrite of an f32 image as Q16.16.
 
 use crate::geom::{Aabb, Vec3};
+use crate::math::solid::{BoxShape, Ellipsoid, Kernel, Triangle};
 use crate::num::Storage;
-use crate::shape::boxshape::BoxShape;
-use crate::shape::ellipsoid::Ellipsoid;
-use crate::shape::triangle::Triangle;
 use core::fmt;
 
 #[cfg(any(test, feature = "std"))]
@@ -220,7 +218,7 @@ pub struct BoxRec<T> {
 #[derive(Clone, Copy, Debug)]
 pub struct BlobGroupRec<T> {
     pub material: u32,
-    pub kernel: crate::shape::blob::Kernel,
+    pub kernel: Kernel,
     pub threshold: T,
     pub first: u32,
     pub count: u32,

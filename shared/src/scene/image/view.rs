@@ -9,11 +9,8 @@ use super::{
     Node, TextureView, TriangleRec,
 };
 use crate::geom::{Aabb, Mat3, Vec3};
+use crate::math::solid::{Ball, BoxShape, CutPlane, Ellipsoid, Kernel, Triangle};
 use crate::num::{Real, Storage};
-use crate::shape::blob::{Ball, Kernel};
-use crate::shape::boxshape::BoxShape;
-use crate::shape::ellipsoid::{CutPlane, Ellipsoid};
-use crate::shape::triangle::Triangle;
 
 /// A validated, zero-copy view of a SceneImage.
 #[derive(Clone, Copy, Debug)]
