@@ -2,7 +2,7 @@
 //! rotated/scaled boxes share one test. `q = M (p - c)`, `L = M⁻¹`.
 
 use super::ellipsoid::{abs_mat_vec, storage_error, LocalSurface};
-use crate::geom::{Mat3, Ray, Vec3};
+use crate::geom::{Ray, Vec3};
 use crate::num::Real;
 
 pub use crate::math::solid::BoxShape;
