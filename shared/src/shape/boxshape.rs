@@ -109,6 +109,7 @@ impl<T: Real> BoxShape<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::Mat3;
 
     fn unit_box_at(z: f64, half: f64) -> BoxShape<f64> {
         let s = |v: f64| Mat3 {
