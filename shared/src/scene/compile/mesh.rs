@@ -203,9 +203,7 @@ impl Dm<'_> {
         let ni = match t.n {
             Some(n) => {
                 let (i, r) = self.w.push(Section::Normals);
-                r.fs(normals::N, &n[0])
-                    .fs(normals::N + normals::STRIDE, &n[1])
-                    .fs(normals::N + 2 * normals::STRIDE, &n[2]);
+                r.per_vertex(normals::N, normals::STRIDE, &n);
                 i
             }
             None => NONE,
@@ -213,17 +211,13 @@ impl Dm<'_> {
         let ui = match t.uv {
             Some(uv) => {
                 let (i, r) = self.w.push(Section::Uvs);
-                r.fs(uvs::UV, &uv[0])
-                    .fs(uvs::UV + uvs::STRIDE, &uv[1])
-                    .fs(uvs::UV + 2 * uvs::STRIDE, &uv[2]);
+                r.per_vertex(uvs::UV, uvs::STRIDE, &uv);
                 i
             }
             None => NONE,
         };
         let (i, r) = self.w.push(Section::Triangles);
-        r.fs(triangle::P, &t.p[0])
-            .fs(triangle::P + triangle::VERTEX_STRIDE, &t.p[1])
-            .fs(triangle::P + 2 * triangle::VERTEX_STRIDE, &t.p[2])
+        r.per_vertex(triangle::P, triangle::VERTEX_STRIDE, &t.p)
             .u(triangle::MATERIAL, t.material)
             .u(triangle::NORMALS, ni)
             .u(triangle::UVS, ui);

@@ -175,8 +175,8 @@ impl Dm<'_> {
         };
         let (i, r) = self.w.push(Section::Ellipsoids);
         r.fs(ellipsoid::CENTER, &f32s(m.t))
-            .fs(ellipsoid::M, &mat_f32(&inv))
-            .fs(ellipsoid::L, &mat_f32(&m.a))
+            .fs(ellipsoid::TO_UNIT, &mat_f32(&inv))
+            .fs(ellipsoid::TO_VIEW, &mat_f32(&m.a))
             .u(ellipsoid::MATERIAL, material)
             .u(ellipsoid::FLAGS, flags)
             .fs(ellipsoid::CUT_N, &f32s(cn))
@@ -212,8 +212,8 @@ impl Dm<'_> {
         })?;
         let (i, r) = self.w.push(Section::Boxes);
         r.fs(boxshape::CENTER, &f32s(m.t))
-            .fs(boxshape::M, &mat_f32(&inv))
-            .fs(boxshape::L, &mat_f32(&m.a))
+            .fs(boxshape::TO_UNIT, &mat_f32(&inv))
+            .fs(boxshape::TO_VIEW, &mat_f32(&m.a))
             .u(boxshape::MATERIAL, material);
         let half = [0, 1, 2].map(|k| m.a[k].iter().map(|v| v.abs()).sum::<f64>());
         let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));

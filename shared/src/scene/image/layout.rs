@@ -287,8 +287,8 @@ pub mod ellipsoid {
     use super::Word::{self, *};
     /// center f[3], m f[9] (view -> unit space, rows), l f[9] (unit -> view space, rows).
     pub const CENTER: usize = 0;
-    pub const M: usize = 12;
-    pub const L: usize = 48;
+    pub const TO_UNIT: usize = 12;
+    pub const TO_VIEW: usize = 48;
     /// material u, flags u ([`CUT`], [`CAPPED`]), cut n f[3], cut d f (unit space).
     pub const MATERIAL: usize = 84;
     pub const FLAGS: usize = 88;
@@ -297,71 +297,27 @@ pub mod ellipsoid {
     pub const SIZE: usize = 4 * 27;
     pub const CUT: u32 = 1;
     pub const CAPPED: u32 = 2;
+    #[rustfmt::skip]
     pub const WORDS: [Word; SIZE / 4] = [
-        Word::L,
-        Word::L,
-        Word::L,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        U,
-        U,
-        P,
-        P,
-        P,
-        P,
+        L, L, L, I, I, I, I, I, I, I, I, I, L, L, L, L, L, L, L, L, L, U, U, P, P, P, P,
     ];
 }
 
-/// A box: the cube [-1, 1]^3 under an affine map.
+/// A box: the cube [-1, 1]^3 under an affine map; its fields are an ellipsoid's first ones,
+/// at the same offsets (center, the two maps, material).
 pub mod boxshape {
-    use super::Word::{self, *};
-    /// center f[3], m f[9] (view -> unit space, rows), l f[9] (unit -> view space, rows),
-    /// material u.
-    pub const CENTER: usize = 0;
-    pub const M: usize = 12;
-    pub const L: usize = 48;
-    pub const MATERIAL: usize = 84;
-    pub const SIZE: usize = 4 * 22;
-    pub const WORDS: [Word; SIZE / 4] = [
-        Word::L,
-        Word::L,
-        Word::L,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        I,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        Word::L,
-        U,
-    ];
+    pub use super::ellipsoid::{CENTER, MATERIAL, TO_UNIT, TO_VIEW};
+    use super::Word;
+    pub const SIZE: usize = MATERIAL + 4;
+    pub const WORDS: [Word; SIZE / 4] = {
+        let mut w = [Word::U; SIZE / 4];
+        let mut k = 0;
+        while k < w.len() {
+            w[k] = super::ellipsoid::WORDS[k];
+            k += 1;
+        }
+        w
+    };
 }
 
 /// A group of density spheres (a blob) rendered as one surface.

@@ -375,8 +375,8 @@ impl<'a> SceneView<'a> {
         EllipsoidRec {
             shape: Ellipsoid {
                 center: r.v3(CENTER),
-                m: r.m3(M),
-                l: r.m3(L),
+                m: r.m3(TO_UNIT),
+                l: r.m3(TO_VIEW),
                 cut,
             },
             material: r.u(MATERIAL),
@@ -390,8 +390,8 @@ impl<'a> SceneView<'a> {
         BoxRec {
             shape: BoxShape {
                 center: r.v3(CENTER),
-                m: r.m3(M),
-                l: r.m3(L),
+                m: r.m3(TO_UNIT),
+                l: r.m3(TO_VIEW),
             },
             material: r.u(MATERIAL),
         }
