@@ -1,7 +1,9 @@
-//! Hand-built SceneImages for tests: a few records written through the image writer (so at
+//! Hand-built scenes for tests: scene descriptions for the DM ([`scene_desc`]) and
+//! SceneImages of a few records ([`SceneBuilder`]) written through the image writer (so at
 //! the offsets of [`crate::image::layout`]), their scalars stored as f32 or Q16.16, for
 //! tests that need an image the DM would never produce or one smaller than any scene.
 
+use crate::desc::{Camera, Cluster, Material, Node, SceneDesc, Transform, TransparencyMode};
 use crate::image::layout::{camera, material, node, texture, triangle, STORAGE_AT};
 use crate::image::writer::ImageWriter;
 use crate::image::{MapTarget, Section, NONE};
@@ -164,4 +166,27 @@ pub fn textured_image(storage: Storage, tex: (u32, u32, u32), texels: &[u8]) -> 
         .triangle([-10.0, -10.0, 2.0, 10.0, -10.0, 2.0, 0.0, 10.0, 2.0])
         .node([-10.0, -10.0, 1.0], [10.0, 10.0, 3.0], 1, 0);
     b.finish()
+}
+
+/// A scene of `children` under a root cluster, seen by `camera` at `width` x `height`: one
+/// default material, no textures or lights, black background, no ambient light, depth 5,
+/// refractive transparency.
+pub fn scene_desc(camera: Camera, width: u32, height: u32, children: Vec<Node>) -> SceneDesc {
+    SceneDesc {
+        camera,
+        width,
+        height,
+        background: [0.0; 3],
+        ambient: [0.0; 3],
+        max_depth: 5,
+        transparency: TransparencyMode::Refractive,
+        materials: std::vec![Material::default()],
+        textures: Vec::new(),
+        lights: Vec::new(),
+        root: Cluster {
+            name: "root".into(),
+            transform: Transform::default(),
+            children,
+        },
+    }
 }

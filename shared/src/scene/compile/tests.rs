@@ -2,28 +2,18 @@ use super::*;
 use crate::desc::*;
 use crate::image::SceneView;
 
+/// The scene the DM tests compile: `children` 5 units in front of the eye, 16 x 16 pixels.
 fn scene(children: Vec<Node>) -> SceneDesc {
+    let camera = Camera {
+        eye: [0.0, 0.0, 5.0],
+        look_at: [0.0; 3],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 40.0,
+    };
     SceneDesc {
-        camera: Camera {
-            eye: [0.0, 0.0, 5.0],
-            look_at: [0.0; 3],
-            up: [0.0, 1.0, 0.0],
-            fov_y_deg: 40.0,
-        },
-        width: 16,
-        height: 16,
-        background: [0.0; 3],
         ambient: [0.1; 3],
         max_depth: 3,
-        transparency: TransparencyMode::Refractive,
-        materials: vec![Material::default()],
-        textures: vec![],
-        lights: vec![],
-        root: Cluster {
-            name: "root".into(),
-            transform: Transform::default(),
-            children,
-        },
+        ..crate::testkit::scene::scene_desc(camera, 16, 16, children)
     }
 }
 
