@@ -16,7 +16,7 @@ pub struct Triangle<T> {
 
 #[derive(Clone, Copy, Debug)]
 pub struct CutPlane<T> {
-    /// Unit normal in the unit-sphere frame.
+    /// Unit normal in the unit-sphere space.
     pub n: Vec3<T>,
     pub d: T,
     pub capped: bool,

@@ -9,7 +9,7 @@
 //! leaves 16 + k fraction bits for the scene's own units: exactly the Q(15-k).(16+k) format
 //! a per-scene choice would pick, with one code path on the node. Powers of two scale
 //! floats exactly, and every quantity the tracer computes is scale-free (directions,
-//! normals, unit-frame coordinates of ellipsoids and boxes, kernel ratios of density
+//! normals, unit-space coordinates of ellipsoids and boxes, kernel ratios of density
 //! spheres) except point-light falloff, whose colour is pre-multiplied by 2^2k.
 //!
 //! A scene is rejected, never wrapped: a value outside the format, or a detail smaller than
