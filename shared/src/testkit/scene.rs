@@ -3,6 +3,7 @@
 //! the offsets of [`crate::image::layout`]), their scalars stored as f32 or Q16.16, for
 //! tests that need an image the DM would never produce or one smaller than any scene.
 
+#[cfg(feature = "std")]
 use crate::desc::{Camera, Cluster, Material, Node, SceneDesc, Transform, TransparencyMode};
 use crate::image::layout::{camera, material, node, texture, triangle, STORAGE_AT};
 use crate::image::writer::ImageWriter;
@@ -168,6 +169,7 @@ pub fn textured_image(storage: Storage, tex: (u32, u32, u32), texels: &[u8]) -> 
     b.finish()
 }
 
+#[cfg(feature = "std")]
 /// A scene of `children` under a root cluster, seen by `camera` at `width` x `height`: one
 /// default material, no textures or lights, black background, no ambient light, depth 5,
 /// refractive transparency.
