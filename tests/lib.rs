@@ -20,28 +20,14 @@ pub fn matte(name: &str, diffuse: [f32; 3]) -> Material {
 /// A scene whose camera sits at the world origin looking down -Z with Y up, so view
 /// coordinates are world (x, y, -z).
 pub fn scene(width: u32, height: u32, fov_y_deg: f64, shapes: Vec<Shape>) -> SceneDesc {
-    SceneDesc {
-        camera: Camera {
-            eye: [0.0; 3],
-            look_at: [0.0, 0.0, -1.0],
-            up: [0.0, 1.0, 0.0],
-            fov_y_deg,
-        },
-        width,
-        height,
-        background: [0.0; 3],
-        ambient: [0.0; 3],
-        max_depth: 5,
-        transparency: TransparencyMode::Refractive,
-        materials: vec![Material::default()],
-        textures: vec![],
-        lights: vec![],
-        root: Cluster {
-            name: "root".into(),
-            transform: Transform::default(),
-            children: shapes.into_iter().map(Node::Shape).collect(),
-        },
-    }
+    let camera = Camera {
+        eye: [0.0; 3],
+        look_at: [0.0, 0.0, -1.0],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg,
+    };
+    let children = shapes.into_iter().map(Node::Shape).collect();
+    links_core::testkit::scene::scene_desc(camera, width, height, children)
 }
 
 pub fn image_of(desc: &SceneDesc) -> Vec<u8> {
@@ -67,7 +53,7 @@ pub fn render_all<T: Real>(image: &[u8]) -> Vec<u8> {
 /// Render a whole compiled scene with chosen techniques: RGB8 rows and the counts.
 pub fn render_all_with<T: Real>(image: &[u8], techniques: Techniques) -> (Vec<u8>, Stats) {
     let view = SceneView::new(image).expect("valid image");
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let mut tracer = Tracer::<T>::with_techniques(view, techniques);
     let mut row = vec![[0u8; 3]; f.width as usize];
     let mut out = Vec::with_capacity((f.width * f.height * 3) as usize);

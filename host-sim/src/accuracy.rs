@@ -49,7 +49,7 @@ struct Probe {
 }
 
 fn probe<T: Real>(view: SceneView<'_>) -> Probe {
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let (w, h) = (f.width, f.height);
     let rows: Vec<(Vec<u8>, usize, Vec<Option<ShapeRef>>)> = (0..h)
         .into_par_iter()
@@ -126,7 +126,7 @@ pub fn reference(image: &[u8]) -> Result<Reference, AccuracyError> {
 /// the same image.
 pub fn compare_to<T: Real>(image: &[u8], reference: &Reference) -> Result<Accuracy, AccuracyError> {
     let view = SceneView::new(image)?;
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let (w, h) = (f.width as usize, f.height as usize);
     let reference = &reference.0;
     let tested = match T::STORAGE {

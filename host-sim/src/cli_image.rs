@@ -94,7 +94,7 @@ pub fn read_image(path: &Path) -> Result<Vec<u8>, ImageFileError> {
 
 /// Checks that the host can render the frame of a valid image at `path`.
 pub fn check_frame(path: &Path, view: &SceneView<'_>) -> Result<(), ImageFileError> {
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     if f.width > MAX_IMAGE_SIDE || f.height > MAX_IMAGE_SIDE {
         return Err(ImageFileError::FrameTooLarge {
             path: path.to_path_buf(),
@@ -134,7 +134,7 @@ pub fn precision_for(
 /// size and the frame (`<name>: SceneImage <N> bytes (<W>x<H>)`), the number format, then one
 /// row per non-empty section.
 pub fn describe(name: &str, view: &SceneView<'_>) -> Vec<String> {
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let format = match view.storage() {
         Storage::F32 => "f32".to_string(),
         Storage::Q16_16 => format!("q16.16, lengths scaled by 2^{}", view.scale_exponent()),

@@ -108,7 +108,7 @@ pub fn render_frame(
         Precision::F64 => rows::<f64>(view, progress),
         Precision::Fixed => rows::<Fx>(view, progress),
     });
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     Ok(FrameImage {
         width: f.width,
         height: f.height,
@@ -119,7 +119,7 @@ pub fn render_frame(
 }
 
 fn rows<T: Real>(view: SceneView<'_>, progress: &(dyn Fn() + Sync)) -> (Vec<u8>, Stats) {
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let (w, h) = (f.width as usize, f.height as usize);
     let mut rgb = vec![0u8; w * h * 3];
     let stats: Vec<Stats> = rgb

@@ -425,7 +425,7 @@ fn run(cli: Cli) -> Result<(), String> {
         } => {
             let (image, precision) = image_to_render(&scene, image.as_deref(), precision, false)?;
             let view = SceneView::new(&image).map_err(|e| e.to_string())?;
-            let f = view.frame::<f32>();
+            let f = view.camera::<f32>();
             let bar = if quiet || !std::io::stderr().is_terminal() {
                 ProgressBar::hidden()
             } else {

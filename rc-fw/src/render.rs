@@ -50,7 +50,7 @@ pub async fn render_frames<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
     last: &mut Option<FrameStreamer>,
 ) -> Result<RootReport, RenderFail> {
     let dims = SceneView::new(image).ok().and_then(|v| {
-        let f = v.frame::<f32>();
+        let f = v.camera::<f32>();
         let w = u16::try_from(f.width).ok()?;
         let h = u16::try_from(f.height).ok()?;
         FrameStreamer::new(0, w, h).ok().map(|_| (w, h))

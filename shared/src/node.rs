@@ -684,7 +684,7 @@ async fn render_next<C: WorkClock, R: RunRenderer>(
         nc.cursor = None;
         return false;
     };
-    let width = view.frame::<f32>().width;
+    let width = view.camera::<f32>().width;
     let Some((y, x0, plen)) = cur.job.region.piece(width, cur.piece) else {
         nc.report.bad_jobs += 1;
         nc.cursor = None;
@@ -738,7 +738,7 @@ fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>, exchanged
             for (b, d) in dims.iter_mut().enumerate() {
                 if let (Some(frame), true) = (nc.banks[b].frame, nc.banks[b].ready) {
                     if let Ok(v) = SceneView::new(&banks[b][..nc.banks[b].total as usize]) {
-                        let f = v.frame::<f32>();
+                        let f = v.camera::<f32>();
                         *d = Some((frame, f.width, f.height));
                     }
                 }

@@ -12,7 +12,7 @@
 use crate::clip::RowClip;
 use crate::geom::{offset_ray_origin, Ray, RayInv, Vec3};
 use crate::image::{
-    BlobGroupRec, Frame, LightKind, MapTarget, Material, SceneView, ShapeKind, ShapeRef,
+    BlobGroupRec, Camera, LightKind, MapTarget, Material, SceneView, ShapeKind, ShapeRef,
     MAX_DEPTH_LIMIT, NONE,
 };
 use crate::num::Real;
@@ -294,7 +294,7 @@ fn schlick<T: Real>(at_normal: T, at_edge: T, cos: T) -> T {
 /// The tracer for one scene and number type.
 pub struct Tracer<'a, T: Real> {
     scene: SceneView<'a>,
-    frame: Frame<T>,
+    frame: Camera<T>,
     techniques: Techniques,
     clip: RowClip,
     /// Recursive (reflected, refracted, straight) rays the current pixel may still spawn.
@@ -309,7 +309,7 @@ impl<'a, T: Real> Tracer<'a, T> {
     }
 
     pub fn with_techniques(scene: SceneView<'a>, techniques: Techniques) -> Self {
-        let frame = scene.frame::<T>();
+        let frame = scene.camera::<T>();
         Self {
             scene,
             frame,
@@ -340,7 +340,7 @@ impl<'a, T: Real> Tracer<'a, T> {
         }
     }
 
-    pub fn frame(&self) -> &Frame<T> {
+    pub fn frame(&self) -> &Camera<T> {
         &self.frame
     }
 

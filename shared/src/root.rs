@@ -375,7 +375,7 @@ impl RootState {
                 });
             }
             let v = SceneView::new(bytes).map_err(|_| RootError::BadScene { frame })?;
-            let f = v.frame::<f32>();
+            let f = v.camera::<f32>();
             match dims {
                 None => dims = Some((f.width, f.height)),
                 Some(d) if d != (f.width, f.height) => {

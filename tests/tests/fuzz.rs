@@ -529,7 +529,7 @@ fn some_record(rng: &mut Rng, img: &[u8]) -> Option<(Section, usize)> {
 /// Words of a record that hold integers (indices, counts, sizes, kinds, flags), by section.
 fn integer_words(s: Section) -> &'static [usize] {
     match s {
-        Section::Frame => &[0, 1, 12, 13],
+        Section::Camera => &[0, 1, 12, 13],
         Section::Materials => &[12, 13],
         Section::Lights => &[0, 13],
         Section::Textures => &[0, 1, 2],
@@ -691,7 +691,7 @@ fn render_sample<T: Real>(
     rng: &mut Rng,
     tally: &mut Tally,
 ) -> Result<(), RenderError> {
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let (w, h) = (f.width, f.height);
     let mut tracer = Tracer::<T>::with_techniques(view, techniques);
     let mut runs: Vec<(u32, u32, u32)> = Vec::new();
@@ -754,7 +754,7 @@ fn check_accepted(img: &[u8], view: SceneView<'_>, rng: &mut Rng, tally: &mut Ta
     } else {
         *rng.pick(&TECHNIQUES)
     };
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let outside = |e: RenderError| panic!("a run inside the {}x{} frame: {e}", f.width, f.height);
     render_sample::<f32>(view, tech, rng, tally).unwrap_or_else(outside);
     render_sample::<FastF32>(view, tech, rng, tally).unwrap_or_else(outside);
@@ -1184,7 +1184,7 @@ impl NodeLink for ScriptLink<'_> {
 /// the single-node render has them.
 fn node_session(img: &[u8], reference: &[Rgb8], rng: &mut Rng, tally: &mut Tally) {
     let view = SceneView::new(img).expect("valid image");
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let (w, h) = (f.width, f.height);
     let pct = *rng.pick(&[0, 0, 3, 10, 30]);
     let crc = CRC32.checksum(img);
@@ -1548,7 +1548,7 @@ impl PixelSink for CheckSink {
 /// The RC driving scripted nodes through whole frames. Unmutated, it must finish with every
 /// pixel delivered once per frame.
 fn root_session(img: &[u8], rng: &mut Rng, tally: &mut Tally) {
-    let f = SceneView::new(img).expect("valid image").frame::<f32>();
+    let f = SceneView::new(img).expect("valid image").camera::<f32>();
     let (w, h) = (f.width, f.height);
     let pct = *rng.pick(&[0, 0, 2, 10, 40]);
     let frames = rng.range(1, 2) as u16;
@@ -1616,7 +1616,7 @@ struct WireState {
 
 fn render_all_f32(img: &[u8]) -> Vec<Rgb8> {
     let view = SceneView::new(img).expect("valid image");
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let mut t = Tracer::<f32>::new(view);
     let mut out = vec![[0u8; 3]; (f.width * f.height) as usize];
     for (y, row) in out.chunks_mut(f.width as usize).enumerate() {
@@ -2300,7 +2300,7 @@ fn rc_serial_session(img: &[u8], rng: &mut Rng, input: &mut Vec<u8>, tally: &mut
         let Ok(view) = SceneView::new(i) else {
             return image.is_some();
         };
-        let f = view.frame::<f32>();
+        let f = view.camera::<f32>();
         if let Ok(fs) = serial::FrameStreamer::new(frame, f.width as u16, f.height as u16) {
             let sent = Sent::default();
             let mut enc = serial::Encoder::new();

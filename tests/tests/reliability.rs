@@ -30,7 +30,7 @@ fn killed(cfg: &SimConfig, node: u16, at_s: f64) -> SimConfig {
 /// node is silent for much longer than this (plus waiting for the bus).
 fn longest_row_s(img: &[u8]) -> f64 {
     let view = SceneView::new(img).expect("valid");
-    let f = view.frame::<f32>();
+    let f = view.camera::<f32>();
     let mut px = vec![[0u8; 3]; f.width as usize];
     (0..f.height)
         .map(|y| {

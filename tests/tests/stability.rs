@@ -4,7 +4,7 @@
 //! already covered elsewhere: shared edges and vertices and self-intersection
 //! (`robustness.rs`), total internal reflection and nesting beyond the depth cap
 //! (`analytic.rs`), thin metaball necks and tangent rays (`shared/src/shape/blob.rs`),
-//! degenerate input (`host-sim/src/scene_file`, `shared/src/dm.rs`).
+//! degenerate input (`host-sim/src/scene_file`, `shared/src/scene/compile`).
 
 use links_core::desc::*;
 use links_core::fixed_image::to_fixed;

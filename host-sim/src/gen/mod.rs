@@ -2,7 +2,7 @@
 //!
 //! - [`camera_mesh`]: the 738-triangle camera of the paper's Photo 1 (`camera.obj`).
 //! - [`building_section_mesh`]: the 170-triangle building section of Photo 2 (`building.obj`).
-//! - [`floor_texture`]: the mapped floor of Photo 2 (`floor.png`, 256 x 256).
+//! - [`floor_texture`]: the mapped floor of Photo 2 (`floor.png`, 128 x 128).
 //!
 //! The committed files in `scenes/assets/` are exactly [`bundled_assets`]; a test checks
 //! that. To regenerate them after changing a generator:

@@ -75,24 +75,7 @@ pub const MAX_REFINE: u32 = 64;
 /// Looser tolerance, in units of `tol`, accepted at the step cap.
 const LOOSE: i32 = 16;
 
-/// The radial density function of every ball of a group.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kernel {
-    /// `b(1 - 3r²/d²)` for `r <= d/3`, `(3b/2)(1 - r/d)²` for `d/3 < r <= d`.
-    Links,
-    /// `b(1 - r²/d²)²` for `r <= d`.
-    Wyvill,
-}
-
-/// One density sphere.
-#[derive(Clone, Copy, Debug)]
-pub struct Ball<T> {
-    pub center: Vec3<T>,
-    /// Radius of influence `d` (> 0; balls with `d <= 0` are ignored).
-    pub radius: T,
-    /// Strength `b`; negative balls carve dents.
-    pub strength: T,
-}
+pub use crate::math::solid::{Ball, Kernel};
 
 /// A blob group: `count` balls fetched by index through `ball(i)` (the caller decodes them
 /// from a byte image in place, so no slice of [`Ball`] is available), kernel and threshold.

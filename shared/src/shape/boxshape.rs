@@ -2,15 +2,10 @@
 //! rotated/scaled boxes share one test. `q = M (p - c)`, `L = M⁻¹`.
 
 use super::ellipsoid::{abs_mat_vec, storage_error, LocalSurface};
-use crate::geom::{Mat3, Ray, Vec3};
+use crate::geom::{Ray, Vec3};
 use crate::num::Real;
 
-#[derive(Clone, Copy, Debug)]
-pub struct BoxShape<T> {
-    pub center: Vec3<T>,
-    pub m: Mat3<T>,
-    pub l: Mat3<T>,
-}
+pub use crate::math::solid::BoxShape;
 
 #[derive(Clone, Copy, Debug)]
 pub struct BoxHit<T> {
@@ -114,6 +109,7 @@ impl<T: Real> BoxShape<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geom::Mat3;
 
     fn unit_box_at(z: f64, half: f64) -> BoxShape<f64> {
         let s = |v: f64| Mat3 {

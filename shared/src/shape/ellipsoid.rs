@@ -9,23 +9,7 @@
 use crate::geom::{Mat3, Ray, Vec3};
 use crate::num::Real;
 
-#[derive(Clone, Copy, Debug)]
-pub struct CutPlane<T> {
-    /// Unit normal in the unit-sphere frame.
-    pub n: Vec3<T>,
-    pub d: T,
-    pub capped: bool,
-}
-
-#[derive(Clone, Copy, Debug)]
-pub struct Ellipsoid<T> {
-    pub center: Vec3<T>,
-    /// View -> unit sphere.
-    pub m: Mat3<T>,
-    /// Unit sphere -> view (the inverse of `m`).
-    pub l: Mat3<T>,
-    pub cut: Option<CutPlane<T>>,
-}
+pub use crate::math::solid::{CutPlane, Ellipsoid};
 
 /// Which surface a hit lies on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -11,11 +11,7 @@
 use crate::geom::{Ray, Vec3};
 use crate::num::Real;
 
-/// A triangle as the renderer sees it (view coordinates).
-#[derive(Clone, Copy, Debug)]
-pub struct Triangle<T> {
-    pub p: [Vec3<T>; 3],
-}
+pub use crate::math::solid::Triangle;
 
 /// Where a ray crossed a triangle: distance and barycentric weights of p0, p1, p2.
 #[derive(Clone, Copy, Debug)]

@@ -1,8 +1,8 @@
 //! Number formats the renderer is generic over.
 //!
 //! The tracer is written once against [`Real`]; `f64` is the host reference, `f32` is what a
-//! Cortex-M4F node computes with its FPU. A fixed-point format can implement the same trait
-//! (the numerics issue): every operation the renderer needs is named here, so nothing in the
+//! Cortex-M4F node computes with its FPU, and Q16.16 ([`crate::fixed::Fx`]) implements the same
+//! trait: every operation the renderer needs is named here, so nothing in the
 //! tracer assumes IEEE floats except through [`Real::epsilon`] (the unit round-off used for
 //! error-bounded ray origins) and [`Real::is_finite`].
 //!

@@ -9,7 +9,7 @@
 //! leaves 16 + k fraction bits for the scene's own units: exactly the Q(15-k).(16+k) format
 //! a per-scene choice would pick, with one code path on the node. Powers of two scale
 //! floats exactly, and every quantity the tracer computes is scale-free (directions,
-//! normals, unit-frame coordinates of ellipsoids and boxes, kernel ratios of density
+//! normals, unit-space coordinates of ellipsoids and boxes, kernel ratios of density
 //! spheres) except point-light falloff, whose colour is pre-multiplied by 2^2k.
 //!
 //! A scene is rejected, never wrapped: a value outside the format, or a detail smaller than
@@ -17,7 +17,7 @@
 //! the format can't resolve), is a [`FixedError`] naming the record.
 
 use crate::fixed::FRAC_BITS;
-use crate::image::{ImageError, SceneView, Section};
+use crate::image::{ImageError, SceneView, Section, Word};
 use crate::num::Storage;
 use core::fmt;
 use core::ops::Range;
@@ -30,68 +30,7 @@ pub const TARGET_DIRECTION: f64 = 32.0;
 /// The smallest feature size, in steps of the format, a scene may have after scaling.
 pub const MIN_DETAIL_STEPS: f64 = 16.0;
 
-/// What a 4-byte word of a record holds, for the conversion.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Word {
-    /// An integer: copied.
-    U,
-    /// A scale-free scalar (colour, coefficient, direction, unit-frame value).
-    P,
-    /// A length: times 2^k, rounded to nearest.
-    L,
-    /// A bounding box's lower corner: times 2^k, rounded down (boxes must still contain
-    /// their shapes after rounding).
-    Lo,
-    /// A bounding box's upper corner: rounded up.
-    Hi,
-    /// An inverse length (a view-to-unit-frame matrix entry): times 2^-k.
-    I,
-    /// A light colour: times 2^2k when the light falls off with distance squared.
-    C,
-    /// A component of the primary directions (x0, y0, dx, dy, dz): times 2^j, the power
-    /// of two that brings the largest component to at most [`TARGET_DIRECTION`].
-    D,
-}
-
 use Word::*;
-
-const FRAME: [Word; 15] = [U, U, D, D, D, D, P, P, P, P, P, P, U, U, D];
-const MATERIAL: [Word; 16] = [P, P, P, P, P, P, P, P, P, P, P, P, U, U, P, P];
-const LIGHT: [Word; 14] = [U, C, C, C, L, L, L, P, P, P, P, P, P, U];
-const TEXTURE: [Word; 3] = [U, U, U];
-const NODE: [Word; 8] = [Lo, Lo, Lo, Hi, Hi, Hi, U, U];
-const TRIANGLE: [Word; 12] = [L, L, L, L, L, L, L, L, L, U, U, U];
-const NORMALS: [Word; 9] = [P; 9];
-const UVS: [Word; 6] = [P; 6];
-const ELLIPSOID: [Word; 27] = [
-    L, L, L, I, I, I, I, I, I, I, I, I, L, L, L, L, L, L, L, L, L, U, U, P, P, P, P,
-];
-const BOX: [Word; 22] = [
-    L, L, L, I, I, I, I, I, I, I, I, I, L, L, L, L, L, L, L, L, L, U,
-];
-const BLOB_GROUP: [Word; 5] = [U, U, P, U, U];
-const BALL: [Word; 5] = [L, L, L, L, P];
-const RECT: [Word; 2] = [U, U];
-
-/// The word layout of a section's records (`None` for raw bytes: texels).
-fn layout(s: Section) -> Option<&'static [Word]> {
-    Some(match s {
-        Section::Frame => &FRAME,
-        Section::Materials => &MATERIAL,
-        Section::Lights => &LIGHT,
-        Section::Textures => &TEXTURE,
-        Section::Texels => return None,
-        Section::Nodes => &NODE,
-        Section::Triangles => &TRIANGLE,
-        Section::Normals => &NORMALS,
-        Section::Uvs => &UVS,
-        Section::Ellipsoids => &ELLIPSOID,
-        Section::Boxes => &BOX,
-        Section::BlobGroups => &BLOB_GROUP,
-        Section::Balls => &BALL,
-        Section::Rects => &RECT,
-    })
-}
 
 /// Every record that has a word layout: (section, record, its byte range in the image,
 /// its words). The range comes from the validated view, checked (`None` never happens for
@@ -100,7 +39,7 @@ fn records<'a>(
     view: &'a SceneView<'_>,
 ) -> impl Iterator<Item = (Section, u32, Option<Range<usize>>, &'static [Word])> + 'a {
     Section::ALL.into_iter().flat_map(move |s| {
-        let words = layout(s);
+        let words = s.words();
         (0..if words.is_some() { view.count(s) } else { 0 })
             .map(move |r| (s, r, view.record_range(s, r), words.unwrap_or(&[])))
     })
@@ -150,7 +89,9 @@ fn u32_of(w: &[u8]) -> u32 {
 const MAX_WORDS: usize = 32;
 
 /// What a word is multiplied by when the scene's lengths are scaled by `scale` and the
-/// camera's directions by `dir_scale` (`None` for an integer).
+/// camera's directions by `dir_scale` (`None` for an integer, copied): lengths (and box
+/// corners, rounded outward) by 2^k, inverse lengths by 2^-k, a light colour by 2^2k when
+/// the light falls off with distance squared, primary-direction components by 2^j.
 fn factor(kind: Word, falloff_light: bool, scale: f64, dir_scale: f64) -> Option<f64> {
     match kind {
         U => None,
@@ -272,7 +213,7 @@ pub fn first_non_finite(image: &[u8]) -> Result<Option<(Section, u32)>, ImageErr
                 .any(|(w, kind)| *kind != U && !f32_of(w).is_finite())
         })
     };
-    // A shape, light or frame record first: the boxes of the nodes above it overflow with it.
+    // A shape, light or camera record first: the boxes of the nodes above it overflow with it.
     let found = records(&view)
         .filter(|r| r.0 != Section::Nodes)
         .find(bad)
@@ -312,15 +253,18 @@ pub fn to_fixed_with_scale(image: &[u8], k: i8) -> Result<FixedImage, FixedError
     convert(image, &view, k, f64::NAN)
 }
 
-/// 2^j for the frame's direction components: with x0 and dx stored as plain Q16.16, a
+/// 2^j for the camera's direction components: with x0 and dx stored as plain Q16.16, a
 /// pixel step of 0.002 would be rounded by 0.4% and the last column's ray bent by a pixel.
 fn direction_scale(image: &[u8], view: &SceneView<'_>) -> Result<f64, FixedError> {
-    let f = view.frame::<f32>();
-    let frame: Vec<f64> =
-        record_words(image, Section::Frame, view.record_range(Section::Frame, 0))?
-            .map(f32_of)
-            .collect();
-    let w = |i: usize| frame.get(i).copied().unwrap_or(0.0);
+    let f = view.camera::<f32>();
+    let camera: Vec<f64> = record_words(
+        image,
+        Section::Camera,
+        view.record_range(Section::Camera, 0),
+    )?
+    .map(f32_of)
+    .collect();
+    let w = |i: usize| camera.get(i).copied().unwrap_or(0.0);
     let (x0, y0, dx, dy, dz) = (w(2), w(3), w(4), w(5), w(14));
     let m = [
         x0,
@@ -471,58 +415,37 @@ mod tests {
         assert_eq!(scale_exponent_for(f64::INFINITY), None);
     }
 
-    /// A valid f32 image whose light record shares its bytes with the frame record (the
+    /// A valid f32 image whose light record shares its bytes with the camera record (the
     /// validator checks each section, not that they are disjoint): the light's colour words
-    /// are the frame's height, x0, y0.
-    fn light_over_frame() -> Vec<u8> {
-        use crate::image::{writer::ImageWriter, NONE};
-        let mut w = ImageWriter::new();
+    /// are the camera's height, x0, y0.
+    fn light_over_camera() -> Vec<u8> {
+        use crate::image::layout::{TABLE_AT, TABLE_ENTRY_SIZE};
+        use crate::testkit::scene::SceneBuilder;
+        let mut b = SceneBuilder::new(Storage::F32);
         // Width 2 reads as a spot light's kind.
-        w.push(Section::Frame)
-            .1
-            .u(2)
-            .u(3)
-            .fs(&[-1.0, 1.0, 0.5, 0.5])
-            .fs(&[0.0; 6])
-            .u(2)
-            .u(0)
-            .fs(&[1.0]);
-        w.push(Section::Materials)
-            .1
-            .fs(&[0.5; 12])
-            .u(NONE)
-            .u(0)
-            .fs(&[1.0, 1.0]);
-        w.push(Section::Triangles)
-            .1
-            .fs(&[-1.0, -1.0, 2.0, 1.0, -1.0, 2.0, 0.0, 1.0, 2.0])
-            .u(0)
-            .u(NONE)
-            .u(NONE);
-        w.push(Section::Nodes)
-            .1
-            .fs(&[-1.0, -1.0, 1.0, 1.0, 1.0, 3.0])
-            .u(1)
-            .u(0);
-        let mut img = w.finish();
-        let frame_at = img[16..20].to_vec();
-        let lights = 16 + 8 * Section::Lights as usize;
-        img[lights..lights + 4].copy_from_slice(&frame_at);
+        b.camera(2, 3, [-1.0, 1.0, 0.5, 0.5], 0.0)
+            .grey_material()
+            .triangle([-1.0, -1.0, 2.0, 1.0, -1.0, 2.0, 0.0, 1.0, 2.0])
+            .node([-1.0, -1.0, 1.0], [1.0, 1.0, 3.0], 1, 0);
+        let mut img = b.finish();
+        let camera_at = img[TABLE_AT..TABLE_AT + 4].to_vec();
+        let lights = TABLE_AT + TABLE_ENTRY_SIZE * Section::Lights as usize;
+        img[lights..lights + 4].copy_from_slice(&camera_at);
         img[lights + 4..lights + 8].copy_from_slice(&1u32.to_le_bytes());
         img
     }
 
     #[test]
     fn a_rewrite_that_would_not_validate_is_an_error() {
-        // Found by the image fuzzer: converting the light's colour turned the frame's
+        // Found by the image fuzzer: converting the light's colour turned the camera's
         // height (3, a subnormal as an f32) into 0, and to_fixed returned that image.
-        let img = light_over_frame();
+        let img = light_over_camera();
         let view = SceneView::new(&img).expect("the input is valid");
         assert_eq!(view.light_count(), 1);
         assert_eq!(
             to_fixed(&img).err(),
             Some(FixedError::Rewritten(ImageError::BadValue {
-                section: Section::Frame as u8,
+                section: Section::Camera as u8,
                 record: 0
             }))
         );
@@ -531,7 +454,7 @@ mod tests {
     #[test]
     fn layouts_cover_whole_records() {
         for s in Section::ALL {
-            if let Some(words) = layout(s) {
+            if let Some(words) = s.words() {
                 assert_eq!(words.len() * 4, s.record_size(), "{}", s.name());
                 assert!(words.len() <= MAX_WORDS, "{}", s.name());
             }

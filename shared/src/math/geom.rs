@@ -196,7 +196,7 @@ impl<T: Real> Mat3<T> {
     pub fn mul_vec(&self, v: Vec3<T>) -> Vec3<T> {
         Vec3::new(self.r[0].dot(v), self.r[1].dot(v), self.r[2].dot(v))
     }
-    /// `Mᵀ v`: how normals leave a local frame whose inverse transform is `M`.
+    /// `Mᵀ v`: how normals leave a local space whose inverse transform is `M`.
     #[inline]
     pub fn mul_transpose_vec(&self, v: Vec3<T>) -> Vec3<T> {
         self.r[0] * v.x + self.r[1] * v.y + self.r[2] * v.z

@@ -190,7 +190,7 @@ pub struct Ball {
     pub strength: f64,
 }
 
-/// A plane cutting an ellipsoid, in the ellipsoid's own frame (origin at its centre, before
+/// A plane cutting an ellipsoid, in the ellipsoid's own coordinates (origin at its centre, before
 /// its rotation): points with `normal · p <= offset` are kept.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CutPlane {
@@ -224,7 +224,7 @@ pub enum Shape {
         cut: Option<CutPlane>,
         material: u32,
     },
-    /// A box `[min, max]` in its cluster's frame (transformed with the cluster).
+    /// A box `[min, max]` in its cluster's coordinates (transformed with the cluster).
     Box {
         min: [f64; 3],
         max: [f64; 3],

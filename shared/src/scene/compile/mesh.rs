@@ -1,0 +1,226 @@
+//! Triangles and meshes: faces into view-space triangles (winding, normals, uvs), then
+//! written as leaves below their cluster in the hierarchy [`MeshHierarchy`] selects.
+
+use super::*;
+
+/// A triangle ready to write: view-space vertices and optional normals / uvs.
+pub(super) struct TriData {
+    pub(super) p: [[f32; 3]; 3],
+    pub(super) n: Option<[[f32; 3]; 3]>,
+    pub(super) uv: Option<[[f32; 2]; 3]>,
+    pub(super) material: u32,
+}
+
+impl TriData {
+    /// World -> view mirrors space (right-handed world, left-handed view), which would turn
+    /// counter-clockwise (outward-facing) triangles clockwise: swap two vertices to undo it.
+    pub(super) fn keep_winding(&mut self, full: &Affine) {
+        if det(&full.a) < 0.0 {
+            self.p.swap(1, 2);
+            if let Some(n) = &mut self.n {
+                n.swap(1, 2);
+            }
+            if let Some(uv) = &mut self.uv {
+                uv.swap(1, 2);
+            }
+        }
+    }
+    /// Drop vertex normals that all equal the face normal: a flat face shades the same
+    /// without them, and the image carries only what the scene needs.
+    pub(super) fn drop_flat_normals(&mut self) {
+        let Some(n) = self.n else { return };
+        let v = self.p.map(|p| p.map(f64::from));
+        let Some(face) = normalize(cross(sub(v[1], v[0]), sub(v[2], v[0]))) else {
+            return;
+        };
+        let flat = n.iter().all(|vn| {
+            let vn = vn.map(f64::from);
+            // Same direction and orientation: without vertex normals the renderer takes the
+            // outside from the winding, so only normals that agree with it may go.
+            dot(vn, face) > 1.0 - 1e-6
+        });
+        if flat {
+            self.n = None;
+        }
+    }
+
+    pub(super) fn centroid(&self, axis: usize) -> f32 {
+        (self.p[0][axis] + self.p[1][axis] + self.p[2][axis]) / 3.0
+    }
+    pub(super) fn bounds(&self) -> Bounds {
+        // The stored vertices are f32 already, so their box is exact.
+        let mut b = Bounds::empty();
+        for v in &self.p {
+            b = b.union(Bounds { min: *v, max: *v });
+        }
+        b
+    }
+}
+
+impl Dm<'_> {
+    pub(super) fn check_triangle(&self, t: &TriData, path: &str) -> Result<(), DmError> {
+        let v = t.p.map(|p| p.map(f64::from));
+        let area2 = cross(sub(v[1], v[0]), sub(v[2], v[0]));
+        if dot(area2, area2) == 0.0 || !t.p.iter().flatten().all(|x| x.is_finite()) {
+            return Err(DmError::DegenerateShape {
+                cluster: path.to_string(),
+                what: "a triangle".into(),
+            });
+        }
+        Ok(())
+    }
+
+    pub(super) fn mesh_triangles(
+        &self,
+        mesh: &desc::Mesh,
+        smooth: bool,
+        material: u32,
+        full: &Affine,
+        normal_m: &M3,
+        path: &str,
+    ) -> Result<Vec<TriData>, DmError> {
+        let bad = |what: String| DmError::BadIndex {
+            what: format!("mesh '{}': {what}", mesh.source),
+        };
+        let pos = |i: u32| {
+            mesh.positions
+                .get(i as usize)
+                .copied()
+                .ok_or_else(|| bad(format!("position {i} missing")))
+        };
+        // Area-weighted vertex normals for smooth meshes without their own.
+        let computed: Option<Vec<[f64; 3]>> = (smooth && mesh.normals.is_empty()).then(|| {
+            let mut acc = vec![[0.0; 3]; mesh.positions.len()];
+            for f in &mesh.faces {
+                let p: Vec<[f64; 3]> = f
+                    .iter()
+                    .filter_map(|v| mesh.positions.get(v.position as usize).copied())
+                    .collect();
+                if p.len() == 3 {
+                    let n = cross(sub(p[1], p[0]), sub(p[2], p[0]));
+                    for v in f {
+                        if let Some(a) = acc.get_mut(v.position as usize) {
+                            *a = add(*a, n);
+                        }
+                    }
+                }
+            }
+            acc
+        });
+        let mut out = Vec::with_capacity(mesh.faces.len());
+        for (fi, f) in mesh.faces.iter().enumerate() {
+            let mut p = [[0.0f32; 3]; 3];
+            let mut n = [[0.0f32; 3]; 3];
+            let mut has_n = true;
+            let mut uv = [[0.0f32; 2]; 3];
+            let mut has_uv = true;
+            for k in 0..3 {
+                let v = f[k];
+                p[k] = f32s(full.point(pos(v.position)?));
+                let world_n = match (&computed, v.normal) {
+                    (Some(c), _) => c.get(v.position as usize).copied(),
+                    (None, Some(ni)) => Some(
+                        mesh.normals
+                            .get(ni as usize)
+                            .copied()
+                            .ok_or_else(|| bad(format!("normal {ni} missing")))?,
+                    ),
+                    (None, None) => None,
+                };
+                match world_n.and_then(|wn| normalize(mat_vec(normal_m, wn))) {
+                    Some(vn) => n[k] = f32s(vn),
+                    None => has_n = false,
+                }
+                match v.uv {
+                    Some(ti) => {
+                        let t = mesh
+                            .uvs
+                            .get(ti as usize)
+                            .copied()
+                            .ok_or_else(|| bad(format!("uv {ti} missing")))?;
+                        uv[k] = [t[0] as f32, t[1] as f32];
+                    }
+                    None => has_uv = false,
+                }
+            }
+            let mut tri = TriData {
+                p,
+                n: has_n.then_some(n),
+                uv: has_uv.then_some(uv),
+                material,
+            };
+            tri.keep_winding(full);
+            tri.drop_flat_normals();
+            self.check_triangle(
+                &tri,
+                &format!("{path} (mesh '{}', face {})", mesh.source, fi + 1),
+            )?;
+            out.push(tri);
+        }
+        Ok(out)
+    }
+
+    /// Write triangles as leaves, splitting into sub-clusters per [`MeshHierarchy`].
+    pub(super) fn triangles(&mut self, mut tris: Vec<TriData>) -> Bounds {
+        let split = match self.opts.mesh_hierarchy {
+            _ if tris.len() <= 1 => None,
+            MeshHierarchy::Flat => None,
+            MeshHierarchy::Median if tris.len() <= MESH_LEAF_SIZE => None,
+            MeshHierarchy::Median => Some(median_split(&mut tris)),
+            MeshHierarchy::Sah => sah_split(&mut tris),
+        };
+        let Some(mid) = split else {
+            let mut b = Bounds::empty();
+            for t in tris {
+                let tb = t.bounds();
+                // Triangles are projected directly (LINKS-1 4.4): tighter than their box.
+                let rect = self.proj.rect_of(&t.p.map(|p| p.map(f64::from)));
+                let idx = self.write_triangle(t);
+                self.leaf_with_rect(
+                    ShapeRef {
+                        kind: ShapeKind::Triangle,
+                        index: idx,
+                    },
+                    tb,
+                    rect,
+                );
+                b = b.union(tb);
+            }
+            return b;
+        };
+        let right = tris.split_off(mid);
+        let mut b = Bounds::empty();
+        for half in [tris, right] {
+            let node = self.open_node();
+            let hb = self.triangles(half);
+            self.close_node(node, hb);
+            b = b.union(hb);
+        }
+        b
+    }
+
+    pub(super) fn write_triangle(&mut self, t: TriData) -> u32 {
+        let ni = match t.n {
+            Some(n) => {
+                let (i, r) = self.w.push(Section::Normals);
+                r.per_vertex(normals::N, normals::STRIDE, &n);
+                i
+            }
+            None => NONE,
+        };
+        let ui = match t.uv {
+            Some(uv) => {
+                let (i, r) = self.w.push(Section::Uvs);
+                r.per_vertex(uvs::UV, uvs::STRIDE, &uv);
+                i
+            }
+            None => NONE,
+        };
+        let (i, r) = self.w.push(Section::Triangles);
+        r.per_vertex(triangle::P, triangle::VERTEX_STRIDE, &t.p)
+            .u(triangle::MATERIAL, t.material)
+            .u(triangle::NORMALS, ni)
+            .u(triangle::UVS, ui);
+        i
+    }
+}
