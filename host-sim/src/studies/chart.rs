@@ -9,7 +9,7 @@
 //! deterministic numbers, so a test can regenerate the CSV and compare it with the committed
 //! copy.
 
-use crate::accuracy::{compare_to, reference, Accuracy, AccuracyError};
+use crate::studies::accuracy::{compare_to, reference, Accuracy, AccuracyError};
 use links_core::num::{FastF32, Fx};
 use plotters::prelude::*;
 use std::fmt::{self, Write as _};
@@ -526,7 +526,7 @@ pub fn png(pts: &[Point]) -> Result<Vec<u8>, ChartError> {
         let area = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         draw(area, pts)?;
     }
-    crate::frame::encode_png(w, h, &rgb).map_err(draw_err)
+    crate::sim::single::encode_png(w, h, &rgb).map_err(draw_err)
 }
 
 /// Write a text file, naming it in the error.

@@ -2,14 +2,14 @@
 //! injection options), `sweep nodes`, `sweep divisions`, `sweep faults`. Thin glue over
 //! [`crate::cluster`]; every number is virtual time.
 
-use crate::cluster::rccost::RcCost;
-use crate::cluster::star::{NodeDeath, Noise};
-use crate::cluster::sweep::{
+use crate::sim::cluster::rccost::RcCost;
+use crate::sim::cluster::star::{NodeDeath, Noise};
+use crate::sim::cluster::{
+    render_cluster, simulate_frame, ClusterRender, RunCache, SimConfig, SimReport,
+};
+use crate::studies::cluster_sweep::{
     divisions_csv, nodes_csv, steady_state_interval, sweep_divisions, sweep_nodes,
     write_divisions_chart, write_nodes_chart, NamedPolicy,
-};
-use crate::cluster::{
-    render_cluster, simulate_frame, ClusterRender, RunCache, SimConfig, SimReport,
 };
 use links_core::node::NodeConfig;
 use links_core::sched::{Policy, Shape};
@@ -38,7 +38,7 @@ pub fn parse_policy(s: &str) -> Result<Policy, String> {
 }
 
 /// Parse `NODE@SECONDS` (a node that stops answering at that virtual time).
-pub fn parse_death(s: &str) -> Result<crate::cluster::star::NodeDeath, String> {
+pub fn parse_death(s: &str) -> Result<crate::sim::cluster::star::NodeDeath, String> {
     let bad = || format!("'{s}': expected NODE@SECONDS, e.g. 10@0.3");
     let (node, at) = s.split_once('@').ok_or_else(bad)?;
     let node = node.trim().parse().map_err(|_| bad())?;
@@ -46,7 +46,7 @@ pub fn parse_death(s: &str) -> Result<crate::cluster::star::NodeDeath, String> {
     if !(at_s.is_finite() && at_s >= 0.0) {
         return Err(bad());
     }
-    Ok(crate::cluster::star::NodeDeath { node, at_s })
+    Ok(crate::sim::cluster::star::NodeDeath { node, at_s })
 }
 
 /// Parse `NODE@SECONDS` or `FIRST-LAST@SECONDS` (nodes `FIRST..=LAST` all stop answering at
@@ -174,7 +174,7 @@ pub fn render(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, String> {
 /// The Fig. 5.1 study: the bus table (raw vs RLE pixels, 1/2/4 buses at 64 nodes) printed,
 /// and the speed-up sweep over node counts written as CSV and SVG into `out`.
 pub fn nodes_study(image: &[u8], out: &Path, progress: &dyn Fn(&str)) -> Result<String, String> {
-    let e = |e: crate::cluster::SimError| e.to_string();
+    let e = |e: crate::sim::cluster::SimError| e.to_string();
     std::fs::create_dir_all(out).map_err(|err| format!("{}: {err}", out.display()))?;
     let base = SimConfig {
         cache: Some(RunCache::new()),
@@ -271,7 +271,7 @@ pub fn divisions_study(
     out: &Path,
     progress: &dyn Fn(&str),
 ) -> Result<String, String> {
-    let e = |e: crate::cluster::SimError| e.to_string();
+    let e = |e: crate::sim::cluster::SimError| e.to_string();
     std::fs::create_dir_all(out).map_err(|err| format!("{}: {err}", out.display()))?;
     let base = SimConfig {
         cache: Some(RunCache::new()),
@@ -333,7 +333,7 @@ pub fn faults_study(
     opts: &FaultSweepArgs,
     progress: &dyn Fn(&str),
 ) -> Result<String, String> {
-    use crate::cluster::reliability::{
+    use crate::studies::faults::{
         faults_csv, faults_markdown, faults_png, replace_section, sweep_faults, write_faults_chart,
         FaultSweepConfig,
     };
@@ -356,10 +356,14 @@ pub fn faults_study(
         "rendering the reference ({}x{} on the host)",
         opts.width, opts.height
     ));
-    let reference =
-        crate::frame::render_frame(&image, crate::frame::Precision::F32, opts.threads, &|| {})
-            .map_err(|e| e.to_string())?
-            .rgb;
+    let reference = crate::sim::single::render_frame(
+        &image,
+        crate::sim::single::Precision::F32,
+        opts.threads,
+        &|| {},
+    )
+    .map_err(|e| e.to_string())?
+    .rgb;
     let cfg = FaultSweepConfig::standard(opts.nodes, opts.timeout_ms * 1e-3);
     let start = std::time::Instant::now();
     let sweep = sweep_faults(&image, &reference, &cfg, opts.threads, &|s| {

@@ -10,9 +10,9 @@
 //! a pool of host threads and returned in input order (results never depend on the thread
 //! count); they share one [`RunCache`].
 
-use super::star::{NodeDeath, Noise};
-use super::sweep::{pool, NamedPolicy};
-use super::{simulate, RunCache, SimConfig, SimError, SimReport};
+use crate::sim::cluster::star::{NodeDeath, Noise};
+use crate::sim::cluster::{simulate, RunCache, SimConfig, SimError, SimReport};
+use crate::studies::cluster_sweep::{pool, NamedPolicy};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -585,20 +585,20 @@ where
 
 /// The three panels: kill moment, bit-error rate, fraction killed. An SVG file.
 pub fn write_faults_chart(path: &Path, s: &FaultSweep) -> Result<(), SimError> {
-    crate::chart::ensure_font().map_err(chart_err)?;
+    crate::studies::chart::ensure_font().map_err(chart_err)?;
     draw_all(SVGBackend::new(path, CHART).into_drawing_area(), s)
 }
 
 /// The same chart as a PNG.
 pub fn faults_png(s: &FaultSweep) -> Result<Vec<u8>, SimError> {
-    crate::chart::ensure_font().map_err(chart_err)?;
+    crate::studies::chart::ensure_font().map_err(chart_err)?;
     let (w, h) = CHART;
     let mut rgb = vec![0u8; (w * h * 3) as usize];
     draw_all(
         BitMapBackend::with_buffer(&mut rgb, CHART).into_drawing_area(),
         s,
     )?;
-    crate::frame::encode_png(w, h, &rgb).map_err(chart_err)
+    crate::sim::single::encode_png(w, h, &rgb).map_err(chart_err)
 }
 
 fn draw_kills<DB: DrawingBackend>(

@@ -6,8 +6,9 @@
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
-//! - [`sweep`]: the Fig. 5.1 / 5.2 analogs (node-count and division sweeps), CSV and charts.
-//! - [`reliability`]: the fault sweep of docs/reliability.md (deaths, bit errors).
+//!
+//! The sweeps over many simulations live in [`crate::studies`] ([`sweep`] and
+//! [`reliability`] here are their old paths).
 //!
 //! Node compute time is [`CycleModel::cycles`] of each run's operation counts at the
 //! configured core clock. A simulation is single-threaded and its results depend only on its
@@ -17,10 +18,10 @@ pub mod dm;
 pub mod exec;
 pub mod framemem;
 pub mod rccost;
-pub mod reliability;
 pub mod star;
-pub mod sweep;
 
+pub use crate::studies::cluster_sweep as sweep;
+pub use crate::studies::faults as reliability;
 pub use sweep::{
     divisions_csv, nodes_csv, steady_state_interval, sweep_divisions, sweep_nodes,
     write_divisions_chart, write_nodes_chart, DivisionPoint, NamedPolicy, NodePoint,

@@ -1,10 +1,10 @@
 //! The `links upload` and `links readback` commands: progress bars and messages around
 //! [`crate::serial_host`].
 
-use crate::frame::encode_png;
-use crate::serial_host::{
+use crate::serial::host::{
     open_port, readback, upload, upload_deadline, ReadbackEvent, ReadbackOptions, UploadOptions,
 };
+use crate::sim::single::encode_png;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::Path;

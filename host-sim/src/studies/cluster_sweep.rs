@@ -5,7 +5,7 @@
 //! returned in input order, so results never depend on the thread count. A shared
 //! [`RunCache`] saves re-rendering runs two simulations have in common.
 
-use super::{simulate, SimConfig, SimError};
+use crate::sim::cluster::{simulate, SimConfig, SimError};
 use links_core::sched::{Policy, Shape};
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -289,7 +289,7 @@ fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
 /// Speed-up against node count (single frame solid, steady state dashed-by-marker), one
 /// line per policy, with the ideal line; an SVG file.
 pub fn write_nodes_chart(path: &Path, points: &[NodePoint], title: &str) -> Result<(), SimError> {
-    crate::chart::ensure_font().map_err(chart_err)?;
+    crate::studies::chart::ensure_font().map_err(chart_err)?;
     let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(chart_err)?;
     let max_n = points.iter().map(|p| p.nodes).max().unwrap_or(1) as f64;
@@ -368,7 +368,7 @@ pub fn write_divisions_chart(
     points: &[DivisionPoint],
     title: &str,
 ) -> Result<(), SimError> {
-    crate::chart::ensure_font().map_err(chart_err)?;
+    crate::studies::chart::ensure_font().map_err(chart_err)?;
     let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(chart_err)?;
     let fixed: Vec<&DivisionPoint> = points
