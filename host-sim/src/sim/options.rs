@@ -356,7 +356,7 @@ pub fn faults_study(
         "rendering the reference ({}x{} on the host)",
         opts.width, opts.height
     ));
-    let reference = crate::sim::single::render_frame(
+    let reference = crate::sim::single::render_single(
         &image,
         crate::sim::single::Precision::F32,
         opts.threads,
