@@ -190,49 +190,19 @@ pub fn readback_with_clock<P: Read + Write>(
     let ms = u64::try_from(opts.timeout.as_millis()).unwrap_or(u64::MAX);
     let mut line = Line::new(port, name, clock, opts.deadline);
     let mut dec = Decoder::<MAX_TO_PC>::new();
-    let mut asm: Option<FrameAssembly> = None;
-    let (mut bad_frames, mut resends, mut crc_retry) = (0u32, 0u32, false);
-    let mut watch = Watch::new();
+    let mut rb = Reading {
+        opts,
+        progress,
+        asm: None,
+        bad_frames: 0,
+        resends: 0,
+        crc_retry: false,
+        watch: Watch::new(),
+    };
     let mut deadline = line.after(opts.timeout);
     loop {
         let Some(b) = line.byte(deadline)? else {
-            if line.overdue() {
-                let doing = asm
-                    .as_ref()
-                    .map_or("waiting for a frame header".into(), |a| {
-                        format!(
-                            "frame {}: {} of {} pixels received",
-                            a.frame,
-                            a.count,
-                            a.total()
-                        )
-                    });
-                return Err(line.deadline_error(doing));
-            }
-            // Silence.
-            let Some(a) = &asm else {
-                return Err(line.timeout(ms, "a frame from the RC"));
-            };
-            if resends >= opts.resend_rounds {
-                return Err(line.timeout(
-                    ms,
-                    format!(
-                        "the rest of frame {} ({} of {} pixels received, {resends} retransmit requests)",
-                        a.frame,
-                        a.count,
-                        a.total()
-                    ),
-                ));
-            }
-            let (start, len) = a.missing_span().unwrap_or((0, 0));
-            line.send(&ToRc::Resend {
-                frame: a.frame,
-                start,
-                len,
-            })?;
-            resends += 1;
-            watch.asked(len as u64);
-            progress(ReadbackEvent::Resend { pixels: len });
+            rb.silence(&mut line, ms)?;
             deadline = line.after(opts.timeout);
             continue;
         };
@@ -242,7 +212,7 @@ pub fn readback_with_clock<P: Read + Write>(
                 return Err(HostSerialError::Version { found })
             }
             Some(Err(_)) => {
-                bad_frames += 1;
+                rb.bad_frames += 1;
                 continue;
             }
             Some(Ok(p)) => p,
@@ -256,110 +226,197 @@ pub fn readback_with_clock<P: Read + Write>(
                 frame,
                 width,
                 height,
-            } => {
-                if asm.as_ref().is_none_or(|a| a.frame != frame) {
-                    if asm.is_some() {
-                        watch.restarts += 1;
-                        if watch.restarts >= opts.max_restarts {
-                            return Err(HostSerialError::FrameRestarts {
-                                restarts: watch.restarts,
-                                frame,
-                            });
-                        }
-                    }
-                    let a = FrameAssembly::new(frame, width, height)?;
-                    watch.new_frame(a.total());
-                    asm = Some(a);
-                    (resends, crc_retry, news) = (0, false, true);
-                    progress(ReadbackEvent::Header {
-                        frame,
-                        width,
-                        height,
-                    });
-                }
-            }
+            } => news = rb.header(frame, width, height)?,
             ToPc::Progress { frame, done, total } => {
                 progress(ReadbackEvent::Rendering { done, total });
-                news = asm
+                news = rb
+                    .asm
                     .as_ref()
-                    .is_some_and(|a| watch.progressed(a, frame, done, total));
+                    .is_some_and(|a| rb.watch.progressed(a, frame, done, total));
             }
             ToPc::Error {
                 code: RcError::Version { found },
             } => return Err(HostSerialError::Version { found }),
             ToPc::Error { code } => return Err(HostSerialError::Rc(code)),
             m @ (ToPc::Pixels { .. } | ToPc::PixelsRle { .. }) => {
-                // At least one pixel per message, so that even empty ones add up.
-                let n = pixel_count(&m).max(1) as u64;
-                let mut fresh = 0;
-                if let Some(a) = &mut asm {
-                    let before = a.count;
-                    if a.put(&m)? {
-                        fresh = a.count - before;
-                        progress(ReadbackEvent::Pixels {
-                            have: a.count,
-                            total: a.total(),
-                        });
-                    }
-                }
-                watch.pixels(asm.as_ref().map(|a| a.frame), n, fresh)?;
+                rb.pixels(&m)?;
                 continue;
             }
             ToPc::FrameEnd { frame, crc } => {
-                if let Some(a) = asm.as_mut().filter(|a| a.frame == frame) {
-                    if let Some((start, len)) = a.missing_span() {
-                        if resends >= opts.resend_rounds {
-                            return Err(HostSerialError::Retries {
-                                what: format!(
-                                    "frame {frame} still lacks {} pixels",
-                                    a.total() - a.count
-                                ),
-                                tries: resends,
-                            });
-                        }
-                        line.send(&ToRc::Resend { frame, start, len })?;
-                        resends += 1;
-                        watch.asked(len as u64);
-                        progress(ReadbackEvent::Resend { pixels: len });
-                    } else {
-                        let found = CRC32.checksum(&a.rgb);
-                        if found == crc {
-                            line.send(&ToRc::FrameAck { frame })?;
-                            let rgb = std::mem::take(&mut a.rgb);
-                            return Ok(Readback {
-                                frame,
-                                width: a.width as u32,
-                                height: a.height as u32,
-                                rgb,
-                                crc,
-                                bad_frames,
-                                resends,
-                            });
-                        }
-                        if crc_retry {
-                            return Err(HostSerialError::FrameCrc {
-                                frame,
-                                expected: crc,
-                                found,
-                            });
-                        }
-                        // Once: forget every pixel and ask for the whole frame again.
-                        crc_retry = true;
-                        a.forget();
-                        let len = a.total() as u32;
-                        line.send(&ToRc::Resend {
-                            frame,
-                            start: 0,
-                            len,
-                        })?;
-                        resends += 1;
-                        watch.asked(len as u64);
-                        progress(ReadbackEvent::Resend { pixels: len });
-                    }
+                if let Some(done) = rb.frame_end(&mut line, frame, crc)? {
+                    return Ok(done);
                 }
             }
             ToPc::Ack { .. } | ToPc::Nak { .. } | ToPc::SceneDone { .. } => {}
         }
-        watch.message(news, kind, opts.idle_messages)?;
+        rb.watch.message(news, kind, opts.idle_messages)?;
+    }
+}
+
+/// A readback under way: the frame being assembled and the counts that bound the session.
+struct Reading<'o> {
+    opts: &'o ReadbackOptions,
+    progress: &'o dyn Fn(ReadbackEvent),
+    /// The frame being read (`None` before the first header).
+    asm: Option<FrameAssembly>,
+    bad_frames: u32,
+    /// Retransmit requests sent for the frame being read.
+    resends: u32,
+    /// Whether the whole frame was asked for again after a CRC mismatch.
+    crc_retry: bool,
+    watch: Watch,
+}
+
+impl Reading<'_> {
+    /// Ask for `len` pixels of `frame` from raster position `start` again.
+    fn resend<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+        frame: u16,
+        start: u32,
+        len: u32,
+    ) -> Result<(), HostSerialError> {
+        line.send(&ToRc::Resend { frame, start, len })?;
+        self.resends += 1;
+        self.watch.asked(len as u64);
+        (self.progress)(ReadbackEvent::Resend { pixels: len });
+        Ok(())
+    }
+
+    /// Nothing arrived in time: past the overall deadline, or before any frame, give up;
+    /// otherwise ask for what is missing (up to `opts.resend_rounds` times).
+    fn silence<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+        ms: u64,
+    ) -> Result<(), HostSerialError> {
+        if line.overdue() {
+            let doing = self
+                .asm
+                .as_ref()
+                .map_or("waiting for a frame header".into(), |a| {
+                    format!(
+                        "frame {}: {} of {} pixels received",
+                        a.frame,
+                        a.count,
+                        a.total()
+                    )
+                });
+            return Err(line.deadline_error(doing));
+        }
+        let Some(a) = &self.asm else {
+            return Err(line.timeout(ms, "a frame from the RC"));
+        };
+        let resends = self.resends;
+        if resends >= self.opts.resend_rounds {
+            return Err(line.timeout(
+                ms,
+                format!(
+                    "the rest of frame {} ({} of {} pixels received, {resends} retransmit requests)",
+                    a.frame,
+                    a.count,
+                    a.total()
+                ),
+            ));
+        }
+        let (start, len) = a.missing_span().unwrap_or((0, 0));
+        let frame = a.frame;
+        self.resend(line, frame, start, len)
+    }
+
+    /// A `FrameHeader`: whether it begins a new frame (progress); a frame begun before the
+    /// one being read was finished counts as a restart.
+    fn header(&mut self, frame: u16, width: u16, height: u16) -> Result<bool, HostSerialError> {
+        if self.asm.as_ref().is_some_and(|a| a.frame == frame) {
+            return Ok(false);
+        }
+        if self.asm.is_some() {
+            self.watch.restarts += 1;
+            if self.watch.restarts >= self.opts.max_restarts {
+                return Err(HostSerialError::FrameRestarts {
+                    restarts: self.watch.restarts,
+                    frame,
+                });
+            }
+        }
+        let a = FrameAssembly::new(frame, width, height)?;
+        self.watch.new_frame(a.total());
+        self.asm = Some(a);
+        (self.resends, self.crc_retry) = (0, false);
+        (self.progress)(ReadbackEvent::Header {
+            frame,
+            width,
+            height,
+        });
+        Ok(true)
+    }
+
+    /// A pixel message: stored if it belongs to the frame being read, counted either way.
+    fn pixels(&mut self, m: &ToPc<'_>) -> Result<(), HostSerialError> {
+        // At least one pixel per message, so that even empty ones add up.
+        let n = pixel_count(m).max(1) as u64;
+        let mut fresh = 0;
+        if let Some(a) = &mut self.asm {
+            let before = a.count;
+            if a.put(m)? {
+                fresh = a.count - before;
+                (self.progress)(ReadbackEvent::Pixels {
+                    have: a.count,
+                    total: a.total(),
+                });
+            }
+        }
+        self.watch
+            .pixels(self.asm.as_ref().map(|a| a.frame), n, fresh)
+    }
+
+    /// A `FrameEnd` of the frame being read: ask for what is missing, or check the CRC and
+    /// acknowledge the frame (`Some`), or, once, ask for the whole frame again.
+    fn frame_end<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+        frame: u16,
+        crc: u32,
+    ) -> Result<Option<Readback>, HostSerialError> {
+        let Some(a) = self.asm.as_mut().filter(|a| a.frame == frame) else {
+            return Ok(None);
+        };
+        if let Some((start, len)) = a.missing_span() {
+            if self.resends >= self.opts.resend_rounds {
+                return Err(HostSerialError::Retries {
+                    what: format!("frame {frame} still lacks {} pixels", a.total() - a.count),
+                    tries: self.resends,
+                });
+            }
+            self.resend(line, frame, start, len)?;
+            return Ok(None);
+        }
+        let found = CRC32.checksum(&a.rgb);
+        if found == crc {
+            line.send(&ToRc::FrameAck { frame })?;
+            let rgb = std::mem::take(&mut a.rgb);
+            return Ok(Some(Readback {
+                frame,
+                width: a.width as u32,
+                height: a.height as u32,
+                rgb,
+                crc,
+                bad_frames: self.bad_frames,
+                resends: self.resends,
+            }));
+        }
+        if self.crc_retry {
+            return Err(HostSerialError::FrameCrc {
+                frame,
+                expected: crc,
+                found,
+            });
+        }
+        // Once: forget every pixel and ask for the whole frame again.
+        self.crc_retry = true;
+        a.forget();
+        let len = a.total() as u32;
+        self.resend(line, frame, 0, len)?;
+        Ok(None)
     }
 }

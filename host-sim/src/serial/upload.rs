@@ -197,29 +197,86 @@ pub fn upload_with_clock<P: Read + Write>(
 ) -> Result<UploadReport, HostSerialError> {
     let len = u32::try_from(image.len())
         .map_err(|_| HostSerialError::Protocol("scene larger than 4 GiB".into()))?;
-    let crc = CRC32.checksum(image);
-    let chunk = opts.chunk.clamp(1, MAX_CHUNK);
     let ms = u64::try_from(opts.reply_timeout.as_millis()).unwrap_or(u64::MAX);
     let mut line = Line::new(port, name, clock, opts.deadline);
     let mut dec = Decoder::<MAX_TO_PC>::new();
-    let mut report = UploadReport {
-        bytes: image.len(),
-        ..UploadReport::default()
+    let mut up = Upload {
+        image,
+        len,
+        crc: CRC32.checksum(image),
+        chunk: opts.chunk.clamp(1, MAX_CHUNK),
+        next: None,
+        acked: 0,
+        sent: 0,
+        report: UploadReport {
+            bytes: image.len(),
+            ..UploadReport::default()
+        },
+        stall: Stall::default(),
     };
-    // `None`: the SceneBegin is not acknowledged yet; `Some(o)`: send from offset `o`.
-    let mut next: Option<u32> = None;
-    // The highest offset the RC acknowledged (progress), and the end of the bytes sent so
-    // far (or of those the RC already had): answers past it are about bytes never sent.
-    let (mut acked, mut sent) = (0u32, 0u32);
-    // Sends since `acked` last grew, and what the RC did meanwhile.
+    // Sends since `acked` last grew.
     let mut tries = 0u32;
-    let mut stall = Stall::default();
     loop {
-        // Send the current message.
-        let sent_end = match next {
+        let sent_end = up.send(&mut line)?;
+        tries += 1;
+        match up.wait(&mut line, &mut dec, opts, sent_end, progress)? {
+            Heard::Stored => {
+                if let Some(frames) = opts.start_render {
+                    line.send(&ToRc::StartRender { frames })?;
+                }
+                return Ok(up.report);
+            }
+            Heard::Grew => {
+                tries = 0;
+                up.stall = Stall::default();
+            }
+            Heard::Stuck | Heard::Useless if tries >= opts.tries => {
+                return Err(stalled(&line, &up.stall, up.next, up.acked, tries, ms));
+            }
+            Heard::Stuck | Heard::Useless => {}
+        }
+    }
+}
+
+/// An upload under way: where it stands, and what the RC did since it last moved.
+struct Upload<'i> {
+    image: &'i [u8],
+    len: u32,
+    crc: u32,
+    /// Scene bytes per chunk.
+    chunk: usize,
+    /// `None`: the SceneBegin is not acknowledged yet; `Some(o)`: send from offset `o`.
+    next: Option<u32>,
+    /// The highest offset the RC acknowledged (progress), and the end of the bytes sent so
+    /// far (or of those the RC already had): answers past it are about bytes never sent.
+    acked: u32,
+    sent: u32,
+    report: UploadReport,
+    /// What the RC did since `acked` last grew.
+    stall: Stall,
+}
+
+/// What an answer means for the wait it arrived in.
+enum Heard {
+    /// The acknowledged offset grew: the wait ends and the tries start again.
+    Grew,
+    /// The wait ends without progress (a time-out, a `Nak`, an `Ack` that took nothing).
+    Stuck,
+    /// The answer moved nothing: keep waiting.
+    Useless,
+    /// The RC stored the whole scene.
+    Stored,
+}
+
+impl Upload<'_> {
+    /// Send the current message: the SceneBegin, or the chunk at `next`. Returns the end of
+    /// the bytes it carries (0 for the SceneBegin).
+    fn send<P: Read + Write>(&mut self, line: &mut Line<'_, P>) -> Result<u32, HostSerialError> {
+        let (len, chunk, image) = (self.len, self.chunk, self.image);
+        match self.next {
             None => {
-                line.send(&ToRc::SceneBegin { len, crc })?;
-                0
+                line.send(&ToRc::SceneBegin { len, crc: self.crc })?;
+                Ok(0)
             }
             Some(o) => {
                 // Everything acknowledged but no SceneDone yet: the last chunk again (the
@@ -234,112 +291,131 @@ pub fn upload_with_clock<P: Read + Write>(
                     HostSerialError::Protocol(format!("no chunk at byte {o} of {len}"))
                 })?;
                 line.send(&ToRc::SceneChunk { offset: o, data })?;
-                report.chunks_sent += 1;
-                sent = sent.max(end as u32);
-                end as u32
+                self.report.chunks_sent += 1;
+                self.sent = self.sent.max(end as u32);
+                Ok(end as u32)
             }
-        };
-        tries += 1;
+        }
+    }
+
+    /// Wait for the answer that moves the upload on (stale ones are skipped, up to
+    /// [`MAX_STALE_ANSWERS`]); never [`Heard::Useless`].
+    fn wait<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+        dec: &mut Decoder<MAX_TO_PC>,
+        opts: &UploadOptions,
+        sent_end: u32,
+        progress: &dyn Fn(u64),
+    ) -> Result<Heard, HostSerialError> {
         let deadline = line.after(opts.reply_timeout);
         // Answers in this wait that moved nothing.
         let mut useless = 0u32;
-        // Wait for the answer that moves us on (stale ones are skipped, up to a point).
-        let grew = loop {
-            let Some(heard) = answer(&mut line, &mut dec, &mut report, deadline)? else {
+        loop {
+            let Some(heard) = answer(line, dec, &mut self.report, deadline)? else {
                 if line.overdue() {
+                    let (acked, len) = (self.acked, self.len);
                     return Err(line.deadline_error(format!("{acked} of {len} bytes acknowledged")));
                 }
-                report.timeouts += 1;
-                break false;
+                self.report.timeouts += 1;
+                return Ok(Heard::Stuck);
             };
-            match heard {
-                // The answer to SceneBegin: 0, or where an interrupted upload of the same
-                // scene stopped.
-                Answer::Ack(a) if next.is_none() => {
-                    if a > len {
-                        return Err(HostSerialError::Protocol(format!(
-                            "the RC acknowledged {a} bytes of a {len}-byte scene"
-                        )));
-                    }
-                    progress(a as u64);
-                    (next, acked, sent) = (Some(a), a, a);
-                    break true;
-                }
-                Answer::Ack(a) if a > sent => {
-                    return Err(HostSerialError::BeyondSent {
-                        answer: "Ack",
-                        offset: a,
-                        sent,
-                    })
-                }
-                Answer::Ack(a) if a >= sent_end => {
-                    next = Some(a);
-                    if a > acked {
-                        acked = a;
-                        progress(a as u64);
-                        break true;
-                    }
-                    stall.stale += 1;
-                    break false;
-                }
-                Answer::Nak(a) => {
-                    report.naks += 1;
-                    if next.is_some() {
-                        if a > sent {
-                            return Err(HostSerialError::BeyondSent {
-                                answer: "Nak",
-                                offset: a,
-                                sent,
-                            });
-                        }
-                        if a < acked {
-                            stall.rewind = Some((a, acked));
-                        } else {
-                            stall.naks += 1;
-                        }
-                        next = Some(a);
-                    } else {
-                        stall.naks += 1;
-                    }
-                    break false;
-                }
-                Answer::Done { len: l, crc: c } if next.is_some() => {
-                    if (l, c) != (len, crc) {
-                        return Err(HostSerialError::Protocol(format!(
-                            "the RC stored a scene of {l} bytes, CRC {c:#010x}; sent {len} bytes, CRC {crc:#010x}"
-                        )));
-                    }
-                    if sent < len {
-                        return Err(HostSerialError::BeyondSent {
-                            answer: "SceneDone",
-                            offset: len,
-                            sent,
-                        });
-                    }
-                    progress(len as u64);
-                    if let Some(frames) = opts.start_render {
-                        line.send(&ToRc::StartRender { frames })?;
-                    }
-                    return Ok(report);
-                }
-                // Stale: an Ack below what was just sent, a SceneDone before SceneBegin's
-                // answer (left from an earlier upload).
-                Answer::Ack(_) | Answer::Done { .. } => stall.stale += 1,
-                Answer::Other(k) => {
-                    stall.other += 1;
-                    stall.last_other = k;
-                }
+            match self.heard(heard, sent_end, progress)? {
+                Heard::Useless => {}
+                h => return Ok(h),
             }
             useless += 1;
             if useless >= MAX_STALE_ANSWERS {
-                break false;
+                return Ok(Heard::Stuck);
             }
-        };
-        if grew {
-            tries = 0;
-            stall = Stall::default();
-        } else if tries >= opts.tries {
-            return Err(stalled(&line, &stall, next, acked, tries, ms));
+        }
+    }
+
+    /// Take in one answer to the message that was sent up to `sent_end`.
+    fn heard(
+        &mut self,
+        heard: Answer,
+        sent_end: u32,
+        progress: &dyn Fn(u64),
+    ) -> Result<Heard, HostSerialError> {
+        let (len, crc, sent) = (self.len, self.crc, self.sent);
+        let stall = &mut self.stall;
+        match heard {
+            // The answer to SceneBegin: 0, or where an interrupted upload of the same
+            // scene stopped.
+            Answer::Ack(a) if self.next.is_none() => {
+                if a > len {
+                    return Err(HostSerialError::Protocol(format!(
+                        "the RC acknowledged {a} bytes of a {len}-byte scene"
+                    )));
+                }
+                progress(a as u64);
+                (self.next, self.acked, self.sent) = (Some(a), a, a);
+                Ok(Heard::Grew)
+            }
+            Answer::Ack(a) if a > sent => Err(HostSerialError::BeyondSent {
+                answer: "Ack",
+                offset: a,
+                sent,
+            }),
+            Answer::Ack(a) if a >= sent_end => {
+                self.next = Some(a);
+                if a > self.acked {
+                    self.acked = a;
+                    progress(a as u64);
+                    return Ok(Heard::Grew);
+                }
+                stall.stale += 1;
+                Ok(Heard::Stuck)
+            }
+            Answer::Nak(a) => {
+                self.report.naks += 1;
+                if self.next.is_some() {
+                    if a > sent {
+                        return Err(HostSerialError::BeyondSent {
+                            answer: "Nak",
+                            offset: a,
+                            sent,
+                        });
+                    }
+                    if a < self.acked {
+                        stall.rewind = Some((a, self.acked));
+                    } else {
+                        stall.naks += 1;
+                    }
+                    self.next = Some(a);
+                } else {
+                    stall.naks += 1;
+                }
+                Ok(Heard::Stuck)
+            }
+            Answer::Done { len: l, crc: c } if self.next.is_some() => {
+                if (l, c) != (len, crc) {
+                    return Err(HostSerialError::Protocol(format!(
+                        "the RC stored a scene of {l} bytes, CRC {c:#010x}; sent {len} bytes, CRC {crc:#010x}"
+                    )));
+                }
+                if sent < len {
+                    return Err(HostSerialError::BeyondSent {
+                        answer: "SceneDone",
+                        offset: len,
+                        sent,
+                    });
+                }
+                progress(len as u64);
+                Ok(Heard::Stored)
+            }
+            // Stale: an Ack below what was just sent, a SceneDone before SceneBegin's
+            // answer (left from an earlier upload).
+            Answer::Ack(_) | Answer::Done { .. } => {
+                stall.stale += 1;
+                Ok(Heard::Useless)
+            }
+            Answer::Other(k) => {
+                stall.other += 1;
+                stall.last_other = k;
+                Ok(Heard::Useless)
+            }
         }
     }
 }
