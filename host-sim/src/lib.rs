@@ -15,6 +15,11 @@ pub mod studies;
 pub use serial::cli as cli_serial;
 pub use serial::host as serial_host;
 pub use sim::cluster;
-pub use sim::options as cli_cluster;
 pub use sim::single as frame;
 pub use studies::{ablation, ablation_doc, accuracy, chart};
+
+/// The cluster commands' options and studies, at the path they had before.
+pub mod cli_cluster {
+    pub use crate::sim::options::*;
+    pub use crate::studies::sweep_commands::*;
+}

@@ -10,6 +10,7 @@
 //! copy.
 
 use crate::studies::accuracy::{compare_to, reference, Accuracy, AccuracyError};
+use crate::studies::report::{replace_between, table_head, write_file};
 use links_core::num::{FastF32, Fx};
 use plotters::prelude::*;
 use std::fmt::{self, Write as _};
@@ -286,8 +287,18 @@ pub fn markdown(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
         s,
         "Every backend against the f64 render of the same scene at {size} (host). Instructions per pixel: Cortex-M under QEMU from `docs/cortex-m-bench.csv` (smaller frames: see that file); `-` = not measured.\n"
     );
-    s.push_str("| scene | backend | PSNR (dB) | max error (/255) | pixels off > 1/255 | NaN/inf pixels | hit-mask mismatches (off silhouettes) | instr/pixel M4F | M3 | M0 |\n");
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str(&table_head([
+        "scene",
+        "backend",
+        "PSNR (dB)",
+        "max error (/255)",
+        "pixels off > 1/255",
+        "NaN/inf pixels",
+        "hit-mask mismatches (off silhouettes)",
+        "instr/pixel M4F",
+        "M3",
+        "M0",
+    ]));
     for a in acc {
         let ipp = |target: &str| speed_of(speed, target, a).map_or("-".to_string(), group);
         match &a.accuracy {
@@ -341,20 +352,7 @@ fn group(v: f64) -> String {
 
 /// Replace the generated table between [`TABLE_BEGIN`] and [`TABLE_END`] in `doc`.
 pub fn replace_table(doc: &str, table: &str) -> Result<String, ChartError> {
-    let (Some(b), Some(e)) = (doc.find(TABLE_BEGIN), doc.find(TABLE_END)) else {
-        return Err(ChartError::Io(format!(
-            "the document has no '{TABLE_BEGIN}' ... '{TABLE_END}' section"
-        )));
-    };
-    if e < b {
-        return Err(ChartError::Io("table markers out of order".into()));
-    }
-    let table = table.trim_matches('\n');
-    Ok(format!(
-        "{}\n{table}\n{}",
-        &doc[..b + TABLE_BEGIN.len()],
-        &doc[e..]
-    ))
+    replace_between(doc, (TABLE_BEGIN, TABLE_END), table, "table").map_err(ChartError::Io)
 }
 
 const COLOURS: [RGBColor; 3] = [
@@ -531,7 +529,7 @@ pub fn png(pts: &[Point]) -> Result<Vec<u8>, ChartError> {
 
 /// Write a text file, naming it in the error.
 pub fn write(path: &Path, bytes: &[u8]) -> Result<(), ChartError> {
-    std::fs::write(path, bytes).map_err(|e| ChartError::Io(format!("{}: {e}", path.display())))
+    write_file(path, bytes).map_err(ChartError::Io)
 }
 
 #[cfg(test)]

@@ -2,6 +2,8 @@
 //! simulated cluster, and the documents they write: the technique ablation
 //! ([`ablation`], [`ablation_doc`]), speed against accuracy ([`accuracy`], [`chart`]), the
 //! node-count and division sweeps ([`cluster_sweep`]) and the fault sweep ([`faults`]).
+//! [`report`] writes their tables and the generated sections of the docs;
+//! [`sweep_commands`] are the `links sweep` commands over the cluster.
 
 pub mod ablation;
 pub mod ablation_doc;
@@ -9,3 +11,5 @@ pub mod accuracy;
 pub mod chart;
 pub mod cluster_sweep;
 pub mod faults;
+pub mod report;
+pub mod sweep_commands;

@@ -2,6 +2,7 @@
 //! docs/reliability.md's generated section.
 
 use super::{mean, BerPoint, FaultSweep, FractionPoint, KillPoint};
+use crate::studies::report::{replace_between, table_head};
 use std::fmt::Write as _;
 
 /// Every point as CSV: `series,policy,x,seed,time_s,bound_s,clean_s` where `x` is the kill
@@ -55,7 +56,16 @@ pub fn faults_markdown(s: &FaultSweep, command: &str) -> String {
         s.victim,
         s.kills.len() / s.clean.len().max(1)
     );
-    m.push_str("| policy | fault-free (s) | W (s) | bound (s) | worst frame (s) | killed at (s) | worst delay / allowance | mean frame (s) |\n|---|---|---|---|---|---|---|---|\n");
+    m.push_str(&table_head([
+        "policy",
+        "fault-free (s)",
+        "W (s)",
+        "bound (s)",
+        "worst frame (s)",
+        "killed at (s)",
+        "worst delay / allowance",
+        "mean frame (s)",
+    ]));
     for c in &s.clean {
         let pts: Vec<&KillPoint> = s.kills.iter().filter(|k| k.policy == c.policy).collect();
         let Some(worst) = pts.iter().max_by(|a, b| a.time_s.total_cmp(&b.time_s)) else {
@@ -85,7 +95,15 @@ pub fn faults_markdown(s: &FaultSweep, command: &str) -> String {
             .collect::<std::collections::BTreeSet<_>>()
             .len()
     );
-    m.push_str("| bit-error rate | down only (s) | up only (s) | both (s) | both / fault-free | frames corrupted (both) | scene repairs (both) |\n|---|---|---|---|---|---|---|\n");
+    m.push_str(&table_head([
+        "bit-error rate",
+        "down only (s)",
+        "up only (s)",
+        "both (s)",
+        "both / fault-free",
+        "frames corrupted (both)",
+        "scene repairs (both)",
+    ]));
     let mut rates: Vec<f64> = s.bers.iter().map(|b| b.ber).collect();
     rates.dedup();
     for ber in rates {
@@ -116,19 +134,18 @@ pub fn faults_markdown(s: &FaultSweep, command: &str) -> String {
     );
     let mut bers: Vec<f64> = s.fractions.iter().map(|f| f.ber).collect();
     bers.dedup();
-    m.push_str("| killed | bound (s) |");
-    for b in &bers {
+    let columns = bers.iter().map(|b| {
         if *b == 0.0 {
-            m.push_str(" frame, no bit errors (s) |");
+            "frame, no bit errors (s)".to_string()
         } else {
-            let _ = write!(m, " frame, bit-error rate {b:e} both ways (s) |");
+            format!("frame, bit-error rate {b:e} both ways (s)")
         }
-    }
-    m.push_str("\n|---|---|");
-    for _ in &bers {
-        m.push_str("---|");
-    }
-    m.push('\n');
+    });
+    m.push_str(&table_head(
+        ["killed".to_string(), "bound (s)".to_string()]
+            .into_iter()
+            .chain(columns),
+    ));
     let mut ks: Vec<u16> = s.fractions.iter().map(|f| f.killed).collect();
     ks.sort_unstable();
     ks.dedup();
@@ -160,18 +177,5 @@ pub const SECTION_END: &str = "<!-- faults-sweep:end -->";
 
 /// Replace the generated section of `doc` with `text`.
 pub fn replace_section(doc: &str, text: &str) -> Result<String, String> {
-    let (Some(b), Some(e)) = (doc.find(SECTION_BEGIN), doc.find(SECTION_END)) else {
-        return Err(format!(
-            "the document has no '{SECTION_BEGIN}' ... '{SECTION_END}' section"
-        ));
-    };
-    if e < b {
-        return Err("section markers out of order".into());
-    }
-    Ok(format!(
-        "{}\n{}\n{}",
-        &doc[..b + SECTION_BEGIN.len()],
-        text.trim_matches('\n'),
-        &doc[e..]
-    ))
+    replace_between(doc, (SECTION_BEGIN, SECTION_END), text, "section")
 }
