@@ -282,7 +282,8 @@ const COLOURS: [RGBColor; 6] = [
     RGBColor(140, 86, 75),
 ];
 
-fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
+/// A chart that could not be drawn, as the sweeps' error.
+pub(crate) fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
     SimError::Config(format!("chart: {e}"))
 }
 

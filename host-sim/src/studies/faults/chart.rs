@@ -3,20 +3,18 @@
 
 use super::{mean, FaultSweep};
 use crate::sim::cluster::SimError;
+use crate::studies::cluster_sweep::chart_err;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
 
+/// The series colours, in order.
 const COLOURS: [RGBColor; 4] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
     RGBColor(214, 39, 40),
 ];
-
-fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
-    SimError::Config(format!("chart: {e}"))
-}
 
 /// The legend every panel draws: top left, on a translucent white box.
 fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
