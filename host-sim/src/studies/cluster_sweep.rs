@@ -6,6 +6,7 @@
 //! [`RunCache`] saves re-rendering runs two simulations have in common.
 
 use crate::sim::cluster::{simulate, SimConfig, SimError};
+use crate::studies::chart::draw_legend;
 use links_core::sched::{Policy, Shape};
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -352,13 +353,7 @@ pub fn write_nodes_chart(path: &Path, points: &[NodePoint], title: &str) -> Resu
             .label(format!("{name}, steady state (dots)"))
             .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(chart_err)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft).map_err(chart_err)?;
     root.present().map_err(chart_err)
 }
 
@@ -421,12 +416,6 @@ pub fn write_divisions_chart(
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], c));
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperMiddle)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(chart_err)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperMiddle).map_err(chart_err)?;
     root.present().map_err(chart_err)
 }

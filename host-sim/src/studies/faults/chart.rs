@@ -3,7 +3,9 @@
 
 use super::{mean, FaultSweep};
 use crate::sim::cluster::SimError;
+use crate::studies::chart::draw_legend;
 use crate::studies::cluster_sweep::chart_err;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -15,22 +17,6 @@ const COLOURS: [RGBColor; 4] = [
     RGBColor(44, 160, 44),
     RGBColor(214, 39, 40),
 ];
-
-/// The legend every panel draws: top left, on a translucent white box.
-fn draw_legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
-    chart: &mut ChartContext<'a, DB, CT>,
-) -> Result<(), SimError>
-where
-    DB::ErrorType: 'static,
-{
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(chart_err)
-}
 
 /// Size of the chart (pixels).
 const CHART: (u32, u32) = (820, 1500);
@@ -68,6 +54,33 @@ pub fn faults_png(s: &FaultSweep) -> Result<Vec<u8>, SimError> {
     crate::sim::single::encode_png(w, h, &rgb).map_err(chart_err)
 }
 
+/// A panel over a fraction (x from 0 to 1) against frame time (0 to `ymax`), with its
+/// caption and axes drawn.
+fn linear_panel<'a, DB: DrawingBackend>(
+    area: &'a DrawingArea<DB, Shift>,
+    caption: String,
+    ymax: f64,
+    x_desc: &str,
+) -> Result<ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>, SimError>
+where
+    DB::ErrorType: 'static,
+{
+    let mut chart = ChartBuilder::on(area)
+        .caption(caption, ("sans-serif", 18))
+        .margin(15)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0f64..1.0, 0f64..ymax)
+        .map_err(chart_err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc("frame time, s (virtual)")
+        .draw()
+        .map_err(chart_err)?;
+    Ok(chart)
+}
+
 fn draw_kills<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     s: &FaultSweep,
@@ -80,25 +93,15 @@ where
         .iter()
         .map(|k| k.time_s.max(k.bound_s))
         .fold(0.0, f64::max);
-    let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!(
-                "node {} of {} killed at a moment of the frame (τ = {} s)",
-                s.victim, s.nodes, s.timeout_s
-            ),
-            ("sans-serif", 18),
-        )
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0f64..1.0, 0f64..tmax * 1.4)
-        .map_err(chart_err)?;
-    chart
-        .configure_mesh()
-        .x_desc("moment of death (fraction of the fault-free frame)")
-        .y_desc("frame time, s (virtual)")
-        .draw()
-        .map_err(chart_err)?;
+    let mut chart = linear_panel(
+        area,
+        format!(
+            "node {} of {} killed at a moment of the frame (τ = {} s)",
+            s.victim, s.nodes, s.timeout_s
+        ),
+        tmax * 1.4,
+        "moment of death (fraction of the fault-free frame)",
+    )?;
     for (i, c) in s.clean.iter().enumerate() {
         let col = COLOURS[i % COLOURS.len()];
         let pts: Vec<(f64, f64)> = s
@@ -133,7 +136,7 @@ where
         .map_err(chart_err)?
         .label("dashed: each policy's bound, clean + 2τ + W")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.6)));
-    draw_legend(&mut chart)
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft).map_err(chart_err)
 }
 
 fn draw_bers<DB: DrawingBackend>(
@@ -220,7 +223,7 @@ where
             )
             .map_err(chart_err)?;
     }
-    draw_legend(&mut chart)
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft).map_err(chart_err)
 }
 
 fn draw_fractions<DB: DrawingBackend>(
@@ -235,25 +238,15 @@ where
         .iter()
         .map(|f| f.time_s.max(f.bound_s))
         .fold(0.0, f64::max);
-    let mut chart = ChartBuilder::on(area)
-        .caption(
-            format!(
-                "nodes killed at once mid-frame ({} nodes, decreasing)",
-                s.nodes
-            ),
-            ("sans-serif", 18),
-        )
-        .margin(15)
-        .x_label_area_size(40)
-        .y_label_area_size(60)
-        .build_cartesian_2d(0f64..1.0, 0f64..tmax * 1.1)
-        .map_err(chart_err)?;
-    chart
-        .configure_mesh()
-        .x_desc("fraction of the nodes killed")
-        .y_desc("frame time, s (virtual)")
-        .draw()
-        .map_err(chart_err)?;
+    let mut chart = linear_panel(
+        area,
+        format!(
+            "nodes killed at once mid-frame ({} nodes, decreasing)",
+            s.nodes
+        ),
+        tmax * 1.1,
+        "fraction of the nodes killed",
+    )?;
     let mut bers: Vec<f64> = s.fractions.iter().map(|f| f.ber).collect();
     bers.dedup();
     let n = s.nodes as f64;
@@ -295,5 +288,5 @@ where
         .map_err(chart_err)?
         .label("bound without bit errors, clean + 2τ + ΣW")
         .legend(|(x, y)| PathElement::new([(x, y), (x + 20, y)], BLACK.mix(0.6)));
-    draw_legend(&mut chart)
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft).map_err(chart_err)
 }
