@@ -6,6 +6,8 @@
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
+//! - `run`: one simulation stage by stage ([`simulate`], [`simulate_frame`],
+//!   [`render_cluster`]).
 //!
 //! The sweeps over many simulations live in [`crate::studies`] ([`sweep`] and
 //! [`reliability`] here are their old paths).
