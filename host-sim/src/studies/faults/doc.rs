@@ -132,6 +132,12 @@ pub fn faults_markdown(s: &FaultSweep, command: &str) -> String {
         "\n**Nodes killed at once at {:.4} s** (half the fault-free frame; decreasing, nodes spread evenly); the bound is `clean + 2τ + ΣW` over the killed nodes:\n",
         s.clean_s / 2.0
     );
+    fractions_table(&mut m, s);
+    m
+}
+
+/// The table of nodes killed at once: one row per count, one column per bit-error rate.
+fn fractions_table(m: &mut String, s: &FaultSweep) {
     let mut bers: Vec<f64> = s.fractions.iter().map(|f| f.ber).collect();
     bers.dedup();
     let columns = bers.iter().map(|b| {
@@ -168,7 +174,6 @@ pub fn faults_markdown(s: &FaultSweep, command: &str) -> String {
         }
         m.push('\n');
     }
-    m
 }
 
 /// The generated section of docs/reliability.md lies between these markers.
