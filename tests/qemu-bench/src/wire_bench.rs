@@ -1,7 +1,7 @@
 //! What the RC's CPU spends per bus transfer, in instructions on the Cortex-M4F: encoding and
 //! decoding wire frames (postcard + CRC-32), the CRC alone, run-length decoding, copying.
 //! Each line is one operation at two sizes, so the per-byte slope and the fixed part can be
-//! read off; host-sim's RC cost model (`host-sim/src/cluster/rccost.rs`) is fitted to them.
+//! read off; host-sim's RC cost model (`host-sim/src/sim/cluster/rccost.rs`) is fitted to them.
 //!
 //! Shared by `main.rs` (scripts/qemu-bench prints them as `WIRE` lines) and usable alone.
 

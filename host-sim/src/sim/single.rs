@@ -1,5 +1,5 @@
-//! Rendering a whole frame on the host: the core's per-run renderer over every scanline,
-//! spread over host threads. Rows are independent and the statistics are sums, so the image
+//! Rendering one picture on a single host (no cluster): the core's per-run renderer over
+//! every scanline, spread over host threads. Rows are independent and the statistics are sums, so the image
 //! and the counts never depend on the thread count.
 
 use links_core::fixed_image::{to_fixed, FixedError};
@@ -45,7 +45,7 @@ impl std::str::FromStr for Precision {
     }
 }
 
-/// A rendered frame: RGB8 rows, top first.
+/// One rendered picture: RGB8 rows, top first.
 #[derive(Clone, Debug)]
 pub struct FrameImage {
     pub width: u32,
@@ -55,6 +55,7 @@ pub struct FrameImage {
     pub elapsed: Duration,
 }
 
+/// Why [`render_single`] could not render a picture.
 #[derive(Debug)]
 pub enum FrameError {
     Image(ImageError),
@@ -74,11 +75,14 @@ impl fmt::Display for FrameError {
 
 impl std::error::Error for FrameError {}
 
+/// [`render_single`]'s former name, kept for its callers.
+pub use render_single as render_frame;
+
 /// Render every pixel of a SceneImage. An f32 image renders in any precision (the
 /// fixed-point backend renders the DM's Q16.16 rewrite of it); an image that already stores
 /// Q16.16 renders in fixed point only. `threads` = 0 uses all cores; `progress` is called
 /// once per finished scanline (from any thread).
-pub fn render_frame(
+pub fn render_single(
     image: &[u8],
     precision: Precision,
     threads: usize,

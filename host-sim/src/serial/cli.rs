@@ -1,10 +1,10 @@
 //! The `links upload` and `links readback` commands: progress bars and messages around
 //! [`crate::serial_host`].
 
-use crate::frame::encode_png;
-use crate::serial_host::{
+use crate::serial::host::{
     open_port, readback, upload, upload_deadline, ReadbackEvent, ReadbackOptions, UploadOptions,
 };
+use crate::sim::single::encode_png;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::Path;
@@ -26,6 +26,18 @@ fn deadline(deadline_s: Option<u64>) -> Option<Option<Duration>> {
     deadline_s.map(|s| (s > 0).then(|| Duration::from_secs(s)))
 }
 
+/// Open `port` for a command whose reply time-out is `timeout_ms` (which must be > 0).
+fn open_checked(
+    port: &str,
+    baud: u32,
+    timeout_ms: u64,
+) -> Result<Box<dyn serialport::SerialPort>, String> {
+    if timeout_ms == 0 {
+        return Err("--timeout-ms must be > 0".into());
+    }
+    open_port(port, baud).map_err(|e| e.to_string())
+}
+
 /// `links upload`: send a compiled SceneImage; returns the summary line. Without
 /// `deadline_s` the overall deadline is [`upload_deadline`]; 0 means none.
 pub fn upload_command(
@@ -37,10 +49,7 @@ pub fn upload_command(
     render: Option<u16>,
     quiet: bool,
 ) -> Result<String, String> {
-    if timeout_ms == 0 {
-        return Err("--timeout-ms must be > 0".into());
-    }
-    let mut p = open_port(port, baud).map_err(|e| e.to_string())?;
+    let mut p = open_checked(port, baud, timeout_ms)?;
     // Bytes already waiting are no answers to this upload.
     p.clear(serialport::ClearBuffer::Input)
         .map_err(|e| format!("serial port {port}: {e}"))?;
@@ -84,10 +93,7 @@ pub fn readback_command(
     deadline_s: Option<u64>,
     quiet: bool,
 ) -> Result<String, String> {
-    if timeout_ms == 0 {
-        return Err("--timeout-ms must be > 0".into());
-    }
-    let mut p = open_port(port, baud).map_err(|e| e.to_string())?;
+    let mut p = open_checked(port, baud, timeout_ms)?;
     let b = bar(
         quiet,
         1,

@@ -9,7 +9,8 @@
 //! deterministic numbers, so a test can regenerate the CSV and compare it with the committed
 //! copy.
 
-use crate::accuracy::{compare_to, reference, Accuracy, AccuracyError};
+use crate::studies::accuracy::{compare_to, reference, Accuracy, AccuracyError};
+use crate::studies::report::{replace_between, table_head, write_file};
 use links_core::num::{FastF32, Fx};
 use plotters::prelude::*;
 use std::fmt::{self, Write as _};
@@ -286,8 +287,18 @@ pub fn markdown(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
         s,
         "Every backend against the f64 render of the same scene at {size} (host). Instructions per pixel: Cortex-M under QEMU from `docs/cortex-m-bench.csv` (smaller frames: see that file); `-` = not measured.\n"
     );
-    s.push_str("| scene | backend | PSNR (dB) | max error (/255) | pixels off > 1/255 | NaN/inf pixels | hit-mask mismatches (off silhouettes) | instr/pixel M4F | M3 | M0 |\n");
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str(&table_head([
+        "scene",
+        "backend",
+        "PSNR (dB)",
+        "max error (/255)",
+        "pixels off > 1/255",
+        "NaN/inf pixels",
+        "hit-mask mismatches (off silhouettes)",
+        "instr/pixel M4F",
+        "M3",
+        "M0",
+    ]));
     for a in acc {
         let ipp = |target: &str| speed_of(speed, target, a).map_or("-".to_string(), group);
         match &a.accuracy {
@@ -341,20 +352,7 @@ fn group(v: f64) -> String {
 
 /// Replace the generated table between [`TABLE_BEGIN`] and [`TABLE_END`] in `doc`.
 pub fn replace_table(doc: &str, table: &str) -> Result<String, ChartError> {
-    let (Some(b), Some(e)) = (doc.find(TABLE_BEGIN), doc.find(TABLE_END)) else {
-        return Err(ChartError::Io(format!(
-            "the document has no '{TABLE_BEGIN}' ... '{TABLE_END}' section"
-        )));
-    };
-    if e < b {
-        return Err(ChartError::Io("table markers out of order".into()));
-    }
-    let table = table.trim_matches('\n');
-    Ok(format!(
-        "{}\n{table}\n{}",
-        &doc[..b + TABLE_BEGIN.len()],
-        &doc[e..]
-    ))
+    replace_between(doc, (TABLE_BEGIN, TABLE_END), table, "table").map_err(ChartError::Io)
 }
 
 const COLOURS: [RGBColor; 3] = [
@@ -365,6 +363,25 @@ const COLOURS: [RGBColor; 3] = [
 
 fn draw_err<E: fmt::Display>(e: E) -> ChartError {
     ChartError::Draw(e.to_string())
+}
+
+/// The legend every chart of the studies draws: at `position`, on a translucent white box.
+pub(crate) fn draw_legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), String>
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+    CT: plotters::coord::CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.9))
+        .border_style(BLACK.mix(0.3))
+        .draw()
+        .map_err(|e| e.to_string())
 }
 
 /// Draw the chart on any plotters backend.
@@ -458,13 +475,7 @@ where
                 });
         }
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(draw_err)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight).map_err(draw_err)?;
     area.present().map_err(draw_err)
 }
 
@@ -526,12 +537,12 @@ pub fn png(pts: &[Point]) -> Result<Vec<u8>, ChartError> {
         let area = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
         draw(area, pts)?;
     }
-    crate::frame::encode_png(w, h, &rgb).map_err(draw_err)
+    crate::sim::single::encode_png(w, h, &rgb).map_err(draw_err)
 }
 
 /// Write a text file, naming it in the error.
 pub fn write(path: &Path, bytes: &[u8]) -> Result<(), ChartError> {
-    std::fs::write(path, bytes).map_err(|e| ChartError::Io(format!("{}: {e}", path.display())))
+    write_file(path, bytes).map_err(ChartError::Io)
 }
 
 #[cfg(test)]

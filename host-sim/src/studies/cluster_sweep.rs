@@ -5,7 +5,8 @@
 //! returned in input order, so results never depend on the thread count. A shared
 //! [`RunCache`] saves re-rendering runs two simulations have in common.
 
-use super::{simulate, SimConfig, SimError};
+use crate::sim::cluster::{simulate, SimConfig, SimError};
+use crate::studies::chart::draw_legend;
 use links_core::sched::{Policy, Shape};
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -282,14 +283,15 @@ const COLOURS: [RGBColor; 6] = [
     RGBColor(140, 86, 75),
 ];
 
-fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
+/// A chart that could not be drawn, as the sweeps' error.
+pub(crate) fn chart_err<E: std::fmt::Display>(e: E) -> SimError {
     SimError::Config(format!("chart: {e}"))
 }
 
 /// Speed-up against node count (single frame solid, steady state dashed-by-marker), one
 /// line per policy, with the ideal line; an SVG file.
 pub fn write_nodes_chart(path: &Path, points: &[NodePoint], title: &str) -> Result<(), SimError> {
-    crate::chart::ensure_font().map_err(chart_err)?;
+    crate::studies::chart::ensure_font().map_err(chart_err)?;
     let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(chart_err)?;
     let max_n = points.iter().map(|p| p.nodes).max().unwrap_or(1) as f64;
@@ -351,13 +353,7 @@ pub fn write_nodes_chart(path: &Path, points: &[NodePoint], title: &str) -> Resu
             .label(format!("{name}, steady state (dots)"))
             .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(chart_err)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft).map_err(chart_err)?;
     root.present().map_err(chart_err)
 }
 
@@ -368,7 +364,7 @@ pub fn write_divisions_chart(
     points: &[DivisionPoint],
     title: &str,
 ) -> Result<(), SimError> {
-    crate::chart::ensure_font().map_err(chart_err)?;
+    crate::studies::chart::ensure_font().map_err(chart_err)?;
     let root = SVGBackend::new(path, (800, 560)).into_drawing_area();
     root.fill(&WHITE).map_err(chart_err)?;
     let fixed: Vec<&DivisionPoint> = points
@@ -420,12 +416,6 @@ pub fn write_divisions_chart(
                 .legend(move |(x, y)| PathElement::new([(x, y), (x + 20, y)], c));
         }
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperMiddle)
-        .background_style(WHITE.mix(0.9))
-        .border_style(BLACK.mix(0.3))
-        .draw()
-        .map_err(chart_err)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperMiddle).map_err(chart_err)?;
     root.present().map_err(chart_err)
 }

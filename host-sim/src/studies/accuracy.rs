@@ -2,7 +2,7 @@
 //! accuracy measures (PSNR, worst channel error, pixels off by more than 1/255, NaN or
 //! infinite colours, and hit-mask mismatches: pixels whose primary ray hit another shape).
 
-use crate::frame::psnr;
+use crate::sim::single::psnr;
 use links_core::fixed_image::{to_fixed, FixedError};
 use links_core::image::{ImageError, SceneView, ShapeRef};
 use links_core::num::{Real, Storage};

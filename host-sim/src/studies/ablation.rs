@@ -11,6 +11,7 @@
 //! time is reported beside the model, never instead of it.
 
 use crate::cost::{CycleModel, DEFAULT_CLOCK_HZ};
+use crate::studies::report::table_head;
 use links_core::desc::{SceneDesc, TransparencyMode};
 use links_core::dm::{compile, CompileOptions, DmError, MeshHierarchy};
 use links_core::image::SceneView;
@@ -312,16 +313,8 @@ impl AblationReport {
 
     /// The Table 5.2 analog as Markdown: modelled seconds and ratios to type 1.
     pub fn table(&self) -> String {
-        let mut s = String::new();
-        s.push_str("| sub-screens |");
-        for v in VARIANTS {
-            s.push_str(&format!(" {} |", v.name));
-        }
-        s.push_str("\n|---|");
-        for _ in VARIANTS {
-            s.push_str("---|");
-        }
-        s.push('\n');
+        let mut s =
+            table_head(std::iter::once("sub-screens").chain(VARIANTS.iter().map(|v| v.name)));
         for &d in &self.config.divisions {
             let base = self.cell("type 1", d).map_or(f64::NAN, |c| c.seconds);
             s.push_str(&format!("| {d} |"));
@@ -340,9 +333,18 @@ impl AblationReport {
 
     /// Operation counts and host time per cell.
     pub fn counts_table(&self) -> String {
-        let mut s = String::from(
-            "| variant | sub-screens | rays | box tests | triangle tests | other shape tests | clip compares | shadow early exits | modelled Mcycles (1 node) | host s |\n|---|---|---|---|---|---|---|---|---|---|\n",
-        );
+        let mut s = table_head([
+            "variant",
+            "sub-screens",
+            "rays",
+            "box tests",
+            "triangle tests",
+            "other shape tests",
+            "clip compares",
+            "shadow early exits",
+            "modelled Mcycles (1 node)",
+            "host s",
+        ]);
         for c in self.cells.iter().chain(std::iter::once(&self.refractive)) {
             let st = &c.stats;
             s.push_str(&format!(

@@ -1,0 +1,29 @@
+//! The PC side of the serial link to a real RC (`links upload`, `links readback`), over any
+//! byte stream (a serial port, a pseudo-terminal), speaking [`links_core::serial`]:
+//!
+//! - [`port`]: opening a port, the clock the waits run on, a line with deadlines;
+//! - [`upload`](mod@upload): sending a SceneImage;
+//! - [`readback`](mod@readback): reading a rendered frame back, assembled by
+//!   [`assembly`];
+//! - [`error`]: why either failed;
+//! - [`cli`]: the `links upload` / `links readback` commands around them.
+
+pub mod assembly;
+pub mod cli;
+pub mod error;
+pub mod port;
+pub mod readback;
+pub mod upload;
+
+pub use assembly::FrameAssembly;
+pub use error::HostSerialError;
+pub use port::{open_port, Clock, SystemClock, VirtualClock, DEFAULT_BAUD};
+pub use readback::{readback, readback_with_clock, Readback, ReadbackEvent, ReadbackOptions};
+pub use upload::{
+    upload, upload_deadline, upload_with_clock, UploadOptions, UploadReport, MAX_STALE_ANSWERS,
+};
+
+/// The module these items had before the link was split by concept.
+pub mod host {
+    pub use super::*;
+}

@@ -1,0 +1,372 @@
+//! The simulated LINKS-1 cluster: the shared RC and NC logic (`links_core::{root, node}`)
+//! over an emulated SPI star in deterministic virtual time.
+//!
+//! - [`exec`]: the discrete-event executor (virtual time, fixed poll order).
+//! - [`dm`]: the DM stage (each frame's scene appears after a fixed DM time per frame).
+//! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
+//! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
+//! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
+//! - `run`: one simulation stage by stage ([`simulate`], [`simulate_frame`],
+//!   [`render_cluster`]).
+//!
+//! The sweeps over many simulations live in [`crate::studies`] ([`sweep`] and
+//! [`reliability`] here are their old paths).
+//!
+//! Node compute time is [`CycleModel::cycles`] of each run's operation counts at the
+//! configured core clock. A simulation is single-threaded and its results depend only on its
+//! inputs; sweeps run independent simulations on several host threads.
+
+pub mod dm;
+pub mod exec;
+pub mod framemem;
+pub mod rccost;
+mod run;
+pub mod star;
+
+pub use crate::studies::cluster_sweep as sweep;
+pub use crate::studies::faults as reliability;
+pub use run::{render_cluster, simulate, simulate_frame, ClusterRender};
+pub use sweep::{
+    divisions_csv, nodes_csv, steady_state_interval, sweep_divisions, sweep_nodes,
+    write_divisions_chart, write_nodes_chart, DivisionPoint, NamedPolicy, NodePoint,
+};
+
+use crate::cost::{CycleModel, DEFAULT_CLOCK_HZ};
+use exec::ExecError;
+use links_core::node::{NodeConfig, NodeReport};
+use links_core::render::Stats;
+use links_core::root::{RootConfig, RootError, RootReport};
+use links_core::sched::Policy;
+use links_core::wire::{self, Job};
+use rccost::RcCost;
+use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, Noise};
+use std::collections::HashMap;
+use std::fmt;
+use std::sync::{Arc, Mutex};
+
+/// How finished pixels reach the frame memory.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Collect {
+    /// The collector snoops every bus (IMSU snoop read): pixels never cross the RC.
+    #[default]
+    Snoop,
+    /// The RC writes each accepted run into the frame memory.
+    ViaRoot,
+}
+
+/// One simulation's set-up.
+#[derive(Clone, Debug)]
+pub struct SimConfig {
+    /// Node computers (1..=256).
+    pub nodes: u16,
+    /// SPI buses from the RC (1..=8); nodes are split evenly across them.
+    pub buses: u16,
+    pub policy: Policy,
+    pub timing: BusTiming,
+    /// Node core clock (Hz).
+    pub clock_hz: f64,
+    pub model: CycleModel,
+    pub faults: Faults,
+    /// Random bit errors per direction and lost broadcasts.
+    pub noise: Noise,
+    /// Nodes that die (stop answering) during the run.
+    pub deaths: Vec<NodeDeath>,
+    /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
+    pub drops: Vec<BroadcastDrop>,
+    /// A node's scene bank (bytes): a larger scene is refused before the run. Default: the
+    /// NC board's even-frame bank, [`nc_fw::plan::SCENE_EVEN`] (the simulated nodes have two
+    /// banks this size).
+    pub bank_bytes: usize,
+    /// The RC declares a node holding jobs dead after this long without an exchange (s) and
+    /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
+    pub node_timeout_s: f64,
+    /// DM time per frame (s): frame `f`'s scene exists from `(f + 1) · dm_s_per_frame` on.
+    /// Default 0: every scene is compiled before the run (see docs/cluster.md).
+    pub dm_s_per_frame: f64,
+    pub collect: Collect,
+    /// Node options (run-length coded pixel runs).
+    pub node: NodeConfig,
+    /// The RC's CPU cost of composing and decoding frames.
+    pub rc_cost: RcCost,
+    /// RC-side DMA double buffering (compose the next transfer and decode the previous
+    /// one while a transfer is on the wire); `false`: one transfer at a time.
+    pub rc_double_buffer: bool,
+    /// Keep a copy of every finished frame in the report.
+    pub keep_frames: bool,
+    /// Memo of rendered runs shared between simulations of the same scenes (sweeps). The
+    /// memo returns exactly what rendering returns, so it changes no result.
+    pub cache: Option<Arc<RunCache>>,
+}
+
+impl Default for SimConfig {
+    fn default() -> Self {
+        Self {
+            nodes: 64,
+            buses: 1,
+            policy: Policy::DECREASING,
+            timing: BusTiming::default(),
+            clock_hz: DEFAULT_CLOCK_HZ,
+            model: CycleModel::default(),
+            faults: Faults::default(),
+            noise: Noise::default(),
+            deaths: Vec::new(),
+            drops: Vec::new(),
+            bank_bytes: nc_fw::plan::SCENE_EVEN,
+            node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
+            dm_s_per_frame: 0.0,
+            collect: Collect::Snoop,
+            node: NodeConfig::default(),
+            rc_cost: RcCost::default(),
+            rc_double_buffer: true,
+            keep_frames: false,
+            cache: None,
+        }
+    }
+}
+
+/// What a simulation measured (all times virtual).
+#[derive(Clone, Debug)]
+pub struct SimReport {
+    pub nodes: u16,
+    pub buses: u16,
+    pub policy: Policy,
+    pub width: u32,
+    pub height: u32,
+    /// Completion time of each frame (s).
+    pub frame_done_s: Vec<f64>,
+    /// Time of the last frame's completion (s).
+    pub time_s: f64,
+    /// Compute time summed over all nodes (s): the work a single node would do alone,
+    /// without any communication.
+    pub compute_s: f64,
+    /// Compute time of each node (s).
+    pub node_compute_s: Vec<f64>,
+    /// Time the RC's CPU was busy composing and decoding frames (s).
+    pub rc_busy_s: f64,
+    pub bus: Vec<BusCounters>,
+    pub root: RootReport,
+    pub node_reports: Vec<NodeReport>,
+    /// The frames (RGB8 rows) if `keep_frames`.
+    pub frames: Vec<Vec<u8>>,
+    /// Operation counts summed over all nodes.
+    pub stats: Stats,
+}
+
+impl SimReport {
+    /// Busy fraction of the busiest bus over the whole run.
+    pub fn bus_utilisation(&self) -> f64 {
+        let t = self.time_s * 1e12;
+        self.bus
+            .iter()
+            .map(|b| b.busy_ps as f64 / t)
+            .fold(0.0, f64::max)
+    }
+    /// Bytes clocked on all buses.
+    pub fn bytes_moved(&self) -> u64 {
+        self.bus.iter().map(|b| b.clocked_bytes).sum()
+    }
+    /// Steady-state time per frame: mean interval between frame completions after the
+    /// first (the first frame's time if there is only one).
+    pub fn frame_interval_s(&self) -> f64 {
+        match self.frame_done_s.as_slice() {
+            [] => 0.0,
+            [t] => *t,
+            [first, .., last] => (last - first) / (self.frame_done_s.len() - 1) as f64,
+        }
+    }
+    /// Node efficiency: compute time over nodes x elapsed time.
+    pub fn efficiency(&self) -> f64 {
+        self.compute_s / (self.nodes as f64 * self.time_s)
+    }
+}
+
+/// Why a simulation could not run or finish.
+#[derive(Debug)]
+pub enum SimError {
+    Config(String),
+    /// Frame `frame`'s scene image (`bytes`) does not fit a node's scene bank (`bank`
+    /// bytes, [`SimConfig::bank_bytes`]); found before the cluster starts.
+    SceneTooBig {
+        frame: u16,
+        bytes: usize,
+        bank: usize,
+    },
+    Root(RootError),
+    /// The cluster could not finish: what it waited for when the simulation stopped.
+    Unfinished(Box<Unfinished>),
+    /// A frame differs from the single-node render (a broken promise, never expected).
+    NotIdentical {
+        what: String,
+    },
+    /// An error of one point of a sweep.
+    Context {
+        what: String,
+        error: Box<SimError>,
+    },
+}
+
+/// What a cluster that cannot finish lacks, when the simulation stopped (stalled, no pixel
+/// accepted for a long time, or past its time limit).
+#[derive(Clone, Debug)]
+pub struct Unfinished {
+    /// Why the simulation stopped.
+    pub cause: ExecError,
+    /// The first frame not complete, and how many frames there are.
+    pub frame: u16,
+    pub frames: u16,
+    /// Sub-screens handed out and never returned: (holder, job, holder declared dead).
+    pub never_returned: Vec<(u16, Job, bool)>,
+    /// Sub-screens of the frame being handed out (`handing_out`) never handed out.
+    pub unissued: u32,
+    pub handing_out: u16,
+    /// Static split: nodes whose region of that frame still waits for them to ask.
+    pub reserved_for: Vec<u16>,
+    /// Nodes the RC has declared dead.
+    pub declared_dead: Vec<u16>,
+    /// Nodes not killed that never reported the scene of the frame being handed out.
+    pub no_scene: Vec<u16>,
+    /// Nodes killed by fault injection: (node, when, s).
+    pub killed: Vec<(u16, f64)>,
+}
+
+/// "node 3" or "nodes 0, 1, 2" (at most 12 listed).
+fn node_list(nodes: &[u16]) -> String {
+    let mut s = String::from(if nodes.len() == 1 { "node " } else { "nodes " });
+    let shown: Vec<String> = nodes.iter().take(12).map(|n| n.to_string()).collect();
+    s.push_str(&shown.join(", "));
+    if nodes.len() > 12 {
+        s.push_str(&format!(" and {} more", nodes.len() - 12));
+    }
+    s
+}
+
+fn region_text(r: &wire::Region) -> String {
+    match *r {
+        wire::Region::Span { start, len } => format!("pixels {start}..{}", start + len),
+        wire::Region::Rect { x, y, w, h } => format!("{w}x{h} at ({x}, {y})"),
+    }
+}
+
+impl fmt::Display for Unfinished {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "the cluster cannot finish frame {} of {}",
+            self.frame, self.frames
+        )?;
+        let mut parts: Vec<String> = Vec::new();
+        if !self.never_returned.is_empty() {
+            let items: Vec<String> = self
+                .never_returned
+                .iter()
+                .take(8)
+                .map(|(n, j, dead)| {
+                    format!(
+                        "frame {} {} held by node {n}{}",
+                        j.frame,
+                        region_text(&j.region),
+                        if *dead { " (declared dead)" } else { "" }
+                    )
+                })
+                .collect();
+            let more = self.never_returned.len().saturating_sub(8);
+            parts.push(format!(
+                "{} sub-screen(s) never returned: {}{}",
+                self.never_returned.len(),
+                items.join(", "),
+                if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                }
+            ));
+        }
+        if self.unissued > 0 {
+            let mut s = format!(
+                "{} sub-screen(s) of frame {} never handed out",
+                self.unissued, self.handing_out
+            );
+            if !self.reserved_for.is_empty() {
+                s.push_str(&format!(
+                    " (static regions of {}, who never asked)",
+                    node_list(&self.reserved_for)
+                ));
+            }
+            parts.push(s);
+        }
+        if !self.declared_dead.is_empty() {
+            parts.push(format!("{} declared dead", node_list(&self.declared_dead)));
+        }
+        if !self.no_scene.is_empty() {
+            parts.push(format!(
+                "{} never reported frame {}'s scene",
+                node_list(&self.no_scene),
+                self.handing_out
+            ));
+        }
+        if !self.killed.is_empty() {
+            let items: Vec<String> = self
+                .killed
+                .iter()
+                .take(12)
+                .map(|(n, t)| format!("node {n} killed at {t:.3} s"))
+                .collect();
+            let more = self.killed.len().saturating_sub(12);
+            parts.push(format!(
+                "{}{}",
+                items.join(", "),
+                if more > 0 {
+                    format!(" and {more} more")
+                } else {
+                    String::new()
+                }
+            ));
+        }
+        if parts.is_empty() {
+            parts.push("nothing is pending (the RC's last broadcast was lost)".into());
+        }
+        write!(f, ": {} (the simulation {})", parts.join("; "), self.cause)
+    }
+}
+
+impl fmt::Display for SimError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            SimError::Config(s) => write!(f, "{s}"),
+            SimError::SceneTooBig { frame, bytes, bank } => write!(
+                f,
+                "frame {frame}'s scene image is {bytes} bytes; a node's scene bank holds {bank} bytes: make the scene smaller (fewer triangles, a smaller texture)"
+            ),
+            SimError::Root(e) => write!(f, "root: {e}"),
+            SimError::Unfinished(u) => write!(f, "{u}"),
+            SimError::NotIdentical { what } => {
+                write!(f, "{what}: the frame differs from the single-node render")
+            }
+            SimError::Context { what, error } => write!(f, "{what}: {error}"),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+/// (scene CRC, y, x, length) of a run.
+type RunKey = (u32, u32, u32, u32);
+
+/// Memo of rendered runs keyed by (scene CRC, y, x, length).
+#[derive(Default)]
+pub struct RunCache {
+    map: Mutex<HashMap<RunKey, (Vec<u8>, Stats)>>,
+}
+
+impl fmt::Debug for RunCache {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let n = self.map.lock().map(|m| m.len()).unwrap_or(0);
+        write!(f, "RunCache({n} runs)")
+    }
+}
+
+impl RunCache {
+    pub fn new() -> Arc<Self> {
+        Arc::new(Self::default())
+    }
+}

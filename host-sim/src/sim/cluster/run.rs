@@ -1,0 +1,474 @@
+//! One simulation run, stage by stage: check the configuration, set up the RC's state, the
+//! star and the DM, spawn one task per bus and per node, run the executor in virtual time
+//! (recording when each frame completes), and assemble the [`SimReport`].
+
+use super::exec::{self, Delay, ExecError, Ps, SharedClock, Task};
+use super::framemem::{self, FrameMemory, ViaRoot};
+use super::rccost::RcClock;
+use super::star::{SharedStar, SimBus, SimNodeLink, Star};
+use super::{dm, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
+use crate::cost::CycleModel;
+use links_core::image::SceneView;
+use links_core::node::{run_node, NodeReport, RunRenderer, Tracing, WorkClock};
+use links_core::render::{render_run, RenderError, Rgb8, Stats, Tracer};
+use links_core::root::{
+    run_bus, PixelSink, RootConfig, RootError, RootReport, RootState, MAX_BUSES,
+};
+use links_core::wire;
+use std::cell::{Cell, RefCell};
+use std::rc::Rc;
+use std::sync::Arc;
+
+/// The tracer in `f32` (the nodes' format), optionally through a [`RunCache`].
+struct SimRenderer {
+    cache: Option<Arc<RunCache>>,
+    crcs: Rc<Vec<u32>>,
+}
+
+impl RunRenderer for SimRenderer {
+    fn render(
+        &mut self,
+        scene: SceneView<'_>,
+        frame: u16,
+        y: u32,
+        x: u32,
+        out: &mut [Rgb8],
+    ) -> Result<Stats, RenderError> {
+        let Some(cache) = &self.cache else {
+            return Tracing::<f32>::new().render(scene, frame, y, x, out);
+        };
+        let key = (
+            self.crcs.get(frame as usize).copied().unwrap_or(0),
+            y,
+            x,
+            out.len() as u32,
+        );
+        if let Ok(m) = cache.map.lock() {
+            if let Some((rgb, stats)) = m.get(&key) {
+                for (o, c) in out.iter_mut().zip(rgb.chunks_exact(3)) {
+                    o.copy_from_slice(c);
+                }
+                return Ok(*stats);
+            }
+        }
+        let mut t = Tracer::<f32>::new(scene);
+        render_run(&mut t, y, x, out)?;
+        if let Ok(mut m) = cache.map.lock() {
+            m.insert(key, (out.as_flattened().to_vec(), t.stats));
+        }
+        Ok(t.stats)
+    }
+}
+
+/// Virtual time for a node's compute: the cost model at the core clock.
+struct SimWork {
+    clock: SharedClock,
+    model: CycleModel,
+    hz: f64,
+    busy: Ps,
+    report: Rc<RefCell<Vec<Ps>>>,
+    id: usize,
+}
+
+impl WorkClock for SimWork {
+    async fn worked(&mut self, stats: &Stats) {
+        let cycles = self.model.cycles(stats);
+        let ps = (cycles as f64 * 1e12 / self.hz).ceil() as Ps;
+        self.busy += ps;
+        self.report.borrow_mut()[self.id] = self.busy;
+        let until = self.clock.borrow().now + ps;
+        Delay::new(&self.clock, until).await;
+    }
+}
+
+enum Sink<'a> {
+    None,
+    Memory(ViaRoot<'a>),
+}
+
+impl PixelSink for Sink<'_> {
+    fn pixels(&mut self, frame: u16, y: u16, x: u16, rgb: &[u8]) {
+        if let Sink::Memory(m) = self {
+            m.pixels(frame, y, x, rgb);
+        }
+    }
+}
+
+/// Simulate the cluster rendering one frame.
+pub fn simulate_frame(image: &[u8], cfg: &SimConfig) -> Result<SimReport, SimError> {
+    simulate(&[image], cfg)
+}
+
+/// Simulate the cluster rendering an animation: `scenes[f]` is frame `f`'s SceneImage (the
+/// DM's output; it becomes available at `(f + 1) · cfg.dm_s_per_frame`, see [`dm`]). Frame
+/// `f + 1`'s scene is broadcast into the nodes' second bank while frame `f` renders. Nodes in
+/// `cfg.deaths` stop answering at their time; the RC re-issues their work.
+pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimReport, SimError> {
+    let frames = check_config(scenes, cfg)?;
+    let rc = RootConfig {
+        policy: cfg.policy,
+        nodes: cfg.nodes,
+        frames,
+        timeout_us: (cfg.node_timeout_s * 1e6).round() as u64,
+        double_buffer: cfg.rc_double_buffer,
+    };
+    let root = RefCell::new(RootState::new(rc, scenes).map_err(SimError::Root)?);
+    let (width, height) = root.borrow().size();
+    if width as usize > framemem::FRAME_MEMORY_SIDE || height as usize > framemem::FRAME_MEMORY_SIDE
+    {
+        return Err(SimError::Config(format!(
+            "{width}x{height} does not fit the 1024x1024 frame memory"
+        )));
+    }
+    let bank_len = scenes.iter().map(|s| s.as_ref().len()).max().unwrap_or(0);
+    let crcs = Rc::new(
+        scenes
+            .iter()
+            .map(|s| wire::CRC32.checksum(s.as_ref()))
+            .collect::<Vec<_>>(),
+    );
+
+    let clock: SharedClock = Rc::new(RefCell::new(exec::Clock::default()));
+    let fm = Rc::new(RefCell::new(FrameMemory::new()));
+    let star = build_star(&clock, cfg, &fm);
+    let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
+    let buses = star.borrow().bus_count();
+    let sink = RefCell::new(match cfg.collect {
+        Collect::Snoop => Sink::None,
+        Collect::ViaRoot => Sink::Memory(ViaRoot(&fm)),
+    });
+    let busy = Rc::new(RefCell::new(vec![0 as Ps; cfg.nodes as usize]));
+    let mut node_reports: Vec<NodeReport> = vec![NodeReport::default(); cfg.nodes as usize];
+    let bus_results: RefCell<Vec<Option<Result<RootReport, RootError>>>> =
+        RefCell::new(vec![None; buses]);
+    let mut banks: Vec<[Vec<u8>; 2]> = (0..cfg.nodes)
+        .map(|_| [vec![0u8; bank_len], vec![0u8; bank_len]])
+        .collect();
+
+    let rc_busy = Rc::new(Cell::new(0 as Ps));
+    let mut tasks = bus_tasks(
+        cfg,
+        &clock,
+        &star,
+        &rc_busy,
+        (&root, &sink, &bus_results, &dm),
+    );
+    tasks.extend(node_tasks(
+        cfg,
+        &clock,
+        &star,
+        &busy,
+        &crcs,
+        &mut banks,
+        &mut node_reports,
+    ));
+
+    let mut kept: Vec<Vec<u8>> = Vec::new();
+    let keep = |f: u16| {
+        if cfg.keep_frames {
+            kept.push(fm.borrow().read(f, width, height));
+        }
+    };
+    let res = run_frames(&clock, &mut tasks, &root, &bus_results, keep);
+    drop(tasks);
+    let done_at = res.map_err(|cause| {
+        SimError::Unfinished(Box::new(unfinished(cause, &root.borrow(), cfg, frames)))
+    })?;
+    for r in bus_results.borrow().iter().flatten() {
+        if let Err(e) = r {
+            return Err(SimError::Root(*e));
+        }
+    }
+    let node_ps = busy.borrow().clone();
+    let compute_ps: Ps = node_ps.iter().sum();
+    let mut stats = Stats::default();
+    for r in &node_reports {
+        stats.add(&r.stats);
+    }
+    let root_report = root.borrow().report();
+    let bus = star.borrow().counters();
+    let time_ps = done_at.last().copied().unwrap_or(0);
+    Ok(SimReport {
+        nodes: cfg.nodes,
+        buses: buses as u16,
+        policy: cfg.policy,
+        width,
+        height,
+        frame_done_s: done_at.iter().map(|&t| t as f64 * 1e-12).collect(),
+        time_s: time_ps as f64 * 1e-12,
+        compute_s: compute_ps as f64 * 1e-12,
+        node_compute_s: node_ps.iter().map(|&t| t as f64 * 1e-12).collect(),
+        rc_busy_s: rc_busy.get() as f64 * 1e-12,
+        bus,
+        root: root_report,
+        node_reports,
+        frames: kept,
+        stats,
+    })
+}
+
+/// Refuse a configuration the simulator cannot run; the number of frames otherwise.
+fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, SimError> {
+    if cfg.nodes == 0 || cfg.nodes as usize > links_core::root::MAX_NODES {
+        return Err(SimError::Config(format!("{} nodes (1 to 256)", cfg.nodes)));
+    }
+    if cfg.buses == 0 || cfg.buses as usize > MAX_BUSES {
+        return Err(SimError::Config(format!(
+            "{} buses (1 to {MAX_BUSES})",
+            cfg.buses
+        )));
+    }
+    if !(cfg.clock_hz > 0.0 && cfg.timing.bit_rate_hz > 0.0) {
+        return Err(SimError::Config(
+            "clock and bit rate must be positive".into(),
+        ));
+    }
+    let times = [cfg.node_timeout_s, cfg.dm_s_per_frame];
+    if times
+        .iter()
+        .any(|t| !(t.is_finite() && *t >= 0.0 && *t < 1e6))
+    {
+        return Err(SimError::Config(
+            "time-out and DM time must be finite, >= 0 and < 1e6 s".into(),
+        ));
+    }
+    if let Some(d) = cfg
+        .deaths
+        .iter()
+        .find(|d| d.node >= cfg.nodes || !(d.at_s.is_finite() && d.at_s >= 0.0))
+    {
+        return Err(SimError::Config(format!(
+            "node {} cannot die at {} s",
+            d.node, d.at_s
+        )));
+    }
+    cfg.noise.check().map_err(SimError::Config)?;
+    let frames =
+        u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
+    if let Some((frame, s)) = scenes
+        .iter()
+        .enumerate()
+        .find(|(_, s)| s.as_ref().len() > cfg.bank_bytes)
+    {
+        return Err(SimError::SceneTooBig {
+            frame: frame as u16,
+            bytes: s.as_ref().len(),
+            bank: cfg.bank_bytes,
+        });
+    }
+    Ok(frames)
+}
+
+/// The SPI star with the configuration's faults: deaths, dropped broadcasts, bit errors.
+fn build_star(clock: &SharedClock, cfg: &SimConfig, fm: &Rc<RefCell<FrameMemory>>) -> SharedStar {
+    let snoop = (cfg.collect == Collect::Snoop).then(|| fm.clone());
+    let star = Star::new(clock, cfg.nodes, cfg.buses, cfg.timing, cfg.faults, snoop);
+    for d in &cfg.deaths {
+        star.borrow_mut()
+            .kill_at(d.node, (d.at_s * 1e12).round() as Ps);
+    }
+    for d in &cfg.drops {
+        star.borrow_mut().drop_broadcasts(*d);
+    }
+    star.borrow_mut().set_noise(cfg.noise);
+    star
+}
+
+/// What the RC's bus tasks share: its state, the pixel sink, each bus's result, the DM.
+type RootShared<'a, S> = (
+    &'a RefCell<RootState>,
+    &'a RefCell<Sink<'a>>,
+    &'a RefCell<Vec<Option<Result<RootReport, RootError>>>>,
+    &'a dm::DmStage<'a, S>,
+);
+
+/// The RC: one task per bus, sharing one CPU ([`RcClock`]).
+fn bus_tasks<'a, S: AsRef<[u8]>>(
+    cfg: &SimConfig,
+    clock: &SharedClock,
+    star: &SharedStar,
+    rc_busy: &Rc<Cell<Ps>>,
+    (root, sink, bus_results, dm): RootShared<'a, S>,
+) -> Vec<Option<Task<'a>>> {
+    let rc_cpu_free = Rc::new(Cell::new(0 as Ps));
+    let buses = star.borrow().bus_count();
+    let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
+    for b in 0..buses {
+        let star = star.clone();
+        let rc_clock = RcClock {
+            clock: clock.clone(),
+            cost: cfg.rc_cost,
+            sink_pixels: cfg.collect == Collect::ViaRoot,
+            cpu_free: rc_cpu_free.clone(),
+            busy: rc_busy.clone(),
+        };
+        tasks.push(Some(Box::pin(async move {
+            let mut bus = SimBus::new(&star, b);
+            let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
+            bus_results.borrow_mut()[b] = Some(r);
+        })));
+    }
+    tasks
+}
+
+/// The nodes: one task each, rendering into its two scene banks and reporting into its slot.
+fn node_tasks<'a>(
+    cfg: &SimConfig,
+    clock: &SharedClock,
+    star: &SharedStar,
+    busy: &Rc<RefCell<Vec<Ps>>>,
+    crcs: &Rc<Vec<u32>>,
+    banks: &'a mut [[Vec<u8>; 2]],
+    node_reports: &'a mut [NodeReport],
+) -> Vec<Option<Task<'a>>> {
+    let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
+    for (i, ([a, b], report)) in banks.iter_mut().zip(node_reports.iter_mut()).enumerate() {
+        let mut link = SimNodeLink::new(star, i as u16);
+        let mut work = SimWork {
+            clock: clock.clone(),
+            model: cfg.model,
+            hz: cfg.clock_hz,
+            busy: 0,
+            report: busy.clone(),
+            id: i,
+        };
+        let mut renderer = SimRenderer {
+            cache: cfg.cache.clone(),
+            crcs: crcs.clone(),
+        };
+        let node_cfg = cfg.node;
+        tasks.push(Some(Box::pin(async move {
+            // A link error ends the node; the report keeps what it did.
+            let _ = run_node(
+                node_cfg,
+                &mut link,
+                &mut work,
+                &mut renderer,
+                [a.as_mut_slice(), b.as_mut_slice()],
+                report,
+            )
+            .await;
+        })));
+    }
+    tasks
+}
+
+/// Run the tasks in virtual time until every bus has finished: the time each frame completed
+/// (`keep` is called with the frame as it does). Stops after 100 000 s of virtual time, or
+/// when no new result arrives over 200 000 executor passes.
+fn run_frames(
+    clock: &SharedClock,
+    tasks: &mut [Option<Task<'_>>],
+    root: &RefCell<RootState>,
+    bus_results: &RefCell<Vec<Option<Result<RootReport, RootError>>>>,
+    mut keep: impl FnMut(u16),
+) -> Result<Vec<Ps>, ExecError> {
+    let mut done_at: Vec<Ps> = Vec::new();
+    let (mut last_accepted, mut idle_passes) = (0u64, 0u32);
+    let limit: Ps = 100_000 * 1_000_000_000_000; // 100 000 s of virtual time
+    exec::run(
+        clock,
+        tasks,
+        limit,
+        || bus_results.borrow().iter().all(|r| r.is_some()),
+        |now| {
+            let complete = root.borrow().frames_complete() as usize;
+            while done_at.len() < complete {
+                let f = done_at.len() as u16;
+                done_at.push(now);
+                keep(f);
+            }
+            let accepted = root.borrow().report().accepted;
+            if accepted != last_accepted {
+                last_accepted = accepted;
+                idle_passes = 0;
+            } else {
+                idle_passes += 1;
+            }
+            idle_passes < 200_000
+        },
+    )?;
+    Ok(done_at)
+}
+
+/// What the RC still waits for when a simulation stops unfinished.
+fn unfinished(cause: ExecError, root: &RootState, cfg: &SimConfig, frames: u16) -> Unfinished {
+    let killed_at = |n: u16| {
+        cfg.deaths
+            .iter()
+            .filter(|d| d.node == n)
+            .map(|d| d.at_s)
+            .fold(None, |a: Option<f64>, t| Some(a.map_or(t, |a| a.min(t))))
+    };
+    let stopped_s = cause.at_s();
+    let killed_at = |n: u16| killed_at(n).filter(|&t| t <= stopped_s);
+    let handing_out = root.handing_out();
+    let all = 0..cfg.nodes;
+    let mut killed: Vec<(u16, f64)> = all
+        .clone()
+        .filter_map(|n| killed_at(n).map(|t| (n, t)))
+        .collect();
+    killed.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+    Unfinished {
+        cause,
+        frame: root.frames_complete(),
+        frames,
+        never_returned: root.pending().collect(),
+        unissued: root.unissued(),
+        handing_out,
+        reserved_for: all
+            .clone()
+            .filter(|&n| root.unissued() > 0 && root.reserved(n))
+            .collect(),
+        declared_dead: all.clone().filter(|&n| root.is_dead(n)).collect(),
+        no_scene: all
+            .filter(|&n| killed_at(n).is_none() && !root.has_scene(n, handing_out))
+            .collect(),
+        killed,
+    }
+}
+
+/// A cluster render with its single-node reference, for `links render --nodes N`.
+#[derive(Clone, Debug)]
+pub struct ClusterRender {
+    /// The `cfg.nodes` simulation (with the frame kept).
+    pub report: SimReport,
+    /// The same configuration on one node: its frame time (s).
+    pub one_node_s: f64,
+    /// `one_node_s / report.time_s`.
+    pub speedup: f64,
+}
+
+/// Render one frame on the simulated cluster and on one node (sharing rendered runs through a
+/// [`RunCache`], so the reference costs little extra host time); the frame is in
+/// `report.frames[0]`.
+pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, SimError> {
+    let cache = cfg.cache.clone().unwrap_or_default();
+    let cfg = SimConfig {
+        keep_frames: true,
+        cache: Some(cache),
+        ..cfg.clone()
+    };
+    let report = simulate_frame(image, &cfg)?;
+    let one_node_s = if cfg.nodes == 1 {
+        report.time_s
+    } else {
+        simulate_frame(
+            image,
+            // The reference: the same settings on one node that never fails.
+            &SimConfig {
+                nodes: 1,
+                buses: 1,
+                keep_frames: false,
+                deaths: Vec::new(),
+                ..cfg
+            },
+        )?
+        .time_s
+    };
+    Ok(ClusterRender {
+        speedup: one_node_s / report.time_s,
+        one_node_s,
+        report,
+    })
+}

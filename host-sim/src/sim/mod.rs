@@ -1,0 +1,7 @@
+//! Simulated renders on the host: one picture on the host's own threads ([`single`]), and
+//! the whole LINKS-1 cluster in deterministic virtual time ([`cluster`]), with the option
+//! types the `links` commands build a cluster run from ([`options`]).
+
+pub mod cluster;
+pub mod options;
+pub mod single;
