@@ -4,6 +4,7 @@ pub mod ablation;
 pub mod ablation_doc;
 pub mod accuracy;
 pub mod chart;
+pub mod cli;
 pub mod cli_cluster;
 pub mod cli_image;
 pub mod cli_serial;
