@@ -17,3 +17,4 @@ pub mod qemu_node;
 pub mod scene_file;
 pub mod serial_host;
 pub mod sim_rc;
+pub mod vec3;

@@ -23,7 +23,7 @@
 //! triangles; the column's single centre fan gives it an odd vertex count, 22 triangles,
 //! which is what makes 170 reachable.)
 
-use super::mesh::{Cap, Frame, GenMesh, MeshBuilder};
+use super::mesh::{Basis, Cap, GenMesh, MeshBuilder};
 
 /// Triangles in [`building_section_mesh`], as in the paper's Photo 2.
 pub const BUILDING_TRIANGLES: usize = 170;
@@ -60,7 +60,7 @@ const BACK: f64 = 5.0;
 pub fn building_section_mesh() -> GenMesh {
     let mut b = MeshBuilder::new();
     // Sections drawn in (x, y), extruded along +z.
-    let along_z = Frame::new([0.0; 3], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]);
+    let along_z = Basis::new([0.0; 3], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]);
 
     // Foundation and side walls, one U-shaped section; the wall tops follow the roof.
     b.begin_part("shell", true, HARD);
@@ -151,7 +151,7 @@ pub fn building_section_mesh() -> GenMesh {
     // Column under the floor's edge, beside the stair: smooth hexagon.
     b.begin_part("column", true, 65.0);
     b.add_frustum(
-        &Frame::y_up([-2.4, 0.0, 1.5]),
+        &Basis::y_up([-2.4, 0.0, 1.5]),
         0.45,
         0.45,
         GROUND,
@@ -166,7 +166,7 @@ pub fn building_section_mesh() -> GenMesh {
 
 #[cfg(test)]
 mod tests {
-    use super::super::mesh::check;
+    use super::super::check;
     use super::*;
 
     #[test]

@@ -23,7 +23,7 @@
 //! | lens release    | cylinder n = 6: side 12 + 2 centre fans 2 x 6                   |   24 |
 //! | **total**       |                                                                 |  738 |
 
-use super::mesh::{octagon, Cap, Frame, GenMesh, MeshBuilder};
+use super::mesh::{octagon, Basis, Cap, GenMesh, MeshBuilder};
 
 /// Triangles in [`camera_mesh`], as in the paper's Photo 1.
 pub const CAMERA_TRIANGLES: usize = 738;
@@ -40,8 +40,8 @@ const LENS_SEGMENTS: u32 = 18;
 /// The camera: see the module docs for the parts and their triangle counts.
 pub fn camera_mesh() -> GenMesh {
     let mut b = MeshBuilder::new();
-    let up = Frame::y_up([0.0; 3]);
-    let xz = Frame::xz;
+    let up = Basis::y_up([0.0; 3]);
+    let xz = Basis::xz;
 
     // Body: the leather-covered lower body (bevelled at the bottom), a small ledge, and the
     // top plate (bevelled at the top). Octagons in plan: corners cut by 0.5.
@@ -83,7 +83,7 @@ pub fn camera_mesh() -> GenMesh {
     // Lens: (radius, distance forward of z = 0) from the back centre (inside the body) to
     // the centre of the front glass.
     b.begin_part("lens", true, TURNED);
-    let lens = Frame::new([0.0, LENS_Y, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]);
+    let lens = Basis::new([0.0, LENS_Y, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]);
     b.add_lathe(
         &lens,
         &[
@@ -109,7 +109,7 @@ pub fn camera_mesh() -> GenMesh {
     // Top-plate controls (they stand on the top plate at y = 6.6).
     b.begin_part("shutter dial", true, TURNED);
     b.add_frustum(
-        &Frame::y_up([4.5, 0.0, 0.3]),
+        &Basis::y_up([4.5, 0.0, 0.3]),
         0.95,
         0.95,
         6.55,
@@ -121,7 +121,7 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("shutter button", true, TURNED);
     b.add_frustum(
-        &Frame::y_up([5.6, 0.0, -1.1]),
+        &Basis::y_up([5.6, 0.0, -1.1]),
         0.38,
         0.34,
         6.55,
@@ -133,7 +133,7 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("rewind knob", true, TURNED);
     b.add_frustum(
-        &Frame::y_up([-4.5, 0.0, 0.3]),
+        &Basis::y_up([-4.5, 0.0, 0.3]),
         0.85,
         0.8,
         6.55,
@@ -145,8 +145,8 @@ pub fn camera_mesh() -> GenMesh {
 
     // Film-advance lever: a flat bar pivoting on the shutter dial, swung back 20 degrees.
     b.begin_part("advance lever", true, HARD);
-    let lever = Frame::new([4.5, 0.0, 0.3], [0.0, 1.0, 0.0], [0.94, 0.0, 0.342]);
-    b.add_frame_box(&lever, [-0.2, -0.3], [2.6, 0.3], 7.05, 7.3);
+    let lever = Basis::new([4.5, 0.0, 0.3], [0.0, 1.0, 0.0], [0.94, 0.0, 0.342]);
+    b.add_basis_box(&lever, [-0.2, -0.3], [2.6, 0.3], 7.05, 7.3);
 
     // Strap lugs on both ends of the top plate.
     b.begin_part("strap lugs", true, HARD);
@@ -160,7 +160,7 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("lens release", true, 65.0);
     b.add_frustum(
-        &Frame::new([3.35, 5.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]),
+        &Basis::new([3.35, 5.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]),
         0.32,
         0.3,
         2.15,
@@ -175,7 +175,7 @@ pub fn camera_mesh() -> GenMesh {
 
 #[cfg(test)]
 mod tests {
-    use super::super::mesh::check;
+    use super::super::check;
     use super::*;
 
     #[test]

@@ -16,7 +16,7 @@
 mod error;
 mod format;
 mod locate;
-mod obj;
+pub(crate) mod obj;
 mod resolve;
 mod texture;
 mod values;

@@ -23,7 +23,7 @@ const IGNORED: &[&str] = &[
 ];
 
 /// Parses OBJ `text`; `file` names it in errors, `source` becomes [`Mesh::source`].
-pub(super) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, SceneError> {
+pub(crate) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, SceneError> {
     let mut mesh = Mesh {
         source: source.to_string(),
         positions: Vec::new(),
