@@ -13,6 +13,7 @@ pub mod cost;
 pub mod frame;
 pub mod gen;
 pub mod limits;
+pub mod png_codec;
 pub mod qemu_node;
 pub mod scene_file;
 pub mod serial_host;

@@ -13,6 +13,7 @@
 //!
 //! Every error is a [`SceneError`] whose `Display` is `file:line:col: message`.
 
+mod compile_at;
 mod error;
 mod format;
 mod locate;
@@ -31,6 +32,7 @@ use links_core::desc::SceneDesc;
 use crate::limits::{read_bounded, MAX_SCENE_BYTES};
 use ron::extensions::Extensions;
 
+pub use compile_at::{compile_at, CompileAtError};
 pub use error::SceneError;
 
 use format::{RefScope, SceneFile};
