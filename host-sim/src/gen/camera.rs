@@ -40,6 +40,14 @@ const LENS_SEGMENTS: u32 = 18;
 /// The camera: see the module docs for the parts and their triangle counts.
 pub fn camera_mesh() -> GenMesh {
     let mut b = MeshBuilder::new();
+    add_body(&mut b);
+    add_lens(&mut b);
+    add_controls(&mut b);
+    b.finish()
+}
+
+/// The body, the pentaprism housing, the eyepiece and the hot shoe.
+fn add_body(b: &mut MeshBuilder) {
     let up = Basis::y_up([0.0; 3]);
     let xz = Basis::xz;
 
@@ -79,7 +87,10 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("hot shoe", true, HARD);
     b.add_box([-0.65, 8.69, -0.15], [0.65, 8.95, 1.05]);
+}
 
+/// The lens, turned around its axis.
+fn add_lens(b: &mut MeshBuilder) {
     // Lens: (radius, distance forward of z = 0) from the back centre (inside the body) to
     // the centre of the front glass.
     b.begin_part("lens", true, TURNED);
@@ -105,7 +116,10 @@ pub fn camera_mesh() -> GenMesh {
         Cap::Open,
         Cap::Open,
     );
+}
 
+/// The controls on the top plate and the front, and the strap lugs.
+fn add_controls(b: &mut MeshBuilder) {
     // Top-plate controls (they stand on the top plate at y = 6.6).
     b.begin_part("shutter dial", true, TURNED);
     b.add_frustum(
@@ -169,8 +183,6 @@ pub fn camera_mesh() -> GenMesh {
         Cap::Center,
         Cap::Center,
     );
-
-    b.finish()
 }
 
 #[cfg(test)]
