@@ -193,16 +193,12 @@ mod tests {
 
     #[test]
     fn building_is_well_formed_and_watertight() {
-        let m = building_section_mesh();
-        check::all(&m);
-        assert!(m.parts.iter().all(|p| p.closed));
+        check::all_closed(&building_section_mesh());
     }
 
     #[test]
     fn building_size() {
-        let (lo, hi) = building_section_mesh().bounds();
-        assert_eq!(lo[1], 0.0, "rests on y = 0");
-        let size = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        let (lo, hi, size) = check::resting_bounds(&building_section_mesh());
         assert!((29.0..=32.0).contains(&size[0]), "width {size:?}");
         assert!((19.0..=21.0).contains(&size[1]), "height {size:?}");
         assert!((9.5..=11.0).contains(&size[2]), "depth {size:?}");

@@ -220,16 +220,12 @@ mod tests {
 
     #[test]
     fn camera_is_well_formed_and_watertight() {
-        let m = camera_mesh();
-        check::all(&m);
-        assert!(m.parts.iter().all(|p| p.closed));
+        check::all_closed(&camera_mesh());
     }
 
     #[test]
     fn camera_size() {
-        let (lo, hi) = camera_mesh().bounds();
-        assert_eq!(lo[1], 0.0, "rests on y = 0");
-        let size = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        let (lo, hi, size) = check::resting_bounds(&camera_mesh());
         assert!((13.5..=15.0).contains(&size[0]), "width {size:?}");
         assert!((8.5..=9.5).contains(&size[1]), "height {size:?}");
         // Body about 6 deep including the eyepiece; the lens adds about 5 towards -z.

@@ -130,3 +130,16 @@ pub fn all(m: &GenMesh) {
         )
     );
 }
+
+/// [`all`], and every part is a closed solid.
+pub fn all_closed(m: &GenMesh) {
+    all(m);
+    assert!(m.parts.iter().all(|p| p.closed));
+}
+
+/// The bounds and size of a mesh that must rest on `y = 0`: `(min, max, max - min)`.
+pub fn resting_bounds(m: &GenMesh) -> ([f64; 3], [f64; 3], [f64; 3]) {
+    let (lo, hi) = m.bounds();
+    assert_eq!(lo[1], 0.0, "rests on y = 0");
+    (lo, hi, [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]])
+}
