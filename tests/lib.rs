@@ -211,13 +211,7 @@ pub fn bundled_image(scene: &str, w: u32, h: u32) -> Vec<u8> {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../scenes")
         .join(scene);
-    let desc = links_host::scene_file::load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
-    let opts = CompileOptions {
-        width: Some(w),
-        height: Some(h),
-        ..Default::default()
-    };
-    compile(&desc, &opts).expect("compiles").bytes
+    links_host::scene_file::compile_at(&path, w, h).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// The host's f32 render of a compiled image on one thread: what every cluster frame must

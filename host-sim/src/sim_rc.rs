@@ -4,8 +4,6 @@
 //! corrupts chosen frames on the line.
 
 use crate::frame::{render_frame, Precision};
-use crate::scene_file::load_scene;
-use links_core::dm::{compile, CompileOptions};
 use links_core::serial::{
     Decoder, Encoder, FrameStreamer, SerialError, ToRc, UploadEvent, UploadReceiver, MAX_TO_PC,
     MAX_TO_RC,
@@ -17,14 +15,8 @@ use std::time::{Duration, Instant};
 /// Compile a scene file at `width` x `height` and render it (f32, as the nodes do):
 /// returns the RGB8 rows.
 pub fn render_scene(path: &Path, width: u32, height: u32) -> Result<Vec<u8>, String> {
-    let desc = load_scene(path).map_err(|e| e.to_string())?;
-    let opts = CompileOptions {
-        width: Some(width),
-        height: Some(height),
-        ..CompileOptions::default()
-    };
-    let image = compile(&desc, &opts).map_err(|e| format!("{}: {e}", path.display()))?;
-    let frame = render_frame(&image.bytes, Precision::F32, 1, &|| {}).map_err(|e| e.to_string())?;
+    let image = crate::scene_file::compile_at(path, width, height).map_err(|e| e.to_string())?;
+    let frame = render_frame(&image, Precision::F32, 1, &|| {}).map_err(|e| e.to_string())?;
     Ok(frame.rgb)
 }
 

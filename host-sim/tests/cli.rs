@@ -121,23 +121,26 @@ fn info_reports_the_scene_image_size_by_section() {
     );
 }
 
+/// `links render <scene> --width 64 --height 60 -o <out>`.
+fn render_64x60(scene_name: &str, out: &Path) -> Command {
+    let mut c = links();
+    c.args([
+        "render",
+        scene(scene_name).to_str().unwrap(),
+        "--width",
+        "64",
+        "--height",
+        "60",
+        "-o",
+    ])
+    .arg(out);
+    c
+}
+
 #[test]
 fn cluster_render_gives_the_host_render_and_reports_virtual_time() {
     let (host, cluster) = (tmp("host.png"), tmp("cluster.png"));
-    let args = |out: &Path| {
-        let mut c = links();
-        c.args([
-            "render",
-            scene("photo1.ron").to_str().unwrap(),
-            "--width",
-            "64",
-            "--height",
-            "60",
-            "-o",
-        ])
-        .arg(out);
-        c
-    };
+    let args = |out: &Path| render_64x60("photo1.ron", out);
     assert!(args(&host).arg("--quiet").status().unwrap().success());
     let o = args(&cluster)
         .args(["--nodes", "8", "--policy", "fixed=64"])
@@ -685,20 +688,7 @@ fn render_takes_a_scene_or_an_image_not_both() {
 #[test]
 fn cluster_render_with_faults_gives_the_host_render_and_bad_fault_options_say_why() {
     let host = tmp("faults-host.png");
-    let base = |out: &Path| {
-        let mut c = links();
-        c.args([
-            "render",
-            scene("reflections.ron").to_str().unwrap(),
-            "--width",
-            "64",
-            "--height",
-            "60",
-            "-o",
-        ])
-        .arg(out);
-        c
-    };
+    let base = |out: &Path| render_64x60("reflections.ron", out);
     assert!(base(&host).arg("--quiet").status().unwrap().success());
     let want = std::fs::read(&host).unwrap();
     let cases: [&[&str]; 2] = [

@@ -16,9 +16,7 @@ fn pixel_dir(w: u32, h: u32, fov_y_deg: f64, x: u32, y: u32) -> [f64; 3] {
     v.map(|c| c / l)
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
+use links_host::vec3::dot;
 
 fn q8(v: f64) -> i32 {
     (v.clamp(0.0, 1.0) * 255.0 + 0.5).floor() as i32

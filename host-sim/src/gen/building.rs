@@ -23,7 +23,7 @@
 //! triangles; the column's single centre fan gives it an odd vertex count, 22 triangles,
 //! which is what makes 170 reachable.)
 
-use super::mesh::{Cap, Frame, GenMesh, MeshBuilder};
+use super::mesh::{Basis, Cap, GenMesh, MeshBuilder};
 
 /// Triangles in [`building_section_mesh`], as in the paper's Photo 2.
 pub const BUILDING_TRIANGLES: usize = 170;
@@ -60,7 +60,7 @@ const BACK: f64 = 5.0;
 pub fn building_section_mesh() -> GenMesh {
     let mut b = MeshBuilder::new();
     // Sections drawn in (x, y), extruded along +z.
-    let along_z = Frame::new([0.0; 3], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]);
+    let along_z = Basis::new([0.0; 3], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]);
 
     // Foundation and side walls, one U-shaped section; the wall tops follow the roof.
     b.begin_part("shell", true, HARD);
@@ -151,7 +151,7 @@ pub fn building_section_mesh() -> GenMesh {
     // Column under the floor's edge, beside the stair: smooth hexagon.
     b.begin_part("column", true, 65.0);
     b.add_frustum(
-        &Frame::y_up([-2.4, 0.0, 1.5]),
+        &Basis::y_up([-2.4, 0.0, 1.5]),
         0.45,
         0.45,
         GROUND,
@@ -166,7 +166,7 @@ pub fn building_section_mesh() -> GenMesh {
 
 #[cfg(test)]
 mod tests {
-    use super::super::mesh::check;
+    use super::super::check;
     use super::*;
 
     #[test]
@@ -193,16 +193,12 @@ mod tests {
 
     #[test]
     fn building_is_well_formed_and_watertight() {
-        let m = building_section_mesh();
-        check::all(&m);
-        assert!(m.parts.iter().all(|p| p.closed));
+        check::all_closed(&building_section_mesh());
     }
 
     #[test]
     fn building_size() {
-        let (lo, hi) = building_section_mesh().bounds();
-        assert_eq!(lo[1], 0.0, "rests on y = 0");
-        let size = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        let (lo, hi, size) = check::resting_bounds(&building_section_mesh());
         assert!((29.0..=32.0).contains(&size[0]), "width {size:?}");
         assert!((19.0..=21.0).contains(&size[1]), "height {size:?}");
         assert!((9.5..=11.0).contains(&size[2]), "depth {size:?}");

@@ -23,7 +23,7 @@
 //! | lens release    | cylinder n = 6: side 12 + 2 centre fans 2 x 6                   |   24 |
 //! | **total**       |                                                                 |  738 |
 
-use super::mesh::{octagon, Cap, Frame, GenMesh, MeshBuilder};
+use super::mesh::{octagon, Basis, Cap, GenMesh, MeshBuilder};
 
 /// Triangles in [`camera_mesh`], as in the paper's Photo 1.
 pub const CAMERA_TRIANGLES: usize = 738;
@@ -40,8 +40,16 @@ const LENS_SEGMENTS: u32 = 18;
 /// The camera: see the module docs for the parts and their triangle counts.
 pub fn camera_mesh() -> GenMesh {
     let mut b = MeshBuilder::new();
-    let up = Frame::y_up([0.0; 3]);
-    let xz = Frame::xz;
+    add_body(&mut b);
+    add_lens(&mut b);
+    add_controls(&mut b);
+    b.finish()
+}
+
+/// The body, the pentaprism housing, the eyepiece and the hot shoe.
+fn add_body(b: &mut MeshBuilder) {
+    let up = Basis::y_up([0.0; 3]);
+    let xz = Basis::xz;
 
     // Body: the leather-covered lower body (bevelled at the bottom), a small ledge, and the
     // top plate (bevelled at the top). Octagons in plan: corners cut by 0.5.
@@ -79,11 +87,14 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("hot shoe", true, HARD);
     b.add_box([-0.65, 8.69, -0.15], [0.65, 8.95, 1.05]);
+}
 
+/// The lens, turned around its axis.
+fn add_lens(b: &mut MeshBuilder) {
     // Lens: (radius, distance forward of z = 0) from the back centre (inside the body) to
     // the centre of the front glass.
     b.begin_part("lens", true, TURNED);
-    let lens = Frame::new([0.0, LENS_Y, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]);
+    let lens = Basis::new([0.0, LENS_Y, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]);
     b.add_lathe(
         &lens,
         &[
@@ -105,11 +116,14 @@ pub fn camera_mesh() -> GenMesh {
         Cap::Open,
         Cap::Open,
     );
+}
 
+/// The controls on the top plate and the front, and the strap lugs.
+fn add_controls(b: &mut MeshBuilder) {
     // Top-plate controls (they stand on the top plate at y = 6.6).
     b.begin_part("shutter dial", true, TURNED);
     b.add_frustum(
-        &Frame::y_up([4.5, 0.0, 0.3]),
+        &Basis::y_up([4.5, 0.0, 0.3]),
         0.95,
         0.95,
         6.55,
@@ -121,7 +135,7 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("shutter button", true, TURNED);
     b.add_frustum(
-        &Frame::y_up([5.6, 0.0, -1.1]),
+        &Basis::y_up([5.6, 0.0, -1.1]),
         0.38,
         0.34,
         6.55,
@@ -133,7 +147,7 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("rewind knob", true, TURNED);
     b.add_frustum(
-        &Frame::y_up([-4.5, 0.0, 0.3]),
+        &Basis::y_up([-4.5, 0.0, 0.3]),
         0.85,
         0.8,
         6.55,
@@ -145,8 +159,8 @@ pub fn camera_mesh() -> GenMesh {
 
     // Film-advance lever: a flat bar pivoting on the shutter dial, swung back 20 degrees.
     b.begin_part("advance lever", true, HARD);
-    let lever = Frame::new([4.5, 0.0, 0.3], [0.0, 1.0, 0.0], [0.94, 0.0, 0.342]);
-    b.add_frame_box(&lever, [-0.2, -0.3], [2.6, 0.3], 7.05, 7.3);
+    let lever = Basis::new([4.5, 0.0, 0.3], [0.0, 1.0, 0.0], [0.94, 0.0, 0.342]);
+    b.add_basis_box(&lever, [-0.2, -0.3], [2.6, 0.3], 7.05, 7.3);
 
     // Strap lugs on both ends of the top plate.
     b.begin_part("strap lugs", true, HARD);
@@ -160,7 +174,7 @@ pub fn camera_mesh() -> GenMesh {
 
     b.begin_part("lens release", true, 65.0);
     b.add_frustum(
-        &Frame::new([3.35, 5.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]),
+        &Basis::new([3.35, 5.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]),
         0.32,
         0.3,
         2.15,
@@ -169,13 +183,11 @@ pub fn camera_mesh() -> GenMesh {
         Cap::Center,
         Cap::Center,
     );
-
-    b.finish()
 }
 
 #[cfg(test)]
 mod tests {
-    use super::super::mesh::check;
+    use super::super::check;
     use super::*;
 
     #[test]
@@ -208,16 +220,12 @@ mod tests {
 
     #[test]
     fn camera_is_well_formed_and_watertight() {
-        let m = camera_mesh();
-        check::all(&m);
-        assert!(m.parts.iter().all(|p| p.closed));
+        check::all_closed(&camera_mesh());
     }
 
     #[test]
     fn camera_size() {
-        let (lo, hi) = camera_mesh().bounds();
-        assert_eq!(lo[1], 0.0, "rests on y = 0");
-        let size = [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]];
+        let (lo, hi, size) = check::resting_bounds(&camera_mesh());
         assert!((13.5..=15.0).contains(&size[0]), "width {size:?}");
         assert!((8.5..=9.5).contains(&size[1]), "height {size:?}");
         // Body about 6 deep including the eyepiece; the lens adds about 5 towards -z.

@@ -9,16 +9,25 @@
 //! `LINKS_WRITE_ASSETS=1 cargo test -p links-host --lib gen::tests::write_assets_to_scenes -- --exact`
 //! (or `links` with the subcommand that calls [`write_bundled_assets`]).
 
+pub mod basis;
+pub mod builder;
 pub mod building;
 pub mod camera;
+#[cfg(test)]
+pub(crate) mod check;
 pub mod mesh;
+#[cfg(test)]
+mod mesh_tests;
+pub mod polygon;
+
 pub mod texture;
+pub mod trig;
 
 use std::path::{Path, PathBuf};
 
 pub use building::{building_section_mesh, BUILDING_TRIANGLES};
 pub use camera::{camera_mesh, CAMERA_TRIANGLES};
-pub use mesh::{Cap, FaceCorner, Frame, GenMesh, MeshBuilder, MeshPart};
+pub use mesh::{Basis, Cap, FaceCorner, GenMesh, MeshBuilder, MeshPart};
 pub use texture::{encode_png, floor_texture};
 
 /// Side of the bundled floor texture, in pixels.

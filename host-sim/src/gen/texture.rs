@@ -91,17 +91,7 @@ pub fn floor_texture(w: u32, h: u32) -> Vec<u8> {
 
 /// Encodes `w x h` RGB8 pixels as a PNG file.
 pub fn encode_png(w: u32, h: u32, rgb: &[u8]) -> Result<Vec<u8>, png::EncodingError> {
-    let mut bytes = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut bytes, w, h);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        enc.set_compression(png::Compression::Balanced);
-        let mut writer = enc.write_header()?;
-        writer.write_image_data(rgb)?;
-        writer.finish()?;
-    }
-    Ok(bytes)
+    crate::png_codec::encode_rgb8(w, h, rgb)
 }
 
 #[cfg(test)]

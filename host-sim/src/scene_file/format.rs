@@ -616,6 +616,73 @@ fn check_cut(cut: &desc::CutPlane, radii: [f64; 3]) -> Result<(), String> {
     Ok(())
 }
 
+/// An ellipsoid shape, its cut plane (if any) checked against its radii.
+fn ellipsoid(
+    center: [f64; 3],
+    radii: [f64; 3],
+    rotate_deg: [f64; 3],
+    cut: Option<CutFile>,
+) -> Result<desc::Shape, String> {
+    let cut = cut.map(CutFile::into_desc);
+    if let Some(c) = &cut {
+        check_cut(c, radii)?;
+    }
+    Ok(desc::Shape::Ellipsoid {
+        center,
+        radii,
+        rotate_deg,
+        cut,
+        material: 0,
+    })
+}
+
+/// A box shape; `min < max` on every axis.
+fn box_shape(min: [f64; 3], max: [f64; 3]) -> Result<desc::Shape, String> {
+    if let Some(axis) = (0..3).find(|&i| min[i] >= max[i]) {
+        return Err(format!(
+            "a box needs min < max on every axis, but on {} min = {} and max = {}",
+            ["x", "y", "z"][axis],
+            Num(min[axis]),
+            Num(max[axis])
+        ));
+    }
+    Ok(desc::Shape::Box {
+        min,
+        max,
+        material: 0,
+    })
+}
+
+/// A blob shape; at least one ball, one of them of positive strength.
+fn blobs(kernel: KernelFile, threshold: f64, balls: Vec<BallFile>) -> Result<desc::Shape, String> {
+    if balls.is_empty() {
+        return Err("a Blobs shape needs at least one ball".into());
+    }
+    if !balls.iter().any(|b| b.strength > 0.0) {
+        return Err(
+            "a Blobs shape needs at least one ball of positive strength \
+                    (negative balls only subtract)"
+                .into(),
+        );
+    }
+    Ok(desc::Shape::Blobs {
+        balls: balls
+            .into_iter()
+            .map(|b| desc::Ball {
+                center: b.center,
+                radius: b.radius,
+                strength: b.strength,
+            })
+            .collect(),
+        threshold,
+        kernel: match kernel {
+            KernelFile::Links => desc::BlobKernel::Links,
+            KernelFile::Wyvill => desc::BlobKernel::Wyvill,
+        },
+        material: 0,
+    })
+}
+
 impl TryFrom<RawNode> for NodeFile {
     type Error = String;
 
@@ -627,62 +694,15 @@ impl TryFrom<RawNode> for NodeFile {
                 radius,
                 cut,
                 material,
-            } => {
-                let cut = cut.map(CutFile::into_desc);
-                if let Some(c) = &cut {
-                    check_cut(c, [radius; 3])?;
-                }
-                shape(
-                    desc::Shape::Ellipsoid {
-                        center,
-                        radii: [radius; 3],
-                        rotate_deg: [0.0; 3],
-                        cut,
-                        material: 0,
-                    },
-                    material,
-                )
-            }
+            } => shape(ellipsoid(center, [radius; 3], [0.0; 3], cut)?, material),
             RawNode::Ellipsoid {
                 center,
                 radii,
                 rotate,
                 cut,
                 material,
-            } => {
-                let cut = cut.map(CutFile::into_desc);
-                if let Some(c) = &cut {
-                    check_cut(c, radii)?;
-                }
-                shape(
-                    desc::Shape::Ellipsoid {
-                        center,
-                        radii,
-                        rotate_deg: rotate,
-                        cut,
-                        material: 0,
-                    },
-                    material,
-                )
-            }
-            RawNode::Box { min, max, material } => {
-                if let Some(axis) = (0..3).find(|&i| min[i] >= max[i]) {
-                    return Err(format!(
-                        "a box needs min < max on every axis, but on {} min = {} and max = {}",
-                        ["x", "y", "z"][axis],
-                        Num(min[axis]),
-                        Num(max[axis])
-                    ));
-                }
-                shape(
-                    desc::Shape::Box {
-                        min,
-                        max,
-                        material: 0,
-                    },
-                    material,
-                )
-            }
+            } => shape(ellipsoid(center, radii, rotate, cut)?, material),
+            RawNode::Box { min, max, material } => shape(box_shape(min, max)?, material),
             RawNode::Triangle {
                 v,
                 normals,
@@ -711,37 +731,7 @@ impl TryFrom<RawNode> for NodeFile {
                 threshold,
                 balls,
                 material,
-            } => {
-                if balls.is_empty() {
-                    return Err("a Blobs shape needs at least one ball".into());
-                }
-                if !balls.iter().any(|b| b.strength > 0.0) {
-                    return Err(
-                        "a Blobs shape needs at least one ball of positive strength \
-                         (negative balls only subtract)"
-                            .into(),
-                    );
-                }
-                shape(
-                    desc::Shape::Blobs {
-                        balls: balls
-                            .into_iter()
-                            .map(|b| desc::Ball {
-                                center: b.center,
-                                radius: b.radius,
-                                strength: b.strength,
-                            })
-                            .collect(),
-                        threshold,
-                        kernel: match kernel {
-                            KernelFile::Links => desc::BlobKernel::Links,
-                            KernelFile::Wyvill => desc::BlobKernel::Wyvill,
-                        },
-                        material: 0,
-                    },
-                    material,
-                )
-            }
+            } => shape(blobs(kernel, threshold, balls)?, material),
             RawNode::Cluster {
                 name,
                 transform,

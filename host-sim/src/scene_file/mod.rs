@@ -13,10 +13,11 @@
 //!
 //! Every error is a [`SceneError`] whose `Display` is `file:line:col: message`.
 
+mod compile_at;
 mod error;
 mod format;
 mod locate;
-mod obj;
+pub(crate) mod obj;
 mod resolve;
 mod texture;
 mod values;
@@ -31,6 +32,7 @@ use links_core::desc::SceneDesc;
 use crate::limits::{read_bounded, MAX_SCENE_BYTES};
 use ron::extensions::Extensions;
 
+pub use compile_at::{compile_at, CompileAtError};
 pub use error::SceneError;
 
 use format::{RefScope, SceneFile};

@@ -23,7 +23,7 @@ const IGNORED: &[&str] = &[
 ];
 
 /// Parses OBJ `text`; `file` names it in errors, `source` becomes [`Mesh::source`].
-pub(super) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, SceneError> {
+pub(crate) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, SceneError> {
     let mut mesh = Mesh {
         source: source.to_string(),
         positions: Vec::new(),
@@ -82,44 +82,7 @@ pub(super) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, Sc
                 mesh.uvs
                     .push([nums[0], nums.get(1).copied().unwrap_or(0.0)]);
             }
-            "f" => {
-                let mut verts = Vec::new();
-                for (col, tok) in tokens.by_ref() {
-                    verts.push(face_vertex(tok, &mesh).map_err(|m| err(Some(col), m))?);
-                }
-                if verts.len() < 3 {
-                    return Err(err(
-                        Some(kw_col),
-                        format!("a face needs at least 3 vertices, found {}", verts.len()),
-                    ));
-                }
-                let pos = |fv: &FaceVertex| mesh.positions[fv.position as usize];
-                let mut added = 0;
-                for i in 1..verts.len() - 1 {
-                    let tri = [verts[0], verts[i], verts[i + 1]];
-                    if degenerate_triangle(&[pos(&tri[0]), pos(&tri[1]), pos(&tri[2])]) {
-                        continue;
-                    }
-                    mesh.faces.push(tri);
-                    added += 1;
-                }
-                if added == 0 {
-                    return Err(err(
-                        Some(kw_col),
-                        if verts.len() == 3 {
-                            "degenerate triangle: its vertices have zero area \
-                             (they coincide or lie on one line)"
-                                .to_string()
-                        } else {
-                            format!(
-                                "degenerate polygon: all {} vertices lie on one line \
-                                 (zero area)",
-                                verts.len()
-                            )
-                        },
-                    ));
-                }
-            }
+            "f" => add_face(&mut mesh, &mut tokens, kw_col).map_err(|(c, m)| err(c, m))?,
             kw if IGNORED.contains(&kw) => {}
             kw => {
                 return Err(err(
@@ -152,6 +115,52 @@ pub(super) fn parse_obj(text: &str, file: &str, source: &str) -> Result<Mesh, Sc
         });
     }
     Ok(mesh)
+}
+
+/// An `f` statement: the polygon fan-triangulated into `mesh.faces`, dropping zero-area
+/// triangles. An error is `(column, message)`.
+fn add_face(
+    mesh: &mut Mesh,
+    tokens: &mut Tokens<'_>,
+    kw_col: usize,
+) -> Result<(), (Option<usize>, String)> {
+    let mut verts = Vec::new();
+    for (col, tok) in tokens.by_ref() {
+        verts.push(face_vertex(tok, mesh).map_err(|m| (Some(col), m))?);
+    }
+    if verts.len() < 3 {
+        return Err((
+            Some(kw_col),
+            format!("a face needs at least 3 vertices, found {}", verts.len()),
+        ));
+    }
+    let pos = |fv: &FaceVertex| mesh.positions[fv.position as usize];
+    let mut added = 0;
+    for i in 1..verts.len() - 1 {
+        let tri = [verts[0], verts[i], verts[i + 1]];
+        if degenerate_triangle(&[pos(&tri[0]), pos(&tri[1]), pos(&tri[2])]) {
+            continue;
+        }
+        mesh.faces.push(tri);
+        added += 1;
+    }
+    if added == 0 {
+        return Err((
+            Some(kw_col),
+            if verts.len() == 3 {
+                "degenerate triangle: its vertices have zero area \
+                 (they coincide or lie on one line)"
+                    .to_string()
+            } else {
+                format!(
+                    "degenerate polygon: all {} vertices lie on one line \
+                     (zero area)",
+                    verts.len()
+                )
+            },
+        ));
+    }
+    Ok(())
 }
 
 /// Whitespace-separated tokens with their 1-based character column.

@@ -95,18 +95,7 @@ pub(super) mod tests {
         palette: Option<&[u8]>,
         data: &[u8],
     ) -> Vec<u8> {
-        let mut out = Vec::new();
-        {
-            let mut enc = png::Encoder::new(&mut out, width, height);
-            enc.set_color(color);
-            enc.set_depth(depth);
-            if let Some(p) = palette {
-                enc.set_palette(p.to_vec());
-            }
-            let mut w = enc.write_header().unwrap();
-            w.write_image_data(data).unwrap();
-        }
-        out
+        crate::png_codec::encode(width, height, color, depth, palette, data).unwrap()
     }
 
     #[test]

@@ -265,22 +265,7 @@ fn to_f32<const N: usize>(v: [f64; N]) -> [f32; N] {
     v.map(|x| x as f32)
 }
 
-/// Length of a 3-vector.
-pub(super) fn length(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-}
-
-pub(super) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
+pub(super) use crate::vec3::{cross, length, sub};
 
 /// `v / |v|`, or `None` when `v` has no usable direction (zero, or so small/large that the
 /// length is zero or infinite).

@@ -152,15 +152,7 @@ fn rows<T: Real>(view: SceneView<'_>, progress: &(dyn Fn() + Sync)) -> (Vec<u8>,
 
 /// Encode RGB8 rows as a PNG file.
 pub fn encode_png(width: u32, height: u32, rgb: &[u8]) -> Result<Vec<u8>, png::EncodingError> {
-    let mut out = Vec::new();
-    {
-        let mut enc = png::Encoder::new(&mut out, width, height);
-        enc.set_color(png::ColorType::Rgb);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut w = enc.write_header()?;
-        w.write_image_data(rgb)?;
-    }
-    Ok(out)
+    crate::png_codec::encode_rgb8(width, height, rgb)
 }
 
 /// Decode an 8-bit RGB PNG (as written by [`encode_png`]) for comparisons.

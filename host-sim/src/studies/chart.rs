@@ -44,18 +44,12 @@ pub fn bundled_images(
     paths.sort();
     let mut out = Vec::new();
     for p in paths {
-        let desc = crate::scene_file::load_scene(&p).map_err(|e| ChartError::Io(e.to_string()))?;
-        let opts = links_core::dm::CompileOptions {
-            width: Some(width),
-            height: Some(height),
-            ..Default::default()
-        };
-        let img = links_core::dm::compile(&desc, &opts)
-            .map_err(|e| ChartError::Io(format!("{}: {e}", p.display())))?;
+        let img = crate::scene_file::compile_at(&p, width, height)
+            .map_err(|e| ChartError::Io(e.to_string()))?;
         let name = p
             .file_stem()
             .map_or(String::new(), |s| s.to_string_lossy().into_owned());
-        out.push((name, img.bytes));
+        out.push((name, img));
     }
     Ok(out)
 }

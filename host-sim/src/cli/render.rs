@@ -1,0 +1,191 @@
+//! `links render`: a scene (or a compiled SceneImage) to a PNG, on the host's threads or on a
+//! simulated cluster (`--nodes`).
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use links_core::image::SceneView;
+
+use super::args::{image_to_render, PrecisionArg, SceneArgs};
+use super::error::write_file;
+use super::CliError;
+use crate::cli_cluster;
+use crate::frame::{encode_png, render_frame};
+use crate::limits;
+
+/// The options of `links render`.
+#[derive(clap::Args)]
+pub struct RenderArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Render this compiled SceneImage file (as `info --image` writes) instead of a scene
+    #[arg(long, value_name = "FILE.bin", conflicts_with_all = ["scene", "width", "height", "max_depth", "transparency", "no_shadows"])]
+    pub image: Option<PathBuf>,
+    /// Output PNG file
+    #[arg(short, long, default_value = "out.png")]
+    pub output: PathBuf,
+    /// Host threads (0 = all cores, at most 256; single-host render only); the image does
+    /// not depend on it
+    #[arg(long, default_value_t = 0, value_parser = limits::parse_threads)]
+    pub threads: usize,
+    /// Number type of the render (default: f32; fixed for an --image that stores Q16.16)
+    #[arg(long, value_enum)]
+    pub precision: Option<PrecisionArg>,
+    /// No progress bar or stats line
+    #[arg(short, long)]
+    pub quiet: bool,
+    /// Render on a simulated LINKS-1 cluster of this many node computers (1..=256)
+    #[arg(long)]
+    pub nodes: Option<u16>,
+    #[command(flatten)]
+    pub cluster: ClusterArgs,
+}
+
+/// The options of a cluster render (`--nodes`).
+#[derive(clap::Args)]
+pub struct ClusterArgs {
+    /// SPI buses from the root computer (cluster only)
+    #[arg(long, default_value_t = 1)]
+    pub buses: u16,
+    /// SPI bit rate in MHz, 0.001..=10000 (cluster only)
+    #[arg(long, default_value_t = 42.0, value_parser = limits::parse_bit_rate_mhz)]
+    pub bit_rate_mhz: f64,
+    /// Sub-screen policy (cluster only): decreasing, static, fixed=N, fixed-rect=N
+    #[arg(long, default_value = "decreasing")]
+    pub policy: String,
+    /// DM time per frame in ms: frame f's scene exists at (f+1) x this (cluster only)
+    #[arg(long, default_value_t = 0.0)]
+    pub dm_ms: f64,
+    #[command(flatten)]
+    pub faults: cli_cluster::FaultArgs,
+    /// How long the RC waits for a silent node holding work before re-issuing it, in ms
+    #[arg(long, default_value_t = 500.0)]
+    pub timeout_ms: f64,
+    /// A single-buffered RC: it composes, clocks and decodes one transfer at a time
+    /// (default: double-buffered, the bus busy while the RC works; cluster only)
+    #[arg(long)]
+    pub rc_single_buffer: bool,
+}
+
+/// Runs `links render`.
+pub fn run(a: RenderArgs) -> Result<(), CliError> {
+    match a.nodes {
+        Some(nodes) => cluster(&a, nodes),
+        None => host(&a),
+    }
+}
+
+/// `links render --nodes N`: the frame of a simulated cluster.
+fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
+    let c = &a.cluster;
+    if !matches!(a.precision, None | Some(PrecisionArg::F32)) {
+        return Err(CliError::Usage(
+            "the cluster's nodes compute in f32: drop --precision or --nodes".into(),
+        ));
+    }
+    if !(1..=256).contains(&nodes) {
+        return Err(CliError::Usage(format!(
+            "--nodes {nodes}: a cluster has 1 to 256 node computers"
+        )));
+    }
+    let (image, _) = image_to_render(&a.scene, a.image.as_deref(), a.precision, true)?;
+    let mut cfg = cli_cluster::config(
+        nodes,
+        c.buses,
+        c.bit_rate_mhz,
+        cli_cluster::parse_policy(&c.policy)?,
+    );
+    if !(c.dm_ms.is_finite() && c.dm_ms >= 0.0 && c.timeout_ms.is_finite() && c.timeout_ms > 0.0) {
+        return Err(CliError::Usage(
+            "--dm-ms must be >= 0 and --timeout-ms > 0".into(),
+        ));
+    }
+    cfg.dm_s_per_frame = c.dm_ms * 1e-3;
+    cfg.node_timeout_s = c.timeout_ms * 1e-3;
+    cfg.rc_double_buffer = !c.rc_single_buffer;
+    cli_cluster::apply_faults(&mut cfg, &c.faults)?;
+    let start = std::time::Instant::now();
+    let r = cli_cluster::render(&image, &cfg)?;
+    let rep = &r.report;
+    let frame = rep
+        .frames
+        .first()
+        .ok_or_else(|| CliError::Failed("the simulation kept no frame".into()))?;
+    let png = encode_png(rep.width, rep.height, frame).map_err(CliError::failed)?;
+    write_file(&a.output, png)?;
+    if !a.quiet {
+        eprintln!(
+            "{}: {}x{} on {nodes} simulated nodes ({} bus(es) at {} MHz, {}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered), {} bytes moved{} | host {:.2} s",
+            a.output.display(),
+            rep.width,
+            rep.height,
+            c.buses,
+            c.bit_rate_mhz,
+            c.policy,
+            rep.time_s,
+            r.speedup,
+            r.one_node_s,
+            100.0 * rep.bus_utilisation(),
+            100.0 * rep.rc_busy_s / rep.time_s,
+            if c.rc_single_buffer { "single" } else { "double" },
+            rep.bytes_moved(),
+            cli_cluster::fault_summary(rep),
+            start.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+/// The progress bar of a host render of `rows` rows (hidden when quiet or not on a terminal).
+fn progress_bar(quiet: bool, rows: u32) -> Result<ProgressBar, CliError> {
+    if quiet || !std::io::stderr().is_terminal() {
+        return Ok(ProgressBar::hidden());
+    }
+    let b = ProgressBar::with_draw_target(Some(rows as u64), ProgressDrawTarget::stderr());
+    b.set_style(
+        ProgressStyle::with_template("{spinner} {bar:40} {pos}/{len} rows, {elapsed} (eta {eta})")
+            .map_err(CliError::failed)?,
+    );
+    Ok(b)
+}
+
+/// `links render` on the host's threads.
+fn host(a: &RenderArgs) -> Result<(), CliError> {
+    let (image, precision) = image_to_render(&a.scene, a.image.as_deref(), a.precision, false)?;
+    let view = SceneView::new(&image).map_err(CliError::failed)?;
+    let bar = progress_bar(a.quiet, view.camera::<f32>().height)?;
+    let frame =
+        render_frame(&image, precision, a.threads, &|| bar.inc(1)).map_err(CliError::failed)?;
+    bar.finish_and_clear();
+    let png = encode_png(frame.width, frame.height, &frame.rgb).map_err(CliError::failed)?;
+    write_file(&a.output, png)?;
+    if !a.quiet {
+        let s = &frame.stats;
+        let secs = frame.elapsed.as_secs_f64();
+        eprintln!(
+            "{}: {}x{} {} in {:.3} s, {:.3} Mrays/s | rays: primary {}, shadow {}, reflect {}, refract {}, straight {} | tests: box {}, triangle {}, ellipsoid {}, box-shape {}, blob {} (field evals {}) | shadings {} | clip compares {} | scene image {} B",
+            a.output.display(),
+            frame.width,
+            frame.height,
+            precision.name(),
+            secs,
+            s.rays() as f64 / secs.max(1e-9) / 1e6,
+            s.primary_rays,
+            s.shadow_rays,
+            s.reflect_rays,
+            s.refract_rays,
+            s.straight_rays,
+            s.box_tests,
+            s.triangle_tests,
+            s.ellipsoid_tests,
+            s.box_shape_tests,
+            s.blob_tests,
+            s.blob_field_evals,
+            s.shadings,
+            s.clip_compares,
+            image.len()
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,134 @@
+//! `links sweep`: the measurement sweeps (techniques ablation, cluster node count, faults,
+//! sub-screen divisions).
+
+use std::path::{Path, PathBuf};
+
+use clap::Subcommand;
+
+use super::args::SceneArgs;
+use super::error::write_file;
+use super::CliError;
+use crate::ablation::{run_ablation, AblationConfig};
+use crate::cli_cluster;
+use crate::limits;
+use crate::scene_file::load_scene;
+
+/// The sweeps `links sweep` runs.
+#[derive(Subcommand)]
+pub enum SweepCmd {
+    /// LINKS-1 Table 5.2 analog: modelled node time of each speed technique
+    Ablation {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        #[arg(long, default_value_t = 512, value_parser = limits::parse_image_side)]
+        width: u32,
+        #[arg(long, default_value_t = 480, value_parser = limits::parse_image_side)]
+        height: u32,
+        /// Node computers the sub-screens are shared among (1..=256)
+        #[arg(long, default_value_t = 16, value_parser = limits::parse_nodes)]
+        nodes: u32,
+        /// Sub-screen counts (multiples of the height), one table row each
+        #[arg(long, value_delimiter = ',', default_value = "2400,480")]
+        divisions: Vec<u32>,
+        /// Markdown report to write
+        #[arg(short, long, default_value = "docs/techniques.md")]
+        output: PathBuf,
+    },
+    /// LINKS-1 Fig. 5.1 analog: cluster speed-up against node count (and the bus study)
+    Nodes {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        /// Directory for nodes.csv and nodes.svg
+        #[arg(short, long, default_value = "docs/cluster")]
+        output: PathBuf,
+    },
+    /// Reliability: frame time against the moment a node dies (every policy, with the
+    /// recovery bound), the bit-error rate and the fraction of nodes killed; writes the
+    /// table into docs/reliability.md and the chart beside it
+    Faults {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        #[command(flatten)]
+        opts: cli_cluster::FaultSweepArgs,
+    },
+    /// LINKS-1 Fig. 5.2 analog: frame time against the number of sub-screens at 64 nodes
+    Divisions {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        /// Directory for divisions[-noshadows].csv/svg
+        #[arg(short, long, default_value = "docs/cluster")]
+        output: PathBuf,
+    },
+}
+
+/// Runs `links sweep ...`.
+pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
+    match cmd {
+        SweepCmd::Ablation {
+            scene,
+            width,
+            height,
+            nodes,
+            divisions,
+            output,
+        } => {
+            let cfg = AblationConfig {
+                width,
+                height,
+                nodes,
+                divisions,
+                ..AblationConfig::default()
+            };
+            ablation(&scene, &cfg, &output)
+        }
+        SweepCmd::Nodes { scene, output } => {
+            let image = SceneArgs::plain(&scene).compile()?;
+            let text =
+                cli_cluster::nodes_study(&image, &output, &|s| eprintln!("simulating {s} ..."))?;
+            outln!("{text}");
+            eprintln!("wrote {}/nodes.csv and nodes.svg", output.display());
+            Ok(())
+        }
+        SweepCmd::Faults { scene, opts } => {
+            let text = cli_cluster::faults_study(&scene, &opts, &|s| eprintln!("{s}"))?;
+            outln!("{text}");
+            Ok(())
+        }
+        SweepCmd::Divisions { scene, output } => divisions(&scene, &output),
+    }
+}
+
+/// `links sweep ablation`: the table on stdout, the report into `output`.
+fn ablation(scene: &Path, cfg: &AblationConfig, output: &Path) -> Result<(), CliError> {
+    let desc = load_scene(scene).map_err(|e| CliError::Scene(e.to_string()))?;
+    let report = run_ablation(&desc, cfg, &|step| eprintln!("rendering {step} ..."))
+        .map_err(|e| CliError::Failed(format!("{}: {e}", scene.display())))?;
+    let command = std::env::args().skip(1).collect::<Vec<_>>().join(" ");
+    let doc = crate::ablation_doc::render(&report, &scene.display().to_string(), &command);
+    outln!("{}", report.table());
+    outln!(
+        "refractive / non-refractive (type 1): {:.2}x",
+        report.refractive_ratio()
+    );
+    write_file(output, doc)?;
+    eprintln!("wrote {}", output.display());
+    Ok(())
+}
+
+/// `links sweep divisions`: the study with and without shadows.
+fn divisions(scene: &Path, output: &Path) -> Result<(), CliError> {
+    let image = SceneArgs::plain(scene).compile()?;
+    let no_shadows = SceneArgs {
+        no_shadows: true,
+        ..SceneArgs::plain(scene)
+    }
+    .compile()?;
+    let text = cli_cluster::divisions_study(
+        &[("divisions-noshadows", &no_shadows), ("divisions", &image)],
+        output,
+        &|s| eprintln!("simulating {s} ..."),
+    )?;
+    outln!("{text}");
+    eprintln!("wrote {}/divisions*.csv and .svg", output.display());
+    Ok(())
+}

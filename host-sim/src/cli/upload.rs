@@ -1,0 +1,48 @@
+//! `links upload`: compile a scene and send its SceneImage to a real RC over a serial port.
+
+use super::args::SceneArgs;
+use super::CliError;
+use crate::cli_serial;
+
+/// The options of `links upload`.
+#[derive(clap::Args)]
+pub struct UploadArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Serial port of the RC (e.g. /dev/ttyACM0)
+    #[arg(long)]
+    pub port: String,
+    /// Baud rate (a USB CDC port ignores it)
+    #[arg(long, default_value_t = crate::serial_host::DEFAULT_BAUD)]
+    pub baud: u32,
+    /// How long to wait for the RC's answer to one message before sending it again, in ms
+    #[arg(long, default_value_t = 1000)]
+    pub timeout_ms: u64,
+    /// Give up after this many seconds in all (default: from the scene size and baud rate; 0: never)
+    #[arg(long)]
+    pub deadline_s: Option<u64>,
+    /// Then ask the RC to render this many frames
+    #[arg(long)]
+    pub render: Option<u16>,
+    /// No progress bar or summary line
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+/// Runs `links upload`.
+pub fn run(a: &UploadArgs) -> Result<(), CliError> {
+    let image = a.scene.compile()?;
+    let line = cli_serial::upload_command(
+        &image,
+        &a.port,
+        a.baud,
+        a.timeout_ms,
+        a.deadline_s,
+        a.render,
+        a.quiet,
+    )?;
+    if !a.quiet {
+        eprintln!("{line}");
+    }
+    Ok(())
+}
