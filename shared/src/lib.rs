@@ -18,7 +18,7 @@
 // The one exception: the FPU square root in `num` (inline asm).
 #![deny(unsafe_code)]
 
-pub mod clip;
+pub mod cluster;
 #[cfg(feature = "std")]
 pub mod desc;
 #[cfg(feature = "std")]
@@ -28,13 +28,11 @@ pub mod fixed;
 pub mod fixed_image;
 pub mod geom;
 pub mod image;
-pub mod link;
-pub mod node;
 pub mod num;
 pub mod render;
-pub mod root;
-pub mod sched;
 pub mod serial;
 pub mod shape;
-pub mod spi;
-pub mod wire;
+pub mod trace;
+
+pub use cluster::{link, node, root, sched, spi, wire};
+pub use trace::clip;

@@ -9,7 +9,6 @@
 //! Colours are linear RGB in [0, 1] per channel, written as 8-bit without gamma (as a 1983
 //! frame memory would hold them).
 
-use crate::clip::RowClip;
 use crate::geom::{offset_ray_origin, Ray, RayInv, Vec3};
 use crate::image::{
     BlobGroupRec, Frame, LightKind, MapTarget, Material, SceneView, ShapeKind, ShapeRef,
@@ -19,6 +18,7 @@ use crate::num::Real;
 use crate::shape::blob::{Ball, BlobGroup, BlobStats};
 use crate::shape::boxshape::BoxHit;
 use crate::shape::ellipsoid::EllipsoidHit;
+use crate::trace::clip::RowClip;
 use core::fmt;
 
 /// Most recursive rays one pixel may spawn (reflection and transmission, two per surface):

@@ -1,0 +1,3 @@
+//! The trace layer: primary-ray clipping, traversal, shading and the per-run entry.
+
+pub mod clip;
