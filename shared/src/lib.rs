@@ -29,10 +29,10 @@ pub mod fixed_image;
 pub mod geom;
 pub mod image;
 pub mod num;
-pub mod render;
 pub mod serial;
 pub mod shape;
 pub mod trace;
 
 pub use cluster::{link, node, root, sched, spi, wire};
+pub use trace as render;
 pub use trace::clip;
