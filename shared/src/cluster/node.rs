@@ -13,14 +13,14 @@
 //! RC's acknowledgements makes the node send them again (go-back-N). Nothing read from the
 //! bus can make it panic: bad frames are counted and otherwise ignored.
 
-use crate::image::SceneView;
-use crate::link::{Incoming, LinkError, NodeLink};
-use crate::num::Real;
-use crate::render::{render_run, RenderError, Rgb8, Stats, Tracer};
-use crate::wire::{
+use super::link::{Incoming, LinkError, NodeLink};
+use super::wire::{
     self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_FRAME, MAX_RUN, MAX_SCENE,
     PIECES_PER_CHUNK, SCENE_CHUNK, SCENE_PIECE,
 };
+use crate::image::SceneView;
+use crate::num::Real;
+use crate::render::{render_run, RenderError, Rgb8, Stats, Tracer};
 use core::fmt;
 use core::marker::PhantomData;
 

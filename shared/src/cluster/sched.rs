@@ -11,8 +11,8 @@
 //! Sub-screens are raster-order runs of pixels ([`Shape::Span`], the paper's scanline runs)
 //! or rectangles ([`Shape::Rect`], a grid as close to square cells as the count allows).
 
-use crate::link::NodeId;
-use crate::wire::Region;
+use super::link::NodeId;
+use super::wire::Region;
 use core::fmt;
 
 /// The form of a sub-screen.

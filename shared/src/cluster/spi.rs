@@ -38,8 +38,8 @@
 //! transfer when both RX banks are full (counted as an overflow; scene chunks lost that way
 //! are repaired by the root logic).
 
-use crate::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
-use crate::wire::MAX_FRAME;
+use super::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
+use super::wire::MAX_FRAME;
 use core::cell::RefCell;
 use core::future::{poll_fn, Future};
 use core::task::{Poll, Waker};

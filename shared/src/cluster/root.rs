@@ -28,10 +28,10 @@
 //! one and twice the longest silence of a node that was rendering, however many false alarms
 //! there are (see docs/reliability.md for the recovery bound).
 
+use super::link::{LinkError, NodeId, RootBus, Transfer};
+use super::sched::{Policy, SchedError, Scheduler};
+use super::wire::{self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_FRAME, SCENE_CHUNK};
 use crate::image::SceneView;
-use crate::link::{LinkError, NodeId, RootBus, Transfer};
-use crate::sched::{Policy, SchedError, Scheduler};
-use crate::wire::{self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_FRAME, SCENE_CHUNK};
 use core::cell::RefCell;
 use core::fmt;
 use core::future::Future;

@@ -1,0 +1,15 @@
+//! The cluster layer: LINKS-1's root computer (RC) and node computers (NCs) on one bus.
+//!
+//! - [`wire`]: every message on the RC-NC bus (postcard, CRC-32, run-length pixels).
+//! - [`link`]: the IMSU link as traits the node and root logic are generic over.
+//! - [`sched`]: sub-screen scheduling (which region a node renders next).
+//! - [`node`]: the NC's whole behaviour (scene, jobs, render, return pixel runs).
+//! - [`root`]: the RC's whole behaviour (broadcast, hand out, collect, detect completion).
+//! - [`spi`]: the link driver's protocol over a real SPI star, generic over the MCU ports.
+
+pub mod link;
+pub mod node;
+pub mod root;
+pub mod sched;
+pub mod spi;
+pub mod wire;

@@ -1,0 +1,127 @@
+//! Completing a hit into a surface point: position with its error bound, geometric and
+//! shading normals, texture coordinates, material index.
+
+use super::tracer::Tracer;
+use super::traversal::{blob_group, Hit, HitDetail};
+use crate::geom::{Ray, Vec3};
+use crate::image::{ShapeRef, NONE};
+use crate::num::Real;
+
+/// A finished hit: where, how accurately, which way the surface faces, what it is made of.
+#[derive(Clone, Copy, Debug)]
+pub struct Surface<T> {
+    pub p: Vec3<T>,
+    pub p_error: Vec3<T>,
+    /// Geometric normal, unit, pointing out of the object.
+    pub ng: Vec3<T>,
+    /// Shading normal (interpolated on smooth triangles), unit, same side as `ng`.
+    pub ns: Vec3<T>,
+    pub uv: [T; 2],
+    pub material: u32,
+    pub shape: ShapeRef,
+}
+
+impl<T: Real> Tracer<'_, T> {
+    /// Complete a hit: position with error bound, normals, texture coordinates.
+    pub(super) fn surface(&self, ray: &Ray<T>, hit: &Hit<T>) -> Surface<T> {
+        let s = &self.scene;
+        let shape = hit.shape;
+        match hit.detail {
+            HitDetail::Triangle(b) => {
+                let rec = s.triangle::<T>(shape.index);
+                let (p, p_error) = rec.tri.point(b);
+                let mut ng = rec.tri.face_normal().normalize();
+                let ns = if rec.normals != NONE {
+                    let n = s.normals::<T>(rec.normals);
+                    let ns = (n[0] * b[0] + n[1] * b[1] + n[2] * b[2]).normalize();
+                    // Vertex normals say which side is outside; make ng agree.
+                    if ns.dot(ng) < T::ZERO {
+                        ng = -ng;
+                    }
+                    ns
+                } else {
+                    ng
+                };
+                let uv = if rec.uvs != NONE {
+                    let t = s.uvs::<T>(rec.uvs);
+                    [
+                        t[0][0] * b[0] + t[1][0] * b[1] + t[2][0] * b[2],
+                        t[0][1] * b[0] + t[1][1] * b[1] + t[2][1] * b[2],
+                    ]
+                } else {
+                    [b[1], b[2]]
+                };
+                Surface {
+                    p,
+                    p_error,
+                    ng,
+                    ns,
+                    uv,
+                    material: rec.material,
+                    shape,
+                }
+            }
+            HitDetail::Ellipsoid(h) => {
+                let rec = s.ellipsoid::<T>(shape.index);
+                let ls = rec.shape.surface(ray, &h, s.storage_epsilon());
+                let q = ls.local;
+                // Spherical mapping in the unit frame (v = 1 at the +Y pole, the image's top
+                // row); the cap maps planar.
+                let uv = if h.part == crate::shape::ellipsoid::EllipsoidPart::Cap {
+                    [(q.x + T::ONE) * T::HALF, (q.z + T::ONE) * T::HALF]
+                } else {
+                    let two_pi = T::TWO * T::PI;
+                    [
+                        T::HALF + q.z.atan2(q.x) / two_pi,
+                        T::ONE - q.y.max(-T::ONE).min(T::ONE).acos() / T::PI,
+                    ]
+                };
+                Surface {
+                    p: ls.p,
+                    p_error: ls.p_error,
+                    ng: ls.n,
+                    ns: ls.n,
+                    uv,
+                    material: rec.material,
+                    shape,
+                }
+            }
+            HitDetail::Box(h) => {
+                let rec = s.boxshape::<T>(shape.index);
+                let ls = rec.shape.surface(ray, &h, s.storage_epsilon());
+                let q = ls.local;
+                // Planar mapping on each face from the two other local axes.
+                let (a, b) = match h.face & 3 {
+                    0 => (q.z, q.y),
+                    1 => (q.x, q.z),
+                    _ => (q.x, q.y),
+                };
+                let uv = [(a + T::ONE) * T::HALF, (b + T::ONE) * T::HALF];
+                Surface {
+                    p: ls.p,
+                    p_error: ls.p_error,
+                    ng: ls.n,
+                    ns: ls.n,
+                    uv,
+                    material: rec.material,
+                    shape,
+                }
+            }
+            HitDetail::Blob { t_error } => {
+                let (g, group) = blob_group(*s, shape.index);
+                let p = ray.at(hit.t);
+                let n = (-group.gradient(p)).normalize();
+                let p_error = ray.dir.abs() * t_error + p.abs() * T::err_gamma(4);
+                Surface {
+                    p,
+                    p_error,
+                    ng: n,
+                    ns: n,
+                    uv: [T::ZERO, T::ZERO],
+                    material: g.material,
+                    shape,
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,173 @@
+//! The tracer: LINKS-1's line-of-sight search with eq. 2.1 shading and eq. 2.2 recursion.
+//!
+//! The node's unit of work is one run of pixels on one scanline ([`render_run`]). Everything
+//! is generic over the number type and reads the SceneImage in place. Recursion depth is
+//! bounded by the image's `max_depth` (validated <= [`crate::image::MAX_DEPTH_LIMIT`]); at the cut-off a
+//! transmitted ray continues straight through (non-refractive transparency, LINKS-1 4.5)
+//! in a loop, so deep nesting costs no stack.
+//!
+//! Colours are linear RGB in [0, 1] per channel, written as 8-bit without gamma (as a 1983
+//! frame memory would hold them).
+
+use super::stats::Stats;
+use super::surface::Surface;
+use super::techniques::Techniques;
+use crate::geom::{Ray, Vec3};
+use crate::image::{Camera, SceneView};
+use crate::num::Real;
+use crate::trace::clip::RowClip;
+use core::fmt;
+
+/// Most recursive rays one pixel may spawn (reflection and transmission, two per surface):
+/// far above what any sane scene needs (a depth-6 glass scene needs at most 254), it bounds
+/// the work a hostile image can ask for per pixel.
+pub const SECONDARY_RAYS_PER_PIXEL: u32 = 4096;
+
+/// Most surfaces a shadow ray or a straight-through ray may cross before it gives up (the
+/// light is then treated as blocked, the straight ray as ending in the background).
+pub const MAX_CROSSINGS: u32 = 64;
+
+/// An 8-bit RGB pixel.
+pub type Rgb8 = [u8; 3];
+
+/// Why a run could not be rendered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RenderError {
+    /// The run does not lie inside the frame.
+    RunOutsideFrame { x: u32, y: u32, len: u32 },
+}
+
+impl fmt::Display for RenderError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            RenderError::RunOutsideFrame { x, y, len } => {
+                write!(f, "pixel run x={x} y={y} len={len} lies outside the frame")
+            }
+        }
+    }
+}
+
+impl core::error::Error for RenderError {}
+
+/// The tracer for one scene and number type.
+pub struct Tracer<'a, T: Real> {
+    pub(super) scene: SceneView<'a>,
+    pub(super) camera: Camera<T>,
+    pub(super) techniques: Techniques,
+    pub(super) clip: RowClip,
+    /// Recursive (reflected, refracted, straight) rays the current pixel may still spawn.
+    pub(super) secondary_left: u32,
+    pub stats: Stats,
+}
+
+impl<'a, T: Real> Tracer<'a, T> {
+    /// A tracer using every technique.
+    pub fn new(scene: SceneView<'a>) -> Self {
+        Self::with_techniques(scene, Techniques::ALL)
+    }
+
+    pub fn with_techniques(scene: SceneView<'a>, techniques: Techniques) -> Self {
+        let camera = scene.camera::<T>();
+        Self {
+            scene,
+            camera,
+            techniques,
+            clip: RowClip::new(),
+            secondary_left: SECONDARY_RAYS_PER_PIXEL,
+            stats: Stats::default(),
+        }
+    }
+
+    pub fn techniques(&self) -> Techniques {
+        self.techniques
+    }
+
+    /// Prepare a run on row `y` (Y clipping). Pixels of the run must then be rendered left
+    /// to right with [`Self::pixel`]; any other call order falls back to the plain traversal.
+    pub fn begin_run(&mut self, y: u32) {
+        self.clip.clear();
+        if self.techniques.y_clip && self.techniques.bounding_boxes {
+            let row = y.min(u16::MAX as u32) as u16;
+            if !self
+                .clip
+                .y_clip(&self.scene, row, &mut self.stats.clip_compares)
+                && self.scene.has_rects()
+            {
+                self.stats.clip_overflows += 1;
+            }
+        }
+    }
+
+    pub fn camera(&self) -> &Camera<T> {
+        &self.camera
+    }
+
+    /// The primary ray through the centre of pixel (x, y): from the eye at the origin.
+    pub fn primary_ray(&self, x: u32, y: u32) -> Ray<T> {
+        let f = &self.camera;
+        let half = T::HALF;
+        let dx = f.x0 + (T::from_i32(x as i32) + half) * f.dx;
+        let dy = f.y0 - (T::from_i32(y as i32) + half) * f.dy;
+        Ray::new(Vec3::zero(), Vec3::new(dx, dy, f.dz).normalize())
+    }
+
+    /// Colour of the primary ray through pixel (x, y), linear RGB.
+    pub fn pixel(&mut self, x: u32, y: u32) -> Vec3<T> {
+        self.stats.primary_rays += 1;
+        self.secondary_left = SECONDARY_RAYS_PER_PIXEL;
+        let ray = self.primary_ray(x, y);
+        let hit = if self.clip.row() == Some(y.min(u16::MAX as u32) as u16) {
+            self.closest_hit_clipped(&ray, x)
+        } else {
+            self.closest_hit(&ray, T::MAX)
+        };
+        self.shade_hit(&ray, hit, 0)
+    }
+
+    /// Eq. 2.2: local shading plus reflected and transmitted light, recursively.
+    pub fn trace(&mut self, ray: &Ray<T>, depth: u32) -> Vec3<T> {
+        let hit = self.closest_hit(ray, T::MAX);
+        self.shade_hit(ray, hit, depth)
+    }
+
+    /// The nearest surface a ray hits, for tests and tools.
+    pub fn first_surface(&mut self, ray: &Ray<T>) -> Option<(T, Surface<T>)> {
+        let hit = self.closest_hit(ray, T::MAX)?;
+        Some((hit.t, self.surface(ray, &hit)))
+    }
+}
+
+/// Quantise a linear colour to 8 bits (clamped, rounded to nearest).
+pub fn to_rgb8<T: Real>(c: Vec3<T>) -> Rgb8 {
+    let q = |v: T| {
+        let x = v.clamp01().to_f32() * 255.0 + 0.5;
+        if x >= 255.0 {
+            255
+        } else if x > 0.0 {
+            x as u8
+        } else {
+            0
+        }
+    };
+    [q(c.x), q(c.y), q(c.z)]
+}
+
+/// Render `out.len()` pixels of scanline `y` starting at column `x`: the node's unit of work.
+pub fn render_run<T: Real>(
+    tracer: &mut Tracer<'_, T>,
+    y: u32,
+    x: u32,
+    out: &mut [Rgb8],
+) -> Result<(), RenderError> {
+    let f = tracer.camera();
+    let len = out.len() as u32;
+    if y >= f.height || x.checked_add(len).is_none_or(|end| end > f.width) {
+        return Err(RenderError::RunOutsideFrame { x, y, len });
+    }
+    tracer.begin_run(y);
+    for (i, px) in out.iter_mut().enumerate() {
+        *px = to_rgb8(tracer.pixel(x + i as u32, y));
+    }
+    Ok(())
+}

@@ -1,0 +1,340 @@
+//! Traversal: the nearest hit along a ray (the node tree nearest-first behind its boxes,
+//! the Y/X-clipped leaves for primary rays, or every shape for the plain algorithm) and the
+//! any-opaque test of shadow rays. It returns hits; completing and shading them is
+//! [`super::surface`]'s and [`super::shading`]'s business.
+
+use super::tracer::Tracer;
+use crate::geom::{Ray, RayInv};
+use crate::image::{BlobGroupRec, MapTarget, SceneView, ShapeKind, ShapeRef, NONE};
+use crate::num::Real;
+use crate::shape::blob::{Ball, BlobGroup, BlobStats};
+use crate::shape::boxshape::BoxHit;
+use crate::shape::ellipsoid::EllipsoidHit;
+
+/// Which shape a ray hit, with what each kind needs to finish the hit.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum HitDetail<T> {
+    Triangle([T; 3]),
+    Ellipsoid(EllipsoidHit<T>),
+    Box(BoxHit<T>),
+    Blob { t_error: T },
+}
+
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Hit<T> {
+    pub(super) t: T,
+    pub(super) shape: ShapeRef,
+    pub(super) detail: HitDetail<T>,
+}
+
+/// Depth of the closest-hit traversal stack (a node and its box entry distance per entry).
+pub(super) const TRAVERSAL_STACK: usize = 48;
+/// Most children of one node visited nearest-first; further hit children are walked in place.
+pub(super) const ORDERED_FANOUT: usize = 8;
+
+/// The nearest hit so far. Equal distances go to the lower node index, so the answer does
+/// not depend on the order shapes are tested in (ordered traversal, clipping, plain).
+pub(super) struct Nearest<T> {
+    pub(super) hit: Option<Hit<T>>,
+    pub(super) node: u32,
+    pub(super) t_max: T,
+}
+
+impl<T: Real> Nearest<T> {
+    pub(super) fn new(t_max: T) -> Self {
+        Self {
+            hit: None,
+            node: u32::MAX,
+            t_max,
+        }
+    }
+    /// Upper bound for tests still worth making: a hit at the current distance may still
+    /// win the tie, so a little beyond it; the exact winner is decided in `offer`.
+    #[inline]
+    pub(super) fn limit(&self) -> T {
+        match &self.hit {
+            // Relative slack: a shape lying in its box's face (a flat box) can compute its
+            // hit a few ulps before the box's computed entry, and must still be tested.
+            Some(h) => h.t * (T::ONE + T::err_gamma(16)),
+            None => self.t_max,
+        }
+    }
+    /// Whether a box entered at `t` lies wholly behind the nearest hit (with the same slack).
+    #[inline]
+    pub(super) fn beyond(&self, t: T) -> bool {
+        self.hit
+            .as_ref()
+            .is_some_and(|h| t * (T::ONE - T::err_gamma(16)) > h.t)
+    }
+    #[inline]
+    pub(super) fn offer(&mut self, h: Hit<T>, node: u32) {
+        // A non-finite distance (from non-finite geometry) never wins: it would compare
+        // false against everything and make the answer depend on test order.
+        if !h.t.is_finite() {
+            return;
+        }
+        let better = match &self.hit {
+            None => true,
+            Some(b) => h.t < b.t || (h.t == b.t && node < self.node),
+        };
+        if better {
+            self.hit = Some(h);
+            self.node = node;
+        }
+    }
+}
+
+impl<T: Real> Tracer<'_, T> {
+    /// The primary ray's nearest hit among the Y-clipped leaves (and, with X clipping, only
+    /// those whose rectangle contains column `x`), each behind its own box test.
+    pub(super) fn closest_hit_clipped(&mut self, ray: &Ray<T>, x: u32) -> Option<Hit<T>> {
+        let inv = RayInv::new(ray.dir);
+        let mut near = Nearest::new(T::MAX);
+        let col = x.min(u16::MAX as u32) as u16;
+        let swept = self.techniques.x_clip && self.clip.advance(col, &mut self.stats.clip_compares);
+        let n = if swept {
+            self.clip.active_len()
+        } else {
+            self.clip.leaves().len()
+        };
+        for k in 0..n {
+            let leaf = if swept {
+                self.clip.active_leaf(k)
+            } else {
+                self.clip.leaves()[k]
+            };
+            let node = self.scene.node::<T>(leaf);
+            self.stats.box_tests += 1;
+            if !node.bounds.hit(ray, &inv, near.limit()) {
+                continue;
+            }
+            if let Some(shape) = node.shape {
+                self.offer(&mut near, shape, leaf, ray);
+            }
+        }
+        near.hit
+    }
+
+    /// Nearest shape along `ray` in (0, t_max): walk the node tree nearest-first, skipping
+    /// the subtree of every box the ray misses (LINKS-1 4.2) or enters beyond the nearest
+    /// hit so far; a small fixed stack holds the children still to visit.
+    pub(super) fn closest_hit(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
+        if !self.techniques.bounding_boxes {
+            return self.closest_hit_plain(ray, t_max);
+        }
+        let inv = RayInv::new(ray.dir);
+        let mut near = Nearest::new(t_max);
+        let mut stack = [(0u32, T::ZERO); TRAVERSAL_STACK];
+        self.stats.box_tests += 1;
+        let t_root = self.scene.node::<T>(0).bounds.entry(ray, &inv, t_max)?;
+        stack[0] = (0, t_root);
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let (i, t_in) = stack[sp];
+            if near.beyond(t_in) {
+                continue;
+            }
+            let node = self.scene.node::<T>(i);
+            if let Some(shape) = node.shape {
+                self.offer(&mut near, shape, i, ray);
+                continue;
+            }
+            // Test the children's boxes; visit the nearest first so later ones can be pruned.
+            let mut kids = [(0u32, T::ZERO); ORDERED_FANOUT];
+            let mut nk = 0;
+            let mut c = i + 1;
+            while c < node.skip {
+                let child = self.scene.node::<T>(c);
+                self.stats.box_tests += 1;
+                if let Some(t) = child.bounds.entry(ray, &inv, near.limit()) {
+                    if nk < ORDERED_FANOUT && sp + nk < TRAVERSAL_STACK {
+                        kids[nk] = (c, t);
+                        nk += 1;
+                    } else {
+                        // No room to order it: walk its subtree in place.
+                        self.walk_hit_subtree(c, child.shape, child.skip, ray, &inv, &mut near);
+                    }
+                }
+                c = child.skip;
+            }
+            // Push farthest first (insertion sort of at most ORDERED_FANOUT entries).
+            for k in 1..nk {
+                let mut j = k;
+                while j > 0 && kids[j - 1].1 < kids[j].1 {
+                    kids.swap(j - 1, j);
+                    j -= 1;
+                }
+            }
+            for kid in &kids[..nk] {
+                stack[sp] = *kid;
+                sp += 1;
+            }
+        }
+        near.hit
+    }
+
+    /// Depth-first walk (in node order) of a subtree whose root box the ray already hit.
+    pub(super) fn walk_hit_subtree(
+        &mut self,
+        root: u32,
+        root_shape: Option<ShapeRef>,
+        end: u32,
+        ray: &Ray<T>,
+        inv: &RayInv<T>,
+        near: &mut Nearest<T>,
+    ) {
+        if let Some(shape) = root_shape {
+            self.offer(near, shape, root, ray);
+            return;
+        }
+        let mut i = root + 1;
+        while i < end {
+            let node = self.scene.node::<T>(i);
+            self.stats.box_tests += 1;
+            if !node.bounds.hit(ray, inv, near.limit()) {
+                i = node.skip;
+                continue;
+            }
+            if let Some(shape) = node.shape {
+                self.offer(near, shape, i, ray);
+            }
+            i += 1;
+        }
+    }
+
+    /// Test a shape and keep it if it is the nearest so far.
+    #[inline]
+    pub(super) fn offer(
+        &mut self,
+        near: &mut Nearest<T>,
+        shape: ShapeRef,
+        node: u32,
+        ray: &Ray<T>,
+    ) {
+        if let Some(h) = self.intersect_shape(shape, ray, near.limit()) {
+            near.offer(h, node);
+        }
+    }
+
+    /// The plain algorithm: every shape, no boxes (the paper's type 4).
+    pub(super) fn closest_hit_plain(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
+        let mut near = Nearest::new(t_max);
+        for i in 0..self.scene.node_count() {
+            if let Some(shape) = self.scene.node::<T>(i).shape {
+                self.offer(&mut near, shape, i, ray);
+            }
+        }
+        near.hit
+    }
+
+    /// Whether any opaque surface lies along `ray` in (0, t_max) (stops at the first), and
+    /// whether a transparent one was seen on the way.
+    pub(super) fn any_opaque(&mut self, ray: &Ray<T>, t_max: T) -> (bool, bool) {
+        let inv = RayInv::new(ray.dir);
+        let n = self.scene.node_count();
+        let mut transparent = false;
+        let mut i = 0;
+        while i < n {
+            let node = self.scene.node::<T>(i);
+            if self.techniques.bounding_boxes {
+                self.stats.box_tests += 1;
+                if !node.bounds.hit(ray, &inv, t_max) {
+                    i = node.skip;
+                    continue;
+                }
+            }
+            if let Some(shape) = node.shape {
+                if let Some(h) = self.intersect_shape(shape, ray, t_max) {
+                    let m = self.scene.material::<T>(self.material_of(&h));
+                    let mapped = m.texture != NONE && m.target == MapTarget::Transmit;
+                    if m.transmit.max_component() <= T::ZERO && !mapped {
+                        return (true, transparent);
+                    }
+                    transparent = true;
+                }
+            }
+            i += 1;
+        }
+        (false, transparent)
+    }
+
+    pub(super) fn material_of(&self, hit: &Hit<T>) -> u32 {
+        let s = &self.scene;
+        match hit.shape.kind {
+            ShapeKind::Triangle => s.triangle::<T>(hit.shape.index).material,
+            ShapeKind::Ellipsoid => s.ellipsoid::<T>(hit.shape.index).material,
+            ShapeKind::Box => s.boxshape::<T>(hit.shape.index).material,
+            ShapeKind::Blob => s.blob_group::<T>(hit.shape.index).material,
+        }
+    }
+
+    pub(super) fn intersect_shape(
+        &mut self,
+        shape: ShapeRef,
+        ray: &Ray<T>,
+        t_max: T,
+    ) -> Option<Hit<T>> {
+        let s = &self.scene;
+        match shape.kind {
+            ShapeKind::Triangle => {
+                self.stats.triangle_tests += 1;
+                let rec = s.triangle::<T>(shape.index);
+                rec.tri.intersect(ray, t_max).map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Triangle(h.b),
+                })
+            }
+            ShapeKind::Ellipsoid => {
+                self.stats.ellipsoid_tests += 1;
+                let rec = s.ellipsoid::<T>(shape.index);
+                rec.shape.intersect(ray, t_max).map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Ellipsoid(h),
+                })
+            }
+            ShapeKind::Box => {
+                self.stats.box_shape_tests += 1;
+                let rec = s.boxshape::<T>(shape.index);
+                rec.shape.intersect(ray, t_max).map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Box(h),
+                })
+            }
+            ShapeKind::Blob => {
+                self.stats.blob_tests += 1;
+                let (_, group) = blob_group(*s, shape.index);
+                let mut bs = BlobStats::default();
+                let h = group.intersect(ray, T::ZERO, t_max, &mut bs);
+                self.stats.blob_field_evals += bs.field_evals as u64;
+                h.map(|h| Hit {
+                    t: h.t,
+                    shape,
+                    detail: HitDetail::Blob { t_error: h.t_error },
+                })
+            }
+        }
+    }
+}
+
+/// A density-sphere group record and the group itself, its balls read in place.
+pub(super) fn blob_group<T: Real>(
+    scene: SceneView<'_>,
+    index: u32,
+) -> (
+    BlobGroupRec<T>,
+    BlobGroup<T, impl Fn(usize) -> Ball<T> + '_>,
+) {
+    let g = scene.blob_group::<T>(index);
+    let first = g.first;
+    let group = BlobGroup {
+        count: g.count as usize,
+        ball: move |k: usize| scene.ball::<T>(first + k as u32),
+        kernel: g.kernel,
+        threshold: g.threshold,
+    };
+    (g, group)
+}
