@@ -2,11 +2,9 @@
 //!
 //! The behaviour is `links_core::root::run_bus` over `links_core::spi::MasterLink` (the link
 //! protocol, tested on the host against an emulated bus); the PC side speaks
-//! `links_core::serial` over USB CDC. This crate adds the board: the memory plan and pin map,
-//! the PC conversation ([`session`]), a render request ([`render`]), the readback sink that turns accepted pixel runs into
-//! serial frames ([`readback`]), the
-//! bus wrapper that holds exchanges back while the USB queue is full ([`throttle`]) — all
-//! host-tested — and, for the MCU, the embassy-stm32 port ([`port`]).
+//! `links_core::serial` over USB CDC, whose RC session (upload, render requests, readback,
+//! throttle) is board-independent and lives there. This crate adds the board: the memory
+//! plan and pin map and, for the MCU, the embassy-stm32 port ([`port`]).
 #![cfg_attr(target_os = "none", no_std)]
 
 #[cfg(target_os = "none")]
@@ -57,10 +55,9 @@ pub mod pins {
     pub const ACCEL_CS: &str = "PE3";
 }
 
-pub mod readback;
-pub mod render;
-pub mod session;
-pub mod throttle;
+// The PC conversation, render requests, readback and throttle are board-independent: they
+// live in `links_core::serial` (host-tested there and driven by the host's simulated RC).
+pub use links_core::serial::{readback, render, session, throttle};
 
 #[cfg(test)]
 mod tests {

@@ -22,6 +22,13 @@
 //! - [`FrameStreamer`]: the RC side of readback: turns rows of pixels into messages and
 //!   keeps the frame's CRC ([`FrameCrc`]) in whatever order the rows come.
 //!
+//! The RC's half of the conversation, generic over the board (bus, clock, USB queue) so the
+//! firmware and the host tests run the same code:
+//! - [`session`]: the PC's bytes in, upload replies out, render / resend / ack requests.
+//! - [`render`]: one render request over the cluster bus, and the answer to a `Resend`.
+//! - [`readback`]: the pixel sink that turns accepted bus runs into serial frames.
+//! - [`throttle`]: the bus wrapper that holds exchanges back while the byte queue is full.
+//!
 //! Nothing here panics or allocates on any input; every failure is a [`SerialError`].
 
 mod codec;
@@ -29,6 +36,11 @@ mod frame_crc;
 mod protocol;
 mod streamer;
 mod upload;
+
+pub mod readback;
+pub mod render;
+pub mod session;
+pub mod throttle;
 
 pub use codec::{decode_body, encode_packet, Decoder, Encoder};
 pub use frame_crc::FrameCrc;

@@ -3,21 +3,21 @@
 //! as they arrive, and the `Resend` answer (the RC renders the span itself: it keeps no frame
 //! memory). Generic over the bus, clock and queue, so the host tests run exactly this.
 
-use crate::readback::{ByteQueue, Readback, RUN_RESERVE};
-use crate::throttle::{Room, Throttle};
+use super::readback::{ByteQueue, Readback, RUN_RESERVE};
+use super::throttle::{Room, Throttle};
+use crate::image::SceneView;
+use crate::link::RootBus;
+use crate::render::{render_run, Rgb8, Tracer};
+use crate::root::{run_bus, RootClock, RootConfig, RootError, RootReport, RootState};
+use crate::sched::Policy;
+use crate::serial::{Encoder, FrameStreamer, RcError, SerialError, ToPc, MAX_RUN, MAX_TO_PC};
 use core::cell::RefCell;
 use core::future::poll_fn;
 use core::task::Poll;
-use links_core::image::SceneView;
-use links_core::link::RootBus;
-use links_core::render::{render_run, Rgb8, Tracer};
-use links_core::root::{run_bus, RootClock, RootConfig, RootError, RootReport, RootState};
-use links_core::sched::Policy;
-use links_core::serial::{Encoder, FrameStreamer, RcError, SerialError, ToPc, MAX_RUN, MAX_TO_PC};
 
 /// Why a render request did not produce its frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RenderFail {
     /// The uploaded bytes are no usable SceneImage (or exceed the 1024 x 1024 frame); the PC
     /// was sent `Error { NoScene }`.

@@ -1,10 +1,10 @@
-//! Frame readback: accepted pixel runs become `links_core::serial` frames in a byte queue
+//! Frame readback: accepted pixel runs become `crate::serial` frames in a byte queue
 //! (USB CDC on the board). Runs of the cluster bus (up to 512 pixels) are cut into serial
 //! runs (up to 256); the frame CRC is kept in whatever order runs arrive.
 
-use links_core::root::PixelSink;
-use links_core::serial::{Encoder, FrameStreamer, SerialError, MAX_RUN, MAX_TO_PC};
-use links_core::wire;
+use crate::root::PixelSink;
+use crate::serial::{Encoder, FrameStreamer, SerialError, MAX_RUN, MAX_TO_PC};
+use crate::wire;
 
 /// Where encoded frames go.
 pub trait ByteQueue {
@@ -146,7 +146,7 @@ impl<Q: ByteQueue> PixelSink for Readback<Q> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use links_core::serial::{pixel_count, pixels_into, Decoder, Packet, ToPc, MAX_TO_PC};
+    use crate::serial::{pixel_count, pixels_into, Decoder, Packet, ToPc, MAX_TO_PC};
 
     struct VecQueue {
         bytes: Vec<u8>,
