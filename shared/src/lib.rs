@@ -37,4 +37,6 @@ pub mod sched;
 pub mod serial;
 pub mod shape;
 pub mod spi;
+#[cfg(any(test, feature = "testkit"))]
+pub mod testkit;
 pub mod wire;

@@ -1,0 +1,3 @@
+//! Test doubles shared by every test: scene builders, SPI fakes.
+
+pub mod spi;
