@@ -108,12 +108,32 @@ pub async fn resend_span<R: Room, Q: ByteQueue>(
     queue: &mut Q,
 ) -> Result<(), RenderFail> {
     let view = SceneView::new(image).map_err(|_| RenderFail::BadScene)?;
+    let render = |y: u16, x: u16, px: &mut [Rgb8]| {
+        let mut tracer = Tracer::<f32>::new(view);
+        render_run(&mut tracer, y as u32, x as u32, px).map_err(|_| RenderFail::BadScene)
+    };
+    resend_runs(fs, start, len, enc, room, queue, render).await
+}
+
+/// [`resend_span`] with the pixels from `pixels(y, x, run)` (which fills `run`): each run of
+/// the span sent again, yielding between runs, then the `FrameEnd` again.
+pub async fn resend_runs<R: Room, Q: ByteQueue, F>(
+    fs: &FrameStreamer,
+    start: u32,
+    len: u32,
+    enc: &mut Encoder,
+    room: &R,
+    queue: &mut Q,
+    mut pixels: F,
+) -> Result<(), RenderFail>
+where
+    F: FnMut(u16, u16, &mut [Rgb8]) -> Result<(), RenderFail>,
+{
     let mut out = [0u8; MAX_TO_PC];
     let mut pix: [Rgb8; MAX_RUN] = [[0; 3]; MAX_RUN];
     for (y, x, n) in fs.span_runs(start, len) {
         let px = &mut pix[..n as usize];
-        let mut tracer = Tracer::<f32>::new(view);
-        render_run(&mut tracer, y as u32, x as u32, px).map_err(|_| RenderFail::BadScene)?;
+        pixels(y, x, px)?;
         let m = fs
             .resend(y, x, px.as_flattened(), enc, &mut out)
             .map_err(RenderFail::Incomplete)?;

@@ -45,6 +45,11 @@ impl<'b> Session<'b> {
         self.out.get(..n).unwrap_or(&[])
     }
 
+    /// Malformed frames received from the PC so far.
+    pub fn bad_frames(&self) -> u32 {
+        self.dec.bad_frames()
+    }
+
     /// The line was reset (USB reconnect): forget a partial frame.
     pub fn line_reset(&mut self) {
         self.dec.reset();
