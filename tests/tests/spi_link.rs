@@ -13,7 +13,7 @@ use links_core::link::{Incoming, LinkError, NodeLink, RootBus, Transfer};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootState};
 use links_core::sched::Policy;
-use links_core::spi::{MasterLink, SlaveShared, ACK, BANK, HEADER, NAK};
+use links_core::spi::{ACK, BANK, HEADER, NAK};
 use links_core::testkit::spi::*;
 use links_core::wire::{self, MAX_FRAME};
 use links_host::frame::{render_frame, Precision};
@@ -31,17 +31,8 @@ fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
         if let Some(dir) = fault {
             bus.borrow_mut().faults.push((1, dir, 5));
         }
-        let mut mb = banks::<3>();
-        let [mtx0, mtx1, mrx] = &mut mb[..] else {
-            unreachable!()
-        };
-        let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-        let mut nb = banks::<5>();
-        let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-        let mut port = FakeSlave {
-            bus: bus.clone(),
-            i: 0,
-        };
+        let mut master = master_link(&bus, 0);
+        let (shared, task, mut port) = slave_link(&bus, 0);
         let up: Vec<u8> = (0..300u32).map(|i| (i * 7) as u8).collect();
         let down: Vec<u8> = (0..40u32).map(|i| (i * 3 + 1) as u8).collect();
         let mut handle = shared.handle();
@@ -119,17 +110,8 @@ fn garbled_headers_never_deliver_and_the_link_recovers() {
     for byte in 0..HEADER {
         let bus = bus(1);
         bus.borrow_mut().faults.push((0, Dir::Up, byte));
-        let mut mb = banks::<3>();
-        let [mtx0, mtx1, mrx] = &mut mb[..] else {
-            unreachable!()
-        };
-        let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-        let mut nb = banks::<5>();
-        let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-        let mut port = FakeSlave {
-            bus: bus.clone(),
-            i: 0,
-        };
+        let mut master = master_link(&bus, 0);
+        let (shared, task, mut port) = slave_link(&bus, 0);
         let mut handle = shared.handle();
         handle.post(b"hello").unwrap();
         let rc = async {
@@ -158,11 +140,7 @@ fn garbled_headers_never_deliver_and_the_link_recovers() {
 #[test]
 fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
     let bus = bus(2);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 10, [mtx0, mtx1], mrx);
+    let mut master = master_link(&bus, 10);
     assert_eq!(master.nodes(), (10, 2));
     assert_eq!(master.ready(), None);
     let mut rx = [0u8; MAX_FRAME];
@@ -186,17 +164,8 @@ fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
 #[test]
 fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
     let bus = bus(3);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave {
-        bus: bus.clone(),
-        i: 1,
-    };
+    let mut master = master_link(&bus, 0);
+    let (shared, task, mut port) = slave_link(&bus, 1);
     // Node 1 is emulated; nodes 0 and 2 are selected but never armed (they miss bytes).
     let rc = async {
         for k in 0..3u8 {
@@ -228,17 +197,8 @@ fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
 #[test]
 fn rc_composes_the_next_frame_while_a_transfer_is_started() {
     let bus = bus(1);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave {
-        bus: bus.clone(),
-        i: 0,
-    };
+    let mut master = master_link(&bus, 0);
+    let (shared, task, mut port) = slave_link(&bus, 0);
     let rc = async {
         let mut rx = [0u8; MAX_FRAME];
         assert_eq!(master.finish(&mut rx).await, Err(LinkError::Aborted));
@@ -284,14 +244,8 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
 fn a_corrupt_broadcast_is_counted_and_dropped() {
     let bus = bus(1);
     bus.borrow_mut().faults.push((0, Dir::Down, HEADER + 3));
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave { bus, i: 0 };
+    let mut master = master_link(&bus, 0);
+    let (shared, task, mut port) = slave_link(&bus, 0);
     let rc = async {
         polls(20).await;
         master.broadcast(&[9u8; 64]).await.unwrap();
@@ -341,9 +295,7 @@ async fn node(
     scene: &mut [u8],
     odd: &mut [u8],
 ) -> (NodeReport, links_core::spi::SlaveCounters) {
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave { bus, i };
+    let (shared, task, mut port) = slave_link(&bus, i);
     let mut report = NodeReport::default();
     let mut handle = shared.handle();
     let (mut clock, mut tracer) = (RealTime, Tracing::<f32>::new());
@@ -383,11 +335,7 @@ fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
         w: w as usize,
         rgb: vec![0; (w * h * 3) as usize],
     });
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut master = master_link(&bus, 0);
     let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
     let [s0, s1, s2, s3] = &mut scene_banks[..] else {
         unreachable!()
@@ -567,11 +515,7 @@ fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
         .expect("renders")
         .rgb;
     let bus = bus(2);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut master = master_link(&bus, 0);
     let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
     let [s0, s1, s2, s3] = &mut scene_banks[..] else {
         unreachable!()

@@ -12,7 +12,11 @@
 //! share one [`Bus`] ([`bus`]). Every future here re-polls itself, so [`run`] drives them
 //! with a waker that does nothing.
 
-use crate::spi::{Armed, Bank, MasterPort, PortError, Select, SlaveBanks, SlavePort, BANK};
+use crate::link::NodeId;
+use crate::spi::{
+    Armed, Bank, MasterLink, MasterPort, PortError, Select, SlaveBanks, SlavePort, SlaveShared,
+    SlaveTask, BANK,
+};
 use core::future::Future;
 use core::pin::pin;
 use core::task::{Context, Poll};
@@ -332,4 +336,26 @@ pub fn slave_banks(v: &mut [Bank]) -> SlaveBanks<'_> {
         rx: [c, d],
         scratch: e,
     }
+}
+
+/// The RC's master link over `bus` (node ids from `first`), on banks of its own (leaked: a
+/// test's link lives as long as the test).
+pub fn master_link(bus: &SharedBus, first: NodeId) -> MasterLink<'static, FakeMaster> {
+    let [tx0, tx1, rx] = Box::leak(Box::new([[0u8; BANK]; 3]));
+    let port = FakeMaster { bus: bus.clone() };
+    MasterLink::new(port, first, [tx0, tx1], rx)
+}
+
+/// Node `i`'s link (shared state, link task, port) over `bus`, on banks of its own (leaked).
+pub fn slave_link(
+    bus: &SharedBus,
+    i: usize,
+) -> (SlaveShared<'static>, SlaveTask<'static>, FakeSlave) {
+    let banks: &'static mut [Bank; 5] = Box::leak(Box::new([[0u8; BANK]; 5]));
+    let (shared, task) = SlaveShared::new(slave_banks(banks));
+    let port = FakeSlave {
+        bus: bus.clone(),
+        i,
+    };
+    (shared, task, port)
 }
