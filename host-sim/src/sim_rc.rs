@@ -124,14 +124,6 @@ impl<W: Write> ByteQueue for Line<'_, W> {
     }
 }
 
-impl<W> Room for Line<'_, W> {
-    fn has_room(&self, _: usize) -> bool {
-        true
-    }
-
-    async fn wait_room(&self, _: usize) {}
-}
-
 impl<W> Line<'_, W> {
     fn result(&mut self) -> io::Result<()> {
         self.error.take().map_or(Ok(()), Err)
@@ -296,7 +288,7 @@ impl SimRc {
                         pixels,
                     ));
                     line.result()?;
-                    r.map_err(|e| io::Error::other(format!("{e:?}")))?;
+                    r.map_err(io::Error::other)?;
                     port.flush()?;
                 }
                 _ => {}

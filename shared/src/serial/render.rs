@@ -28,6 +28,18 @@ pub enum RenderFail {
     Incomplete(SerialError),
 }
 
+impl core::fmt::Display for RenderFail {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            RenderFail::BadScene => write!(f, "the uploaded scene is no usable SceneImage"),
+            RenderFail::Root(e) => write!(f, "root logic: {e}"),
+            RenderFail::Incomplete(e) => write!(f, "frame incomplete: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for RenderFail {}
+
 /// Queue `bytes` once there is room.
 async fn send<R: Room, Q: ByteQueue>(room: &R, queue: &mut Q, bytes: &[u8]) -> bool {
     room.wait_room(bytes.len()).await;
