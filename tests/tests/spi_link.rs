@@ -14,6 +14,7 @@ use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootState};
 use links_core::sched::Policy;
 use links_core::spi::{ACK, BANK, HEADER, NAK};
+use links_core::testkit::serial::{read_back, ReadBack};
 use links_core::testkit::spi::*;
 use links_core::wire::{self, MAX_FRAME};
 use links_host::frame::{render_frame, Precision};
@@ -478,35 +479,6 @@ async fn drain(q: &RefCell<UsbQueue>, done: &core::cell::Cell<bool>) {
     .await
 }
 
-/// Decode what the RC sent: (frame pixels, FrameEnd CRCs, pixel messages).
-fn read_back(bytes: &[u8], w: usize, h: usize) -> (Vec<u8>, Vec<u32>, usize) {
-    use links_core::serial::{pixel_count, pixels_into, Decoder, Packet, ToPc, MAX_TO_PC};
-    let mut dec = Decoder::<MAX_TO_PC>::new();
-    let mut frame = vec![0u8; 3 * w * h];
-    let (mut ends, mut runs) = (Vec::new(), 0);
-    for &b in bytes {
-        let Some(r) = dec.feed::<ToPc>(b) else {
-            continue;
-        };
-        let p: Packet<ToPc> = r.expect("every frame the RC sends is valid");
-        match p.msg {
-            ToPc::Pixels { y, x, .. } | ToPc::PixelsRle { y, x, .. } => {
-                let at = 3 * (y as usize * w + x as usize);
-                let n = pixel_count(&p.msg);
-                pixels_into(&p.msg, &mut frame[at..at + 3 * n]).unwrap();
-                runs += 1;
-            }
-            ToPc::FrameEnd { crc, .. } => ends.push(crc),
-            ToPc::FrameHeader { width, height, .. } => {
-                assert_eq!((width as usize, height as usize), (w, h))
-            }
-            ToPc::Progress { .. } => {}
-            other => panic!("unexpected {other:?}"),
-        }
-    }
-    (frame, ends, runs)
-}
-
 #[test]
 fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
     let (w, h) = (24u32, 16u32);
@@ -552,7 +524,7 @@ fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
     assert!(report.pixels >= (w * h) as u64);
     assert!(nodes.iter().all(|(n, _)| n.pixels > 0), "both nodes worked");
     let sent = std::mem::take(&mut usb.borrow_mut().sent);
-    let (got, ends, _) = read_back(&sent, w as usize, h as usize);
+    let ReadBack { rgb: got, ends, .. } = read_back(&sent, w as usize, h as usize);
     assert_eq!(got, want, "the PC assembles the single-node render");
     assert_eq!(ends, [wire::CRC32.checksum(&want)]);
     assert_eq!(usb.borrow().refused, 0);
@@ -568,7 +540,12 @@ fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
     };
     run(join(resend, drain(&usb, &done)));
     let sent = std::mem::take(&mut usb.borrow_mut().sent);
-    let (again, ends, runs) = read_back(&sent, w as usize, h as usize);
+    let ReadBack {
+        rgb: again,
+        ends,
+        runs,
+        ..
+    } = read_back(&sent, w as usize, h as usize);
     assert_eq!(
         runs, 3,
         "row 0 from column 20, row 1 whole, row 2 up to column 2"

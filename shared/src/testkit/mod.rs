@@ -1,3 +1,4 @@
 //! Test doubles shared by every test: scene builders, SPI fakes.
 
+pub mod serial;
 pub mod spi;
