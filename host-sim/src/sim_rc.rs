@@ -1,15 +1,21 @@
-//! A simulated RC for the serial link: the same no_std [`FrameStreamer`] and
-//! [`UploadReceiver`] the firmware drives, over any `std::io` byte stream. The tests run
-//! `links readback` / `links upload` against it over a pseudo-terminal; fault injection
-//! corrupts chosen frames on the line.
+//! A simulated RC for the serial link: a thin host port of the firmware's own session
+//! (`links_core::serial::{session, readback, render}`) over any `std::io` byte stream, with
+//! a pre-rendered frame in place of the cluster. The tests run `links readback` /
+//! `links upload` against it over a pseudo-terminal; fault injection corrupts chosen frames
+//! on the line.
 
 use crate::frame::{render_frame, Precision};
-use links_core::serial::{
-    Decoder, Encoder, FrameStreamer, SerialError, ToRc, UploadEvent, UploadReceiver, MAX_TO_PC,
-    MAX_TO_RC,
-};
+use links_core::root::PixelSink;
+use links_core::serial::readback::{ByteQueue, Ended, Readback};
+use links_core::serial::render::{resend_runs, RenderFail};
+use links_core::serial::session::{Session, Step};
+use links_core::serial::throttle::Room;
+use links_core::serial::{encode_packet, Decoder, Encoder, Packet, SerialError, ToPc, MAX_TO_PC};
+use std::future::Future;
 use std::io::{self, Read, Write};
 use std::path::Path;
+use std::pin::pin;
+use std::task::{Context, Poll};
 use std::time::{Duration, Instant};
 
 /// Compile a scene file at `width` x `height` and render it (f32, as the nodes do):
@@ -27,6 +33,106 @@ fn corrupt(frame: &mut [u8]) {
     frame[i] = if frame[i] == 0x55 { 0x2a } else { 0x55 };
 }
 
+/// The line faults to inject into the RC's frames to the PC.
+#[derive(Clone, Debug, Default)]
+struct Faults {
+    /// Indices (0-based) of the pixel messages of the first pass to corrupt.
+    corrupt_runs: Vec<usize>,
+    /// Announce a wrong frame CRC (flip its lowest bit) in every `FrameEnd`.
+    wrong_crc: bool,
+    /// Corrupt the first `FrameEnd`.
+    corrupt_first_end: bool,
+    /// Pixel messages seen so far (first pass and resends).
+    runs: usize,
+}
+
+impl Faults {
+    /// Apply the faults to one frame the RC queues (`bytes`, one whole frame).
+    fn apply(&mut self, bytes: &[u8]) -> Vec<u8> {
+        let mut frame = bytes.to_vec();
+        let mut dec = Decoder::<MAX_TO_PC>::new();
+        let mut end = None;
+        let mut run = false;
+        for &b in bytes {
+            if let Some(Ok(p)) = dec.feed::<ToPc>(b) {
+                let p: Packet<ToPc> = p;
+                match p.msg {
+                    ToPc::Pixels { .. } | ToPc::PixelsRle { .. } => run = true,
+                    ToPc::FrameEnd { frame, crc } => end = Some((p.seq, frame, crc)),
+                    _ => {}
+                }
+            }
+        }
+        if run {
+            if self.corrupt_runs.contains(&self.runs) {
+                corrupt(&mut frame);
+            }
+            self.runs += 1;
+        }
+        if let Some((seq, f, crc)) = end {
+            if std::mem::take(&mut self.corrupt_first_end) {
+                corrupt(&mut frame);
+            } else if self.wrong_crc {
+                // The same FrameEnd with its CRC off by one bit.
+                let msg = ToPc::FrameEnd {
+                    frame: f,
+                    crc: crc ^ 1,
+                };
+                let mut buf = [0u8; MAX_TO_PC];
+                if let Ok(n) = encode_packet(seq, &msg, &mut buf) {
+                    frame = buf[..n].to_vec();
+                }
+            }
+        }
+        frame
+    }
+}
+
+/// The RC's byte queue on the host: every frame goes straight to the line (through the
+/// fault injection); the first write error is kept.
+struct Line<'w, W> {
+    out: &'w mut W,
+    faults: &'w mut Faults,
+    error: Option<io::Error>,
+}
+
+impl<W: Write> ByteQueue for Line<'_, W> {
+    fn free(&self) -> usize {
+        usize::MAX
+    }
+
+    fn push(&mut self, bytes: &[u8]) -> bool {
+        if self.error.is_some() {
+            return false;
+        }
+        let frame = self.faults.apply(bytes);
+        match self.out.write_all(&frame) {
+            Ok(()) => true,
+            Err(e) => {
+                self.error = Some(e);
+                false
+            }
+        }
+    }
+}
+
+impl<W> Line<'_, W> {
+    fn result(&mut self) -> io::Result<()> {
+        self.error.take().map_or(Ok(()), Err)
+    }
+}
+
+/// Poll `f` to completion (the RC's futures here only yield, never wait).
+fn block_on<F: Future>(f: F) -> F::Output {
+    let mut f = pin!(f);
+    let mut cx = Context::from_waker(std::task::Waker::noop());
+    loop {
+        if let Poll::Ready(v) = f.as_mut().poll(&mut cx) {
+            return v;
+        }
+    }
+}
+
 /// What the simulated RC saw while serving a readback.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ServeReport {
@@ -39,9 +145,13 @@ pub struct ServeReport {
 /// The RC end of a frame readback: one rendered frame and the protocol state.
 pub struct SimRc {
     rgb: Vec<u8>,
-    streamer: FrameStreamer,
+    frame: u16,
+    width: u16,
+    height: u16,
     enc: Encoder,
-    buf: [u8; MAX_TO_PC],
+    faults: Faults,
+    /// The streamed frame's state, for `Resend` (after [`SimRc::stream`]).
+    streamer: Option<links_core::serial::FrameStreamer>,
     /// Indices (0-based) of the pixel messages of the first pass to corrupt on the line.
     pub corrupt_runs: Vec<usize>,
     /// Announce a wrong frame CRC (flip its lowest bit) in every `FrameEnd`.
@@ -59,100 +169,71 @@ impl SimRc {
                 rgb.len()
             ));
         }
-        let streamer = FrameStreamer::new(frame, width, height).map_err(|e| e.to_string())?;
+        links_core::serial::FrameStreamer::new(frame, width, height).map_err(|e| e.to_string())?;
         Ok(SimRc {
             rgb,
-            streamer,
+            frame,
+            width,
+            height,
             enc: Encoder::new(),
-            buf: [0; MAX_TO_PC],
+            faults: Faults::default(),
+            streamer: None,
             corrupt_runs: Vec::new(),
             wrong_crc: false,
             corrupt_first_end: false,
         })
     }
 
-    fn row_runs(&self, y: u16) -> impl Iterator<Item = (u16, u16, u16)> {
-        let w = self.streamer.width() as u32;
-        self.streamer.span_runs(y as u32 * w, w)
-    }
-
-    fn pixels(&self, y: u16, x: u16, n: u16) -> std::ops::Range<usize> {
-        let first = y as usize * self.streamer.width() as usize + x as usize;
-        3 * first..3 * (first + n as usize)
-    }
-
-    fn write_end<W: Write>(&mut self, out: &mut W) -> io::Result<()> {
-        let n = self
-            .streamer
-            .end(&mut self.enc, &mut self.buf)
-            .map_err(other)?;
-        if std::mem::take(&mut self.corrupt_first_end) {
-            corrupt(&mut self.buf[..n]);
-            return out.write_all(&self.buf[..n]);
-        }
-        if self.wrong_crc {
-            // Re-encode the same FrameEnd with its CRC off by one bit.
-            let crc = self.streamer_crc() ^ 1;
-            let msg = links_core::serial::ToPc::FrameEnd {
-                frame: self.streamer.frame(),
-                crc,
-            };
-            let seq = self.enc.next_seq().wrapping_sub(1);
-            let n = links_core::serial::encode_packet(seq, &msg, &mut self.buf).map_err(other)?;
-            return out.write_all(&self.buf[..n]);
-        }
-        out.write_all(&self.buf[..n])
-    }
-
-    fn streamer_crc(&self) -> u32 {
-        links_core::wire::CRC32.checksum(&self.rgb)
-    }
-
-    /// Stream the whole frame: header, rows (odd rows first, as nodes return them out of
-    /// order), a progress message every 8 rows, and the frame end with its CRC.
+    /// Stream the whole frame through the firmware's readback sink: header, rows (odd rows
+    /// first, as nodes return them out of order), a progress message every 8 rows, and the
+    /// frame end with its CRC.
     pub fn stream<W: Write>(&mut self, out: &mut W) -> io::Result<()> {
-        let n = self
-            .streamer
-            .header(&mut self.enc, &mut self.buf)
-            .map_err(other)?;
-        out.write_all(&self.buf[..n])?;
-        let h = self.streamer.height();
+        self.faults = Faults {
+            corrupt_runs: self.corrupt_runs.clone(),
+            wrong_crc: self.wrong_crc,
+            corrupt_first_end: self.corrupt_first_end,
+            runs: 0,
+        };
+        let mut line = Line {
+            out: &mut *out,
+            faults: &mut self.faults,
+            error: None,
+        };
+        let enc = std::mem::take(&mut self.enc);
+        let (w, h) = (self.width, self.height);
+        let mut rb = Readback::new(&mut line, enc, self.frame, w, h).map_err(other)?;
+        let row = 3 * w as usize;
         let order = (1..h).step_by(2).chain((0..h).step_by(2));
-        let mut index = 0usize;
-        for (i, y) in order.enumerate() {
-            for (y, x, len) in self.row_runs(y).collect::<Vec<_>>() {
-                let px = self.pixels(y, x, len);
-                let n = self
-                    .streamer
-                    .run(y, x, &self.rgb[px], &mut self.enc, &mut self.buf)
-                    .map_err(other)?;
-                if self.corrupt_runs.contains(&index) {
-                    corrupt(&mut self.buf[..n]);
-                }
-                out.write_all(&self.buf[..n])?;
-                index += 1;
-            }
-            if i % 8 == 7 {
-                let done = self.streamer.folded();
-                let n = self
-                    .streamer
-                    .progress(done, &mut self.enc, &mut self.buf)
-                    .map_err(other)?;
-                out.write_all(&self.buf[..n])?;
-            }
+        for y in order {
+            let at = y as usize * row;
+            rb.pixels(self.frame, y, 0, &self.rgb[at..at + row]);
         }
-        self.write_end(out)?;
+        let Ended {
+            enc,
+            streamer,
+            result,
+            ..
+        } = rb.end();
+        self.enc = enc;
+        self.streamer = Some(streamer);
+        line.result()?;
+        result.map_err(other)?;
+        self.faults.corrupt_runs.clear();
         out.flush()
     }
 
-    /// Answer the PC's requests after [`SimRc::stream`]: `Resend` (the pixels again, then
-    /// the frame end), until the PC acknowledges the frame or `timeout` of silence.
+    /// Answer the PC's requests after [`SimRc::stream`] with the firmware's session:
+    /// `Resend` (the pixels again, then the frame end), until the PC acknowledges the frame
+    /// or `timeout` of silence.
     pub fn answer<P: Read + Write>(
         &mut self,
         port: &mut P,
         timeout: Duration,
     ) -> io::Result<ServeReport> {
-        let mut dec = Decoder::<MAX_TO_RC>::new();
+        let Some(fs) = self.streamer.clone() else {
+            return Err(io::Error::other("answer before stream"));
+        };
+        let mut session = Session::new(&mut []);
         let mut report = ServeReport::default();
         let mut byte = [0u8; 1];
         let mut deadline = Instant::now() + timeout;
@@ -163,39 +244,73 @@ impl SimRc {
                     "no FrameAck from the PC",
                 ));
             }
-            match port.read(&mut byte) {
-                Ok(0) => std::thread::sleep(Duration::from_millis(1)),
-                Ok(_) => {}
-                Err(e) if e.kind() == io::ErrorKind::TimedOut => continue,
-                Err(e) => return Err(e),
+            if !read_byte(port, &mut byte)? {
+                continue;
             }
-            let request = match dec.feed::<ToRc>(byte[0]) {
-                None => continue,
-                Some(Err(_)) => {
-                    report.bad_frames += 1;
-                    continue;
-                }
-                Some(Ok(p)) => p.msg,
-            };
-            deadline = Instant::now() + timeout;
-            match request {
-                ToRc::FrameAck { frame } if frame == self.streamer.frame() => return Ok(report),
-                ToRc::Resend { frame, start, len } if frame == self.streamer.frame() => {
+            let step = session.feed(byte[0]);
+            report.bad_frames = session.bad_frames();
+            match step {
+                Step::Nothing | Step::Reply(_) => continue,
+                _ => deadline = Instant::now() + timeout,
+            }
+            match step {
+                Step::Acked { frame } if frame == fs.frame() => return Ok(report),
+                Step::Resend { frame, start, len } if frame == fs.frame() => {
                     report.resends += 1;
-                    for (y, x, n) in self.streamer.span_runs(start, len).collect::<Vec<_>>() {
-                        let px = self.pixels(y, x, n);
-                        let n = self
-                            .streamer
-                            .resend(y, x, &self.rgb[px], &mut self.enc, &mut self.buf)
-                            .map_err(other)?;
-                        port.write_all(&self.buf[..n])?;
-                    }
-                    self.write_end(port)?;
+                    let mut line = Line {
+                        out: &mut *port,
+                        faults: &mut self.faults,
+                        error: None,
+                    };
+                    let (rgb, w) = (&self.rgb, self.width as usize);
+                    let pixels = |y: u16, x: u16, px: &mut [[u8; 3]]| {
+                        let at = 3 * (y as usize * w + x as usize);
+                        let src = rgb.get(at..at + 3 * px.len()).ok_or(RenderFail::BadScene)?;
+                        px.as_flattened_mut().copy_from_slice(src);
+                        Ok(())
+                    };
+                    let room = Room0;
+                    let r = block_on(resend_runs(
+                        &fs,
+                        start,
+                        len,
+                        &mut self.enc,
+                        &room,
+                        &mut line,
+                        pixels,
+                    ));
+                    line.result()?;
+                    r.map_err(io::Error::other)?;
                     port.flush()?;
                 }
                 _ => {}
             }
         }
+    }
+}
+
+/// Room that is always there (the host line never fills).
+struct Room0;
+
+impl Room for Room0 {
+    fn has_room(&self, _: usize) -> bool {
+        true
+    }
+
+    async fn wait_room(&self, _: usize) {}
+}
+
+/// Read one byte into `byte`: `Ok(false)` when none came yet (time-out or end of input,
+/// after a short sleep for the latter).
+fn read_byte<P: Read>(port: &mut P, byte: &mut [u8; 1]) -> io::Result<bool> {
+    match port.read(byte) {
+        Ok(0) => {
+            std::thread::sleep(Duration::from_millis(1));
+            Ok(false)
+        }
+        Ok(_) => Ok(true),
+        Err(e) if e.kind() == io::ErrorKind::TimedOut => Ok(false),
+        Err(e) => Err(e),
     }
 }
 
@@ -215,11 +330,11 @@ pub struct ReceivedUpload {
     pub start_render: Option<u16>,
 }
 
-/// Receive a scene upload into a buffer of `capacity` bytes with the firmware's
-/// [`UploadReceiver`]. The PC frames whose 0-based indices are in `corrupt_frames` are
-/// corrupted on arrival (as by line noise). Returns once the scene is complete (and a
-/// `StartRender`, if the PC sends one within `linger`), or fails after `timeout` of
-/// silence.
+/// Receive a scene upload into a buffer of `capacity` bytes with the firmware's session
+/// (its [`links_core::serial::UploadReceiver`]). The PC frames whose 0-based indices are in
+/// `corrupt_frames` are corrupted on arrival (as by line noise). Returns once the scene is
+/// complete (and a `StartRender`, if the PC sends one within `linger`), or fails after
+/// `timeout` of silence.
 pub fn receive_upload<P: Read + Write>(
     port: &mut P,
     capacity: usize,
@@ -228,44 +343,41 @@ pub fn receive_upload<P: Read + Write>(
     linger: Duration,
 ) -> io::Result<ReceivedUpload> {
     let mut store = vec![0u8; capacity];
-    let mut rx = UploadReceiver::new(&mut store);
-    let mut enc = Encoder::new();
-    let mut dec = Decoder::<MAX_TO_RC>::new();
-    let mut out = [0u8; MAX_TO_PC];
+    let mut session = Session::new(&mut store);
     let mut frame = Vec::new();
     let mut index = 0usize;
     let mut done_at: Option<Instant> = None;
-    let mut bad_frames = 0;
     let mut start_render = None;
     let mut deadline = Instant::now() + timeout;
     let mut byte = [0u8; 1];
     loop {
         let now = Instant::now();
         if done_at.is_some_and(|t| now >= t + linger) || start_render.is_some() {
-            let image = rx.image().map(<[u8]>::to_vec).unwrap_or_default();
+            let image = session
+                .upload
+                .image()
+                .map(<[u8]>::to_vec)
+                .unwrap_or_default();
             return Ok(ReceivedUpload {
                 image,
-                naks: rx.naks(),
-                bad_frames,
+                naks: session.upload.naks(),
+                bad_frames: session.bad_frames(),
                 start_render,
             });
         }
         if now >= deadline {
             return Err(io::Error::new(
                 io::ErrorKind::TimedOut,
-                format!("upload incomplete: {} bytes received", rx.received()),
+                format!(
+                    "upload incomplete: {} bytes received",
+                    session.upload.received()
+                ),
             ));
         }
-        match port.read(&mut byte) {
-            Ok(0) => {
-                std::thread::sleep(Duration::from_millis(1));
-                continue;
-            }
-            Ok(_) => {}
-            Err(e) if e.kind() == io::ErrorKind::TimedOut => continue,
-            Err(e) => return Err(e),
+        if !read_byte(port, &mut byte)? {
+            continue;
         }
-        // Collect one line frame, corrupt it if asked, then decode it.
+        // Collect one line frame, corrupt it if asked, then feed it to the session.
         frame.push(byte[0]);
         if byte[0] != 0 || frame.len() == 1 {
             continue;
@@ -275,25 +387,17 @@ pub fn receive_upload<P: Read + Write>(
         }
         index += 1;
         for &b in &frame {
-            let reply = match dec.feed::<ToRc>(b) {
-                None => continue,
-                Some(Ok(p)) => {
-                    if let ToRc::StartRender { frames } = p.msg {
-                        start_render = Some(frames);
-                    }
-                    rx.on_message(&p.msg, &mut enc, &mut out)
+            match session.feed(b) {
+                Step::Reply(n) => {
+                    port.write_all(session.reply(n))?;
+                    port.flush()?;
                 }
-                Some(Err(e)) => {
-                    bad_frames += 1;
-                    rx.on_bad_frame(e, &mut enc, &mut out)
-                }
+                Step::Render { frames } => start_render = Some(frames),
+                _ => {}
             }
-            .map_err(other)?;
-            if let UploadEvent::Complete { .. } = reply.event {
+            if session.upload.image().is_some() {
                 done_at.get_or_insert(Instant::now());
             }
-            port.write_all(&out[..reply.len])?;
-            port.flush()?;
         }
         frame.clear();
         deadline = Instant::now() + timeout;

@@ -32,6 +32,15 @@ impl Tx {
         self.queue.extend(&self.buf[..n]);
         self.sent += 1;
     }
+
+    /// The `FrameHeader` of a `W` x `H` frame `frame`.
+    fn header(&mut self, frame: u16) {
+        self.send(&ToPc::FrameHeader {
+            frame,
+            width: W,
+            height: H,
+        });
+    }
 }
 
 /// A misbehaving RC.
@@ -149,11 +158,7 @@ fn rgb() -> Vec<u8> {
 
 /// Send frame `frame` (header, every row but `skip`, FrameEnd with the right CRC).
 fn stream_frame(tx: &mut Tx, frame: u16, rgb: &[u8], skip: Option<u16>) {
-    tx.send(&ToPc::FrameHeader {
-        frame,
-        width: W,
-        height: H,
-    });
+    tx.header(frame);
     for y in (0..H).filter(|&y| Some(y) != skip) {
         let row = 3 * W as usize * y as usize;
         tx.send(&ToPc::Pixels {
@@ -177,11 +182,7 @@ struct EndlessProgress {
 impl Script for EndlessProgress {
     fn chatter(&mut self, tx: &mut Tx) {
         if !std::mem::replace(&mut self.started, true) {
-            tx.send(&ToPc::FrameHeader {
-                frame: 3,
-                width: W,
-                height: H,
-            });
+            tx.header(3);
         }
         tx.send(&ToPc::Progress {
             frame: 3,
@@ -219,11 +220,7 @@ struct CreepingProgress {
 impl Script for CreepingProgress {
     fn chatter(&mut self, tx: &mut Tx) {
         if self.header && self.done == 0 {
-            tx.send(&ToPc::FrameHeader {
-                frame: 0,
-                width: W,
-                height: H,
-            });
+            tx.header(0);
         }
         self.done += 1;
         tx.send(&ToPc::Progress {
@@ -282,11 +279,7 @@ struct HeaderPerMessage {
 
 impl Script for HeaderPerMessage {
     fn chatter(&mut self, tx: &mut Tx) {
-        tx.send(&ToPc::FrameHeader {
-            frame: self.frame,
-            width: W,
-            height: H,
-        });
+        tx.header(self.frame);
         self.frame = self.frame.wrapping_add(1);
     }
 }
@@ -319,11 +312,7 @@ struct SamePixels {
 impl Script for SamePixels {
     fn chatter(&mut self, tx: &mut Tx) {
         if !std::mem::replace(&mut self.started, true) {
-            tx.send(&ToPc::FrameHeader {
-                frame: 1,
-                width: W,
-                height: H,
-            });
+            tx.header(1);
         }
         tx.send(&ToPc::Pixels {
             frame: 1,
@@ -576,11 +565,7 @@ impl Script for Legit {
             });
         }
         tx.send(&ToPc::FrameEnd { frame: 0, crc: 1 });
-        tx.send(&ToPc::FrameHeader {
-            frame: 1,
-            width: W,
-            height: H,
-        });
+        tx.header(1);
         for y in 0..H {
             if y != 1 && y != 6 {
                 tx.send(&ToPc::Pixels {

@@ -16,10 +16,8 @@ pub mod port;
 pub mod plan {
     use links_core::spi::BANK;
 
-    /// SRAM1 + SRAM2 (DMA-reachable).
-    pub const SRAM: usize = 128 * 1024;
-    /// CCM data RAM (CPU only).
-    pub const CCM: usize = 64 * 1024;
+    /// SRAM1 + SRAM2 (DMA-reachable) and CCM data RAM (CPU only): the board's.
+    pub use links_board::{CCM, SRAM};
     /// The link's DMA banks: two TX, two RX, one scratch (in SRAM).
     pub const LINK_BANKS: usize = 5 * BANK;
     /// Scene bank of even frames (in SRAM): what the DMA banks leave, in whole KB.

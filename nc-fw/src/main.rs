@@ -14,8 +14,6 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod fw {
-    use core::mem::MaybeUninit;
-    use core::ptr::addr_of_mut;
     use cortex_m_rt::entry;
     use defmt::{info, unwrap, warn};
     use embassy_executor::{Executor, InterruptExecutor};
@@ -36,8 +34,6 @@ mod fw {
         scene_even: [u8; SCENE_EVEN],
     }
 
-    #[link_section = ".sram"]
-    static mut SRAM: MaybeUninit<Sram> = MaybeUninit::uninit();
     /// The odd frames' scene bank: CCM (`.bss`), read in place by the CPU only.
     static SCENE_ODD_BANK: ConstStaticCell<[u8; SCENE_ODD]> = ConstStaticCell::new([0; SCENE_ODD]);
     static SHARED: StaticCell<SlaveShared<'static>> = StaticCell::new();
@@ -48,31 +44,6 @@ mod fw {
     unsafe fn UART4() {
         // SAFETY: the interrupt executor's documented use: called from its own interrupt.
         unsafe { EXECUTOR_LINK.on_interrupt() }
-    }
-
-    fn board() -> embassy_stm32::Config {
-        use embassy_stm32::rcc::*;
-        use embassy_stm32::time::Hertz;
-        let mut c = embassy_stm32::Config::default();
-        // 8 MHz crystal -> 168 MHz core, APB2 84 MHz (SPI1 up to 42 MHz), 48 MHz for USB.
-        c.rcc.hse = Some(Hse {
-            freq: Hertz(8_000_000),
-            mode: HseMode::Oscillator,
-        });
-        c.rcc.pll_src = PllSource::HSE;
-        c.rcc.pll = Some(Pll {
-            prediv: PllPreDiv::DIV4,
-            mul: PllMul::MUL168,
-            divp: Some(PllPDiv::DIV2),
-            divq: Some(PllQDiv::DIV7),
-            divr: None,
-        });
-        c.rcc.ahb_pre = AHBPrescaler::DIV1;
-        c.rcc.apb1_pre = APBPrescaler::DIV4;
-        c.rcc.apb2_pre = APBPrescaler::DIV2;
-        c.rcc.sys = Sysclk::PLL1_P;
-        c.rcc.mux.clk48sel = mux::Clk48sel::PLL1_Q;
-        c
     }
 
     #[embassy_executor::task]
@@ -114,16 +85,10 @@ mod fw {
 
     #[entry]
     fn main() -> ! {
-        let p = embassy_stm32::init(board());
+        let p = links_board::init();
         info!("LINKS-1 NC up");
-        // SAFETY: `main` runs once; this is the only reference ever made to SRAM. Zeroing
-        // through the raw pointer (no stack temporary: the bank is 120 KB) makes every
-        // byte array valid.
-        let sram: &'static mut Sram = unsafe {
-            let ptr = addr_of_mut!(SRAM).cast::<Sram>();
-            ptr.write_bytes(0, 1);
-            &mut *ptr
-        };
+        // `main` runs once, so this expansion does: the only reference to the region.
+        let sram: &'static mut Sram = links_board::take_sram!(Sram);
         let [tx0, tx1, rx0, rx1, scratch] = &mut sram.link;
         let (shared, task) = SlaveShared::new(SlaveBanks {
             tx: [tx0, tx1],

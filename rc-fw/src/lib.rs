@@ -2,11 +2,9 @@
 //!
 //! The behaviour is `links_core::root::run_bus` over `links_core::spi::MasterLink` (the link
 //! protocol, tested on the host against an emulated bus); the PC side speaks
-//! `links_core::serial` over USB CDC. This crate adds the board: the memory plan and pin map,
-//! the PC conversation ([`session`]), a render request ([`render`]), the readback sink that turns accepted pixel runs into
-//! serial frames ([`readback`]), the
-//! bus wrapper that holds exchanges back while the USB queue is full ([`throttle`]) — all
-//! host-tested — and, for the MCU, the embassy-stm32 port ([`port`]).
+//! `links_core::serial` over USB CDC, whose RC session (upload, render requests, readback,
+//! throttle) is board-independent and lives there. This crate adds the board: the memory
+//! plan and pin map and, for the MCU, the embassy-stm32 port ([`port`]).
 #![cfg_attr(target_os = "none", no_std)]
 
 #[cfg(target_os = "none")]
@@ -16,10 +14,8 @@ pub mod port;
 pub mod plan {
     use links_core::spi::BANK;
 
-    /// SRAM1 + SRAM2 (DMA-reachable).
-    pub const SRAM: usize = 128 * 1024;
-    /// CCM data RAM (CPU only).
-    pub const CCM: usize = 64 * 1024;
+    /// SRAM1 + SRAM2 (DMA-reachable) and CCM data RAM (CPU only): the board's.
+    pub use links_board::{CCM, SRAM};
     /// The bus's DMA banks: two TX (double-buffered: the RC composes into one while the
     /// other waits for or crosses the bus) and one RX (in SRAM).
     pub const LINK_BANKS: usize = 3 * BANK;
@@ -38,29 +34,58 @@ pub mod plan {
         assert!(USB_QUEUE >= 2 * crate::readback::RUN_RESERVE + links_core::serial::MAX_TO_PC);
 }
 
-/// Pins of the RC board (STM32F4DISCOVERY). See `docs/hardware.md`.
+/// The RC board's pin table (STM32F4DISCOVERY; see `docs/hardware.md`), written once: calls
+/// `$m!(args; table)` with every pin as an identifier. [`pins`] turns it into names for the
+/// host tests, the firmware's `main` into the peripherals it wires, so the two cannot drift.
+#[macro_export]
+macro_rules! with_pins {
+    ($m:ident $(, $arg:ident)*) => {
+        $m! {$($arg),*;
+            spi1: [PA5, PA6, PA7],
+            usb: [PA11, PA12],
+            accel_cs: PE3,
+            cs: [PE8, PE9, PE10, PE11, PE12, PE13, PE14, PE15],
+            ready: [PD0 / EXTI0, PD1 / EXTI1, PD2 / EXTI2, PD3 / EXTI3,
+                    PD6 / EXTI6, PD7 / EXTI7, PD8 / EXTI8, PD9 / EXTI9],
+            miso_sel: [PE4, PE5, PE6]
+        }
+    };
+}
+
+/// The pin table's names (see [`with_pins!`]).
+macro_rules! pin_names {
+    (; spi1: [$($spi:ident),*], usb: [$($usb:ident),*], accel_cs: $acc:ident,
+       cs: [$($cs:ident),*], ready: [$($rdy:ident / $exti:ident),*],
+       miso_sel: [$($sel:ident),*]) => {
+        /// SPI1 (master): SCK, MISO, MOSI.
+        pub const SPI1: [&str; 3] = [$(stringify!($spi)),*];
+        /// Chip-select outputs, node 0..7 (active low).
+        pub const CS: [&str; NODES] = [$(stringify!($cs)),*];
+        /// Handshake inputs with EXTI (pull-down: an absent node reads "not ready").
+        pub const READY: [&str; NODES] = [$(stringify!($rdy)),*];
+        /// The EXTI line of each handshake input (must match its pin number).
+        pub const READY_EXTI: [&str; NODES] = [$(stringify!($exti)),*];
+        /// Select lines S0..S2 of the 8:1 MISO multiplexer (74LVC251: node i's MISO on input i).
+        pub const MISO_SEL: [&str; 3] = [$(stringify!($sel)),*];
+        /// USB OTG FS (the Discovery's micro-USB CN5): D-, D+.
+        pub const USB: [&str; 2] = [$(stringify!($usb)),*];
+        /// The Discovery's accelerometer shares SPI1: its chip-select is held high.
+        pub const ACCEL_CS: &str = stringify!($acc);
+    };
+}
+
+/// Pins of the RC board (STM32F4DISCOVERY), from the one table [`with_pins!`] that `main`
+/// wires. See `docs/hardware.md`.
 pub mod pins {
     /// Nodes on the one bus this firmware drives (one chip-select and one handshake line
     /// each; EXTI lines must differ, so at most 16 per RC without a decoder).
     pub const NODES: usize = 8;
-    /// SPI1 (master): SCK, MISO, MOSI.
-    pub const SPI1: [&str; 3] = ["PA5", "PA6", "PA7"];
-    /// Chip-select outputs, node 0..7 (active low).
-    pub const CS: [&str; NODES] = ["PE8", "PE9", "PE10", "PE11", "PE12", "PE13", "PE14", "PE15"];
-    /// Handshake inputs with EXTI (pull-down: an absent node reads "not ready").
-    pub const READY: [&str; NODES] = ["PD0", "PD1", "PD2", "PD3", "PD6", "PD7", "PD8", "PD9"];
-    /// Select lines S0..S2 of the 8:1 MISO multiplexer (74LVC251: node i's MISO on input i).
-    pub const MISO_SEL: [&str; 3] = ["PE4", "PE5", "PE6"];
-    /// USB OTG FS (the Discovery's micro-USB CN5): D-, D+.
-    pub const USB: [&str; 2] = ["PA11", "PA12"];
-    /// The Discovery's accelerometer shares SPI1: its chip-select is held high.
-    pub const ACCEL_CS: &str = "PE3";
+    crate::with_pins!(pin_names);
 }
 
-pub mod readback;
-pub mod render;
-pub mod session;
-pub mod throttle;
+// The PC conversation, render requests, readback and throttle are board-independent: they
+// live in `links_core::serial` (host-tested there and driven by the host's simulated RC).
+pub use links_core::serial::{readback, render, session, throttle};
 
 #[cfg(test)]
 mod tests {
@@ -83,5 +108,9 @@ mod tests {
         lines.sort();
         lines.dedup();
         assert_eq!(lines.len(), super::pins::NODES, "one EXTI line per node");
+        for (pin, exti) in super::pins::READY.iter().zip(super::pins::READY_EXTI) {
+            let line = pin.trim_start_matches(|c: char| c.is_ascii_alphabetic());
+            assert_eq!(exti, format!("EXTI{line}"), "{pin} is on its own EXTI line");
+        }
     }
 }

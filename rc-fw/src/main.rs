@@ -14,8 +14,6 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod fw {
-    use core::mem::MaybeUninit;
-    use core::ptr::addr_of_mut;
     use defmt::{info, unwrap, warn};
     use embassy_executor::Spawner;
     use embassy_stm32::exti::{self, ExtiInput};
@@ -57,38 +55,12 @@ mod fw {
         scene: [u8; SCENE],
     }
 
-    #[link_section = ".sram"]
-    static mut SRAM: MaybeUninit<Sram> = MaybeUninit::uninit();
     static USB_QUEUE: UsbPipe = Pipe::new();
     static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static CONTROL: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
     static CDC: StaticCell<State<'static>> = StaticCell::new();
-
-    fn board() -> embassy_stm32::Config {
-        use embassy_stm32::rcc::*;
-        let mut c = embassy_stm32::Config::default();
-        // 8 MHz crystal -> 168 MHz core, APB2 84 MHz (SPI1 up to 42 MHz), 48 MHz for USB.
-        c.rcc.hse = Some(Hse {
-            freq: Hertz(8_000_000),
-            mode: HseMode::Oscillator,
-        });
-        c.rcc.pll_src = PllSource::HSE;
-        c.rcc.pll = Some(Pll {
-            prediv: PllPreDiv::DIV4,
-            mul: PllMul::MUL168,
-            divp: Some(PllPDiv::DIV2),
-            divq: Some(PllQDiv::DIV7),
-            divr: None,
-        });
-        c.rcc.ahb_pre = AHBPrescaler::DIV1;
-        c.rcc.apb1_pre = APBPrescaler::DIV4;
-        c.rcc.apb2_pre = APBPrescaler::DIV2;
-        c.rcc.sys = Sysclk::PLL1_P;
-        c.rcc.mux.clk48sel = mux::Clk48sel::PLL1_Q;
-        c
-    }
 
     #[embassy_executor::task]
     async fn usb_task(mut device: UsbDevice<'static, UsbDriver>) {
@@ -186,23 +158,44 @@ mod fw {
         }
     }
 
+    /// Wire the board from the pin table (`rc_fw::with_pins!`, named in `rc_fw::pins` for
+    /// the host tests): the USB driver and the bus port. The accelerometer's chip-select is
+    /// held high for good.
+    macro_rules! wire {
+        ($p:ident, $usb_cfg:ident, $spi_cfg:ident;
+         spi1: [$sck:ident, $miso:ident, $mosi:ident], usb: [$dm:ident, $dp:ident],
+         accel_cs: $acc:ident, cs: [$($cs:ident),*], ready: [$($rdy:ident / $exti:ident),*],
+         miso_sel: [$($sel:ident),*]) => {{
+            let driver =
+                usb::Driver::new_fs($p.USB_OTG_FS, Irqs, $p.$dp, $p.$dm, EP_OUT.take(), $usb_cfg);
+            let accel_cs = Output::new($p.$acc, Level::High, Speed::Low);
+            core::mem::forget(accel_cs);
+            let spi = Spi::new(
+                $p.SPI1, $p.$sck, $p.$mosi, $p.$miso, $p.DMA2_CH3, $p.DMA2_CH0, Irqs, $spi_cfg,
+            );
+            let cs = [$(Output::new($p.$cs, Level::High, Speed::VeryHigh)),*];
+            let ready = [$(ExtiInput::new($p.$rdy, $p.$exti, Pull::Down, Irqs)),*];
+            let miso_sel = [$(Output::new($p.$sel, Level::Low, Speed::VeryHigh)),*];
+            let port = RcPort { spi, cs, ready, miso_sel };
+            (driver, port)
+        }};
+    }
+
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        let p = embassy_stm32::init(board());
+        let p = links_board::init();
         info!("LINKS-1 RC up");
-        // SAFETY: runs once; the only reference ever made to SRAM. Zeroed through the raw
-        // pointer (no stack temporary), which makes every byte array valid.
-        let sram: &'static mut Sram = unsafe {
-            let ptr = addr_of_mut!(SRAM).cast::<Sram>();
-            ptr.write_bytes(0, 1);
-            &mut *ptr
-        };
+        // `main` runs once, so this expansion does: the only reference to the region.
+        let sram: &'static mut Sram = links_board::take_sram!(Sram);
 
-        // USB CDC (the Discovery's micro-USB, CN5).
+        // USB CDC (the Discovery's micro-USB, CN5) and the star: SPI1 master, one
+        // chip-select and one handshake line per node, all wired from the pin table.
         let mut usb_cfg = usb::Config::default();
         usb_cfg.vbus_detection = false;
-        let driver =
-            usb::Driver::new_fs(p.USB_OTG_FS, Irqs, p.PA12, p.PA11, EP_OUT.take(), usb_cfg);
+        let mut spi_cfg = spi::Config::default();
+        spi_cfg.frequency = Hertz(21_000_000);
+        spi_cfg.mode = spi::MODE_0;
+        let (driver, port) = rc_fw::with_pins!(wire, p, usb_cfg, spi_cfg);
         // pid.codes test VID/PID (replace before distributing boards).
         let mut config = embassy_usb::Config::new(0x1209, 0x0001);
         config.manufacturer = Some("LINKS-1");
@@ -220,47 +213,7 @@ mod fw {
         let device = builder.build();
         let (tx, rx) = class.split();
 
-        // The star: SPI1 master, one chip-select and one handshake line per node.
-        let _accel_cs = Output::new(p.PE3, Level::High, Speed::Low);
-        core::mem::forget(_accel_cs);
-        let mut spi_cfg = spi::Config::default();
-        spi_cfg.frequency = Hertz(21_000_000);
-        spi_cfg.mode = spi::MODE_0;
-        let spi = Spi::new(
-            p.SPI1, p.PA5, p.PA7, p.PA6, p.DMA2_CH3, p.DMA2_CH0, Irqs, spi_cfg,
-        );
-        let cs = [
-            Output::new(p.PE8, Level::High, Speed::VeryHigh),
-            Output::new(p.PE9, Level::High, Speed::VeryHigh),
-            Output::new(p.PE10, Level::High, Speed::VeryHigh),
-            Output::new(p.PE11, Level::High, Speed::VeryHigh),
-            Output::new(p.PE12, Level::High, Speed::VeryHigh),
-            Output::new(p.PE13, Level::High, Speed::VeryHigh),
-            Output::new(p.PE14, Level::High, Speed::VeryHigh),
-            Output::new(p.PE15, Level::High, Speed::VeryHigh),
-        ];
-        let ready = [
-            ExtiInput::new(p.PD0, p.EXTI0, Pull::Down, Irqs),
-            ExtiInput::new(p.PD1, p.EXTI1, Pull::Down, Irqs),
-            ExtiInput::new(p.PD2, p.EXTI2, Pull::Down, Irqs),
-            ExtiInput::new(p.PD3, p.EXTI3, Pull::Down, Irqs),
-            ExtiInput::new(p.PD6, p.EXTI6, Pull::Down, Irqs),
-            ExtiInput::new(p.PD7, p.EXTI7, Pull::Down, Irqs),
-            ExtiInput::new(p.PD8, p.EXTI8, Pull::Down, Irqs),
-            ExtiInput::new(p.PD9, p.EXTI9, Pull::Down, Irqs),
-        ];
         let [btx0, btx1, brx] = &mut sram.link;
-        let miso_sel = [
-            Output::new(p.PE4, Level::Low, Speed::VeryHigh),
-            Output::new(p.PE5, Level::Low, Speed::VeryHigh),
-            Output::new(p.PE6, Level::Low, Speed::VeryHigh),
-        ];
-        let port = RcPort {
-            spi,
-            cs,
-            ready,
-            miso_sel,
-        };
         let link = MasterLink::new(port, 0, [btx0, btx1], brx);
 
         spawner.spawn(unwrap!(usb_task(device)));

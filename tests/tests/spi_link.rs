@@ -1,19 +1,11 @@
 //! The SPI link driver (`links_core::spi`, the protocol `nc-fw` and `rc-fw` run) against an
-//! emulated bus that enforces the hardware's rules and injects faults:
-//!
-//! - a master transfer is full duplex: transmit and receive lengths are equal;
-//! - bytes move only while a chip-select is asserted, and only into a node whose DMA is
-//!   armed (others miss them, as real hardware would);
-//! - handshake ordering: the RC may select one node only while its ready line is high;
-//! - several nodes selected at once (broadcast) drive MISO together: the RC reads garbage;
-//! - faults: a flipped bit in a chosen transfer (either direction), lost ready-line edges.
+//! emulated bus that enforces the hardware's rules and injects faults
+//! ([`links_core::testkit::spi`], shared with the other tests).
 //!
 //! The end-to-end tests run the real root and node logic (`run_bus`, `run_node`) over the
 //! link and compare the frame with the single-node render.
 
-use core::future::Future;
-use core::pin::pin;
-use core::task::{Context, Poll};
+use core::task::Poll;
 use embassy_futures::join::{join, join_array};
 use embassy_futures::select::{select, Either};
 use links_core::dm::{compile, CompileOptions};
@@ -21,322 +13,14 @@ use links_core::link::{Incoming, LinkError, NodeLink, RootBus, Transfer};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootState};
 use links_core::sched::Policy;
-use links_core::spi::{
-    Armed, Bank, MasterLink, MasterPort, PortError, Select, SlaveBanks, SlavePort, SlaveShared,
-    ACK, BANK, HEADER, NAK,
-};
+use links_core::spi::{ACK, BANK, HEADER, NAK};
+use links_core::testkit::serial::{read_back, ReadBack};
+use links_core::testkit::spi::*;
 use links_core::wire::{self, MAX_FRAME};
 use links_host::frame::{render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::cell::RefCell;
 use std::path::Path;
-use std::rc::Rc;
-
-/// Which direction a fault hits.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Dir {
-    /// What the RC receives (MISO).
-    Up,
-    /// What the nodes receive (MOSI).
-    Down,
-}
-
-struct Arm {
-    tx: Vec<u8>,
-    rx: Vec<u8>,
-    pos: usize,
-    /// Selected at least once since armed.
-    touched: bool,
-    /// Selected and released: the transfer is over.
-    done: bool,
-}
-
-#[derive(Default)]
-struct FakeNode {
-    arm: Option<Arm>,
-    ready: bool,
-    selected: bool,
-}
-
-#[derive(Default)]
-struct Bus {
-    nodes: Vec<FakeNode>,
-    selected: Option<Select>,
-    /// Master transfers so far (each header, body and trailer phase counts one).
-    transfers: u64,
-    /// Flip bit 0 of byte `.2` of master transfer number `.0` in direction `.1`.
-    faults: Vec<(u64, Dir, usize)>,
-    faults_hit: u32,
-    /// Ready-line rising edges to lose (the RC's interrupt never fires for them).
-    lose_edges: u32,
-    edges_lost: u32,
-    edge: bool,
-    /// Rule violations (each a description); a test fails if any occur.
-    violations: Vec<String>,
-    /// Bytes clocked while a selected node was not armed.
-    missed: u64,
-    /// Trailer bytes the RC sent (single-byte transfers).
-    trailers: Vec<u8>,
-}
-
-type SharedBus = Rc<RefCell<Bus>>;
-
-fn bus(nodes: usize) -> SharedBus {
-    Rc::new(RefCell::new(Bus {
-        nodes: (0..nodes).map(|_| FakeNode::default()).collect(),
-        ..Bus::default()
-    }))
-}
-
-struct FakeMaster {
-    bus: SharedBus,
-}
-
-/// Resolve after `n` polls (the polling fallback of a real `wait_any_ready`, or a delay).
-async fn polls(n: u32) {
-    let mut k = 0;
-    core::future::poll_fn(|cx| {
-        k += 1;
-        cx.waker().wake_by_ref();
-        if k > n {
-            Poll::Ready(())
-        } else {
-            Poll::Pending
-        }
-    })
-    .await
-}
-
-impl MasterPort for FakeMaster {
-    fn count(&self) -> u16 {
-        self.bus.borrow().nodes.len() as u16
-    }
-
-    fn ready(&self, i: u16) -> bool {
-        self.bus
-            .borrow()
-            .nodes
-            .get(i as usize)
-            .is_some_and(|n| n.ready)
-    }
-
-    async fn wait_any_ready(&mut self) {
-        // An edge wakes at once; without one, a polling period (a lost edge costs this).
-        let mut k = 0;
-        core::future::poll_fn(|cx| {
-            k += 1;
-            let mut b = self.bus.borrow_mut();
-            if std::mem::take(&mut b.edge) || k > 200 {
-                Poll::Ready(())
-            } else {
-                cx.waker().wake_by_ref();
-                Poll::Pending
-            }
-        })
-        .await
-    }
-
-    async fn select(&mut self, sel: Select) {
-        {
-            let mut b = self.bus.borrow_mut();
-            if b.selected.is_some() {
-                b.violations.push("select while selected".into());
-            }
-            if let Select::One(i) = sel {
-                if !b.nodes[i as usize].ready {
-                    b.violations
-                        .push(format!("node {i} selected with its ready line low"));
-                }
-            }
-            b.selected = Some(sel);
-            let all = matches!(sel, Select::All);
-            for (k, n) in b.nodes.iter_mut().enumerate() {
-                if all || sel == Select::One(k as u16) {
-                    n.selected = true;
-                    // The node's port drops its ready line when its chip-select falls.
-                    if n.arm.is_some() {
-                        n.ready = false;
-                    }
-                    if let Some(a) = &mut n.arm {
-                        a.touched = true;
-                    }
-                }
-            }
-        }
-        // Chip-select set-up time.
-        polls(2).await;
-    }
-
-    async fn deselect(&mut self) {
-        {
-            let mut b = self.bus.borrow_mut();
-            if b.selected.is_none() {
-                b.violations.push("deselect while not selected".into());
-            }
-            b.selected = None;
-            for n in b.nodes.iter_mut() {
-                if std::mem::take(&mut n.selected) {
-                    if let Some(a) = &mut n.arm {
-                        if a.touched {
-                            a.done = true;
-                        }
-                    }
-                }
-            }
-        }
-        // Hold time: the nodes re-arm.
-        polls(2).await;
-    }
-
-    async fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), PortError> {
-        polls(1).await;
-        let mut b = self.bus.borrow_mut();
-        let b = &mut *b;
-        if tx.len() != rx.len() {
-            b.violations
-                .push(format!("transfer of {} out, {} in", tx.len(), rx.len()));
-            return Err(PortError);
-        }
-        let Some(sel) = b.selected else {
-            b.violations.push("transfer without chip-select".into());
-            return Err(PortError);
-        };
-        let t = b.transfers;
-        b.transfers += 1;
-        if tx.len() == 1 {
-            b.trailers.push(tx[0]);
-        }
-        let mut down = tx.to_vec();
-        for &(at, dir, byte) in &b.faults {
-            if at == t && dir == Dir::Down && !down.is_empty() {
-                down[byte % tx.len()] ^= 1;
-                b.faults_hit += 1;
-            }
-        }
-        rx.fill(0xff);
-        let mut driving = 0;
-        for n in b.nodes.iter_mut().filter(|n| n.selected) {
-            driving += 1;
-            match &mut n.arm {
-                Some(a) if !a.done => {
-                    for (k, &byte) in down.iter().enumerate() {
-                        if let Some(d) = a.rx.get_mut(a.pos + k) {
-                            *d = byte;
-                        }
-                        if let (Some(&s), true) = (a.tx.get(a.pos + k), sel != Select::All) {
-                            rx[k] = s;
-                        }
-                    }
-                    a.pos += down.len();
-                }
-                _ => b.missed += down.len() as u64,
-            }
-        }
-        if driving > 1 {
-            // Contention on MISO: what the RC reads is meaningless.
-            rx.fill(0x00);
-        }
-        for &(at, dir, byte) in &b.faults {
-            if at == t && dir == Dir::Up && !rx.is_empty() {
-                let k = byte % rx.len();
-                rx[k] ^= 1;
-                b.faults_hit += 1;
-            }
-        }
-        Ok(())
-    }
-}
-
-struct FakeSlave {
-    bus: SharedBus,
-    i: usize,
-}
-
-impl SlavePort for FakeSlave {
-    async fn transfer(
-        &mut self,
-        tx: &[u8],
-        rx: &mut [u8],
-        cancel: impl Future<Output = ()>,
-    ) -> Result<Armed, PortError> {
-        {
-            let mut b = self.bus.borrow_mut();
-            if tx.len() != rx.len() {
-                b.violations.push("slave DMA lengths differ".into());
-                return Err(PortError);
-            }
-            let n = &mut b.nodes[self.i];
-            n.arm = Some(Arm {
-                tx: tx.to_vec(),
-                rx: rx.to_vec(),
-                pos: 0,
-                touched: n.selected,
-                done: false,
-            });
-        }
-        let mut cancel = pin!(cancel);
-        core::future::poll_fn(|cx: &mut Context<'_>| {
-            let mut b = self.bus.borrow_mut();
-            let n = &mut b.nodes[self.i];
-            if n.arm.as_ref().is_some_and(|a| a.done) {
-                if let Some(a) = n.arm.take() {
-                    rx.copy_from_slice(&a.rx);
-                }
-                return Poll::Ready(Ok(Armed::Done));
-            }
-            let idle = !n.selected && !n.arm.as_ref().is_some_and(|a| a.touched);
-            if idle && cancel.as_mut().poll(cx).is_ready() {
-                n.arm = None;
-                return Poll::Ready(Ok(Armed::Cancelled));
-            }
-            cx.waker().wake_by_ref();
-            Poll::Pending
-        })
-        .await
-    }
-
-    fn set_ready(&mut self, high: bool) {
-        let mut b = self.bus.borrow_mut();
-        let was = b.nodes[self.i].ready;
-        b.nodes[self.i].ready = high;
-        if high && !was {
-            if b.lose_edges > 0 {
-                b.lose_edges -= 1;
-                b.edges_lost += 1;
-            } else {
-                b.edge = true;
-            }
-        }
-    }
-}
-
-/// Poll `f` to completion with a waker that does nothing (every future here re-polls
-/// itself); a stall fails the test instead of hanging it.
-fn run<F: Future>(f: F) -> F::Output {
-    let mut f = pin!(f);
-    let mut cx = Context::from_waker(std::task::Waker::noop());
-    for _ in 0..50_000_000u64 {
-        if let Poll::Ready(v) = f.as_mut().poll(&mut cx) {
-            return v;
-        }
-    }
-    panic!("the link stalled");
-}
-
-fn banks<const N: usize>() -> Vec<Bank> {
-    vec![[0u8; BANK]; N]
-}
-
-fn slave_banks(v: &mut [Bank]) -> SlaveBanks<'_> {
-    let [a, b, c, d, e] = v else {
-        panic!("five banks")
-    };
-    SlaveBanks {
-        tx: [a, b],
-        rx: [c, d],
-        scratch: e,
-    }
-}
 
 /// One node posts a frame; the RC exchanges with it; returns (what the RC got, what the
 /// node got) after the exchange that delivered the node's frame.
@@ -348,17 +32,8 @@ fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
         if let Some(dir) = fault {
             bus.borrow_mut().faults.push((1, dir, 5));
         }
-        let mut mb = banks::<3>();
-        let [mtx0, mtx1, mrx] = &mut mb[..] else {
-            unreachable!()
-        };
-        let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-        let mut nb = banks::<5>();
-        let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-        let mut port = FakeSlave {
-            bus: bus.clone(),
-            i: 0,
-        };
+        let mut master = master_link(&bus, 0);
+        let (shared, task, mut port) = slave_link(&bus, 0);
         let up: Vec<u8> = (0..300u32).map(|i| (i * 7) as u8).collect();
         let down: Vec<u8> = (0..40u32).map(|i| (i * 3 + 1) as u8).collect();
         let mut handle = shared.handle();
@@ -436,17 +111,8 @@ fn garbled_headers_never_deliver_and_the_link_recovers() {
     for byte in 0..HEADER {
         let bus = bus(1);
         bus.borrow_mut().faults.push((0, Dir::Up, byte));
-        let mut mb = banks::<3>();
-        let [mtx0, mtx1, mrx] = &mut mb[..] else {
-            unreachable!()
-        };
-        let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-        let mut nb = banks::<5>();
-        let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-        let mut port = FakeSlave {
-            bus: bus.clone(),
-            i: 0,
-        };
+        let mut master = master_link(&bus, 0);
+        let (shared, task, mut port) = slave_link(&bus, 0);
         let mut handle = shared.handle();
         handle.post(b"hello").unwrap();
         let rc = async {
@@ -475,11 +141,7 @@ fn garbled_headers_never_deliver_and_the_link_recovers() {
 #[test]
 fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
     let bus = bus(2);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 10, [mtx0, mtx1], mrx);
+    let mut master = master_link(&bus, 10);
     assert_eq!(master.nodes(), (10, 2));
     assert_eq!(master.ready(), None);
     let mut rx = [0u8; MAX_FRAME];
@@ -503,17 +165,8 @@ fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
 #[test]
 fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
     let bus = bus(3);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave {
-        bus: bus.clone(),
-        i: 1,
-    };
+    let mut master = master_link(&bus, 0);
+    let (shared, task, mut port) = slave_link(&bus, 1);
     // Node 1 is emulated; nodes 0 and 2 are selected but never armed (they miss bytes).
     let rc = async {
         for k in 0..3u8 {
@@ -545,17 +198,8 @@ fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
 #[test]
 fn rc_composes_the_next_frame_while_a_transfer_is_started() {
     let bus = bus(1);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave {
-        bus: bus.clone(),
-        i: 0,
-    };
+    let mut master = master_link(&bus, 0);
+    let (shared, task, mut port) = slave_link(&bus, 0);
     let rc = async {
         let mut rx = [0u8; MAX_FRAME];
         assert_eq!(master.finish(&mut rx).await, Err(LinkError::Aborted));
@@ -601,14 +245,8 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
 fn a_corrupt_broadcast_is_counted_and_dropped() {
     let bus = bus(1);
     bus.borrow_mut().faults.push((0, Dir::Down, HEADER + 3));
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave { bus, i: 0 };
+    let mut master = master_link(&bus, 0);
+    let (shared, task, mut port) = slave_link(&bus, 0);
     let rc = async {
         polls(20).await;
         master.broadcast(&[9u8; 64]).await.unwrap();
@@ -658,9 +296,7 @@ async fn node(
     scene: &mut [u8],
     odd: &mut [u8],
 ) -> (NodeReport, links_core::spi::SlaveCounters) {
-    let mut nb = banks::<5>();
-    let (shared, task) = SlaveShared::new(slave_banks(&mut nb));
-    let mut port = FakeSlave { bus, i };
+    let (shared, task, mut port) = slave_link(&bus, i);
     let mut report = NodeReport::default();
     let mut handle = shared.handle();
     let (mut clock, mut tracer) = (RealTime, Tracing::<f32>::new());
@@ -700,11 +336,7 @@ fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
         w: w as usize,
         rgb: vec![0; (w * h * 3) as usize],
     });
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut master = master_link(&bus, 0);
     let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
     let [s0, s1, s2, s3] = &mut scene_banks[..] else {
         unreachable!()
@@ -847,35 +479,6 @@ async fn drain(q: &RefCell<UsbQueue>, done: &core::cell::Cell<bool>) {
     .await
 }
 
-/// Decode what the RC sent: (frame pixels, FrameEnd CRCs, pixel messages).
-fn read_back(bytes: &[u8], w: usize, h: usize) -> (Vec<u8>, Vec<u32>, usize) {
-    use links_core::serial::{pixel_count, pixels_into, Decoder, Packet, ToPc, MAX_TO_PC};
-    let mut dec = Decoder::<MAX_TO_PC>::new();
-    let mut frame = vec![0u8; 3 * w * h];
-    let (mut ends, mut runs) = (Vec::new(), 0);
-    for &b in bytes {
-        let Some(r) = dec.feed::<ToPc>(b) else {
-            continue;
-        };
-        let p: Packet<ToPc> = r.expect("every frame the RC sends is valid");
-        match p.msg {
-            ToPc::Pixels { y, x, .. } | ToPc::PixelsRle { y, x, .. } => {
-                let at = 3 * (y as usize * w + x as usize);
-                let n = pixel_count(&p.msg);
-                pixels_into(&p.msg, &mut frame[at..at + 3 * n]).unwrap();
-                runs += 1;
-            }
-            ToPc::FrameEnd { crc, .. } => ends.push(crc),
-            ToPc::FrameHeader { width, height, .. } => {
-                assert_eq!((width as usize, height as usize), (w, h))
-            }
-            ToPc::Progress { .. } => {}
-            other => panic!("unexpected {other:?}"),
-        }
-    }
-    (frame, ends, runs)
-}
-
 #[test]
 fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
     let (w, h) = (24u32, 16u32);
@@ -884,11 +487,7 @@ fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
         .expect("renders")
         .rgb;
     let bus = bus(2);
-    let mut mb = banks::<3>();
-    let [mtx0, mtx1, mrx] = &mut mb[..] else {
-        unreachable!()
-    };
-    let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 0, [mtx0, mtx1], mrx);
+    let mut master = master_link(&bus, 0);
     let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
     let [s0, s1, s2, s3] = &mut scene_banks[..] else {
         unreachable!()
@@ -925,7 +524,7 @@ fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
     assert!(report.pixels >= (w * h) as u64);
     assert!(nodes.iter().all(|(n, _)| n.pixels > 0), "both nodes worked");
     let sent = std::mem::take(&mut usb.borrow_mut().sent);
-    let (got, ends, _) = read_back(&sent, w as usize, h as usize);
+    let ReadBack { rgb: got, ends, .. } = read_back(&sent, w as usize, h as usize);
     assert_eq!(got, want, "the PC assembles the single-node render");
     assert_eq!(ends, [wire::CRC32.checksum(&want)]);
     assert_eq!(usb.borrow().refused, 0);
@@ -941,7 +540,12 @@ fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
     };
     run(join(resend, drain(&usb, &done)));
     let sent = std::mem::take(&mut usb.borrow_mut().sent);
-    let (again, ends, runs) = read_back(&sent, w as usize, h as usize);
+    let ReadBack {
+        rgb: again,
+        ends,
+        runs,
+        ..
+    } = read_back(&sent, w as usize, h as usize);
     assert_eq!(
         runs, 3,
         "row 0 from column 20, row 1 whole, row 2 up to column 2"

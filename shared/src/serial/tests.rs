@@ -1,4 +1,6 @@
+use super::frame_crc::CRC32_RAW;
 use super::*;
+use crate::wire::CRC32;
 
 /// xorshift64*: deterministic random numbers for the property tests.
 struct Rng(u64);

@@ -3,21 +3,21 @@
 //! as they arrive, and the `Resend` answer (the RC renders the span itself: it keeps no frame
 //! memory). Generic over the bus, clock and queue, so the host tests run exactly this.
 
-use crate::readback::{ByteQueue, Readback, RUN_RESERVE};
-use crate::throttle::{Room, Throttle};
+use super::readback::{ByteQueue, Readback, RUN_RESERVE};
+use super::throttle::{Room, Throttle};
+use crate::image::SceneView;
+use crate::link::RootBus;
+use crate::render::{render_run, Rgb8, Tracer};
+use crate::root::{run_bus, RootClock, RootConfig, RootError, RootReport, RootState};
+use crate::sched::Policy;
+use crate::serial::{Encoder, FrameStreamer, RcError, SerialError, ToPc, MAX_RUN, MAX_TO_PC};
 use core::cell::RefCell;
 use core::future::poll_fn;
 use core::task::Poll;
-use links_core::image::SceneView;
-use links_core::link::RootBus;
-use links_core::render::{render_run, Rgb8, Tracer};
-use links_core::root::{run_bus, RootClock, RootConfig, RootError, RootReport, RootState};
-use links_core::sched::Policy;
-use links_core::serial::{Encoder, FrameStreamer, RcError, SerialError, ToPc, MAX_RUN, MAX_TO_PC};
 
 /// Why a render request did not produce its frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum RenderFail {
     /// The uploaded bytes are no usable SceneImage (or exceed the 1024 x 1024 frame); the PC
     /// was sent `Error { NoScene }`.
@@ -27,6 +27,18 @@ pub enum RenderFail {
     /// A frame ended without every pixel sent once (no `FrameEnd` went out).
     Incomplete(SerialError),
 }
+
+impl core::fmt::Display for RenderFail {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            RenderFail::BadScene => write!(f, "the uploaded scene is no usable SceneImage"),
+            RenderFail::Root(e) => write!(f, "root logic: {e}"),
+            RenderFail::Incomplete(e) => write!(f, "frame incomplete: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for RenderFail {}
 
 /// Queue `bytes` once there is room.
 async fn send<R: Room, Q: ByteQueue>(room: &R, queue: &mut Q, bytes: &[u8]) -> bool {
@@ -108,12 +120,32 @@ pub async fn resend_span<R: Room, Q: ByteQueue>(
     queue: &mut Q,
 ) -> Result<(), RenderFail> {
     let view = SceneView::new(image).map_err(|_| RenderFail::BadScene)?;
+    let render = |y: u16, x: u16, px: &mut [Rgb8]| {
+        let mut tracer = Tracer::<f32>::new(view);
+        render_run(&mut tracer, y as u32, x as u32, px).map_err(|_| RenderFail::BadScene)
+    };
+    resend_runs(fs, start, len, enc, room, queue, render).await
+}
+
+/// [`resend_span`] with the pixels from `pixels(y, x, run)` (which fills `run`): each run of
+/// the span sent again, yielding between runs, then the `FrameEnd` again.
+pub async fn resend_runs<R: Room, Q: ByteQueue, F>(
+    fs: &FrameStreamer,
+    start: u32,
+    len: u32,
+    enc: &mut Encoder,
+    room: &R,
+    queue: &mut Q,
+    mut pixels: F,
+) -> Result<(), RenderFail>
+where
+    F: FnMut(u16, u16, &mut [Rgb8]) -> Result<(), RenderFail>,
+{
     let mut out = [0u8; MAX_TO_PC];
     let mut pix: [Rgb8; MAX_RUN] = [[0; 3]; MAX_RUN];
     for (y, x, n) in fs.span_runs(start, len) {
         let px = &mut pix[..n as usize];
-        let mut tracer = Tracer::<f32>::new(view);
-        render_run(&mut tracer, y as u32, x as u32, px).map_err(|_| RenderFail::BadScene)?;
+        pixels(y, x, px)?;
         let m = fs
             .resend(y, x, px.as_flattened(), enc, &mut out)
             .map_err(RenderFail::Incomplete)?;

@@ -1,11 +1,9 @@
 //! The RC's side of the PC conversation, byte by byte: scene upload (answered at once), and
 //! the requests the firmware acts on (render, resend, acknowledgement). The firmware feeds it
-//! the bytes of USB CDC packets; host tests feed it what the PC side of `links_core::serial`
+//! the bytes of USB CDC packets; host tests feed it what the PC side of `crate::serial`
 //! encodes.
 
-use links_core::serial::{
-    Decoder, Encoder, RcError, ToPc, ToRc, UploadReceiver, MAX_TO_PC, MAX_TO_RC,
-};
+use crate::serial::{Decoder, Encoder, RcError, ToPc, ToRc, UploadReceiver, MAX_TO_PC, MAX_TO_RC};
 
 /// What one byte from the PC asks the firmware to do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,6 +43,11 @@ impl<'b> Session<'b> {
     /// The reply frame of the last [`Step::Reply`].
     pub fn reply(&self, n: usize) -> &[u8] {
         self.out.get(..n).unwrap_or(&[])
+    }
+
+    /// Malformed frames received from the PC so far.
+    pub fn bad_frames(&self) -> u32 {
+        self.dec.bad_frames()
     }
 
     /// The line was reset (USB reconnect): forget a partial frame.
@@ -88,8 +91,8 @@ impl<'b> Session<'b> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use links_core::serial::{Packet, MAX_CHUNK};
-    use links_core::wire::CRC32;
+    use crate::serial::{Packet, MAX_CHUNK};
+    use crate::wire::CRC32;
 
     /// Feed `frame` to the session; return the replies decoded and the other steps.
     fn feed(s: &mut Session<'_>, frame: &[u8]) -> (Vec<String>, Vec<Step>) {

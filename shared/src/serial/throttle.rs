@@ -1,5 +1,5 @@
 //! A [`RootBus`] wrapper that holds exchanges back until the readback queue has room for
-//! what they may bring back ([`crate::readback::RUN_RESERVE`] each): the root logic's pixel
+//! what they may bring back ([`super::readback::RUN_RESERVE`] each): the root logic's pixel
 //! sink cannot wait, so the bus does, and no accepted pixel is ever dropped for want of USB
 //! bandwidth (the nodes simply wait with their frames posted).
 //!
@@ -10,7 +10,7 @@
 //! flight (or not yet taken) and the new one. Only the RC's own task fills the queue, so
 //! room seen free stays free until that task pushes.
 
-use links_core::link::{LinkError, NodeId, RootBus, Transfer};
+use crate::link::{LinkError, NodeId, RootBus, Transfer};
 
 /// Something that can wait for queue space.
 #[allow(async_fn_in_trait)]

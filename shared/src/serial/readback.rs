@@ -1,10 +1,10 @@
-//! Frame readback: accepted pixel runs become `links_core::serial` frames in a byte queue
+//! Frame readback: accepted pixel runs become `crate::serial` frames in a byte queue
 //! (USB CDC on the board). Runs of the cluster bus (up to 512 pixels) are cut into serial
 //! runs (up to 256); the frame CRC is kept in whatever order runs arrive.
 
-use links_core::root::PixelSink;
-use links_core::serial::{Encoder, FrameStreamer, SerialError, MAX_RUN, MAX_TO_PC};
-use links_core::wire;
+use crate::root::PixelSink;
+use crate::serial::{Encoder, FrameStreamer, SerialError, MAX_RUN, MAX_TO_PC};
+use crate::wire;
 
 /// Where encoded frames go.
 pub trait ByteQueue {
@@ -146,7 +146,7 @@ impl<Q: ByteQueue> PixelSink for Readback<Q> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use links_core::serial::{pixel_count, pixels_into, Decoder, Packet, ToPc, MAX_TO_PC};
+    use crate::testkit::serial::read_back;
 
     struct VecQueue {
         bytes: Vec<u8>,
@@ -164,32 +164,6 @@ mod tests {
             self.bytes.extend_from_slice(b);
             true
         }
-    }
-
-    fn decode(bytes: &[u8], w: usize, h: usize) -> (Vec<u8>, Option<u32>, u32) {
-        let mut dec = Decoder::<MAX_TO_PC>::new();
-        let mut frame = vec![0u8; 3 * w * h];
-        let (mut crc, mut progress) = (None, 0);
-        for &b in bytes {
-            let Some(r) = dec.feed::<ToPc>(b) else {
-                continue;
-            };
-            let p: Packet<ToPc> = r.expect("valid frame");
-            match p.msg {
-                ToPc::Pixels { y, x, .. } | ToPc::PixelsRle { y, x, .. } => {
-                    let at = 3 * (y as usize * w + x as usize);
-                    let n = pixel_count(&p.msg);
-                    pixels_into(&p.msg, &mut frame[at..at + 3 * n]).unwrap();
-                }
-                ToPc::FrameEnd { crc: c, .. } => crc = Some(c),
-                ToPc::Progress { .. } => progress += 1,
-                ToPc::FrameHeader { width, height, .. } => {
-                    assert_eq!((width as usize, height as usize), (w, h))
-                }
-                other => panic!("unexpected {other:?}"),
-            }
-        }
-        (frame, crc, progress)
     }
 
     #[test]
@@ -216,10 +190,10 @@ mod tests {
         let mut again = [0u8; MAX_TO_PC];
         let n = ended.streamer.end(&mut ended.enc, &mut again).unwrap();
         ended.queue.bytes.extend_from_slice(&again[..n]);
-        let (got, crc, progress) = decode(&ended.queue.bytes, w, h);
-        assert_eq!(got, want);
-        assert_eq!(crc, Some(wire::CRC32.checksum(&want)));
-        assert!(progress >= 1);
+        let got = read_back(&ended.queue.bytes, w, h);
+        assert_eq!(got.rgb, want);
+        assert_eq!(got.ends.last(), Some(&wire::CRC32.checksum(&want)));
+        assert!(got.progress >= 1);
     }
 
     #[test]
