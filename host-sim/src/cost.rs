@@ -166,14 +166,54 @@ impl Default for CycleModel {
 /// The reference node clock: STM32F407 at 168 MHz.
 pub const DEFAULT_CLOCK_HZ: f64 = 168e6;
 
-/// One measured frame: its operation counts and the instructions QEMU counted.
+/// One measured frame, a row of `docs/cortex-m-bench.csv`: where it ran, what it rendered,
+/// the instructions QEMU counted and every [`Stats`] counter. The QEMU bench's report
+/// (`xtask qemu-bench`) writes these rows ([`Sample::csv_head`], [`Sample::csv_line`]) and
+/// [`parse_rows`] reads them back, so the row format is defined here once.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sample {
     pub target: String,
+    /// The number backend by `Real::NAME` (`f32`, `f32-fast`, `q16.16`).
+    pub backend: String,
     pub scene: String,
     pub techniques: String,
+    pub pixels: u64,
     pub stats: Stats,
     pub instructions: u64,
+}
+
+/// The row's columns before the [`Stats`] counters (which follow in [`Stats::NAMES`] order).
+pub const CSV_LEAD: [&str; 6] = [
+    "target",
+    "backend",
+    "scene",
+    "techniques",
+    "pixels",
+    "instructions",
+];
+
+impl Sample {
+    /// The CSV header: [`CSV_LEAD`] then every [`Stats::NAMES`], comma-separated.
+    pub fn csv_head() -> String {
+        CSV_LEAD
+            .iter()
+            .chain(Stats::NAMES.iter())
+            .copied()
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+
+    /// The row as a CSV line (no newline), in [`Sample::csv_head`]'s column order.
+    pub fn csv_line(&self) -> String {
+        let mut line = format!(
+            "{},{},{},{},{},{}",
+            self.target, self.backend, self.scene, self.techniques, self.pixels, self.instructions
+        );
+        for v in self.stats.values() {
+            line.push_str(&format!(",{v}"));
+        }
+        line
+    }
 }
 
 /// Why a calibration file could not be used.
@@ -219,6 +259,15 @@ impl std::error::Error for CalibrationError {}
 /// model is of f32 code, so rows of other number backends (column `backend`: `f32-fast`,
 /// `q16.16`) are left out; a file without that column holds f32 rows only.
 pub fn parse_samples(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
+    let mut rows = parse_rows(csv)?;
+    rows.retain(|r| r.backend == "f32");
+    Ok(rows)
+}
+
+/// Read every row of `scripts/qemu-bench`'s CSV, whatever its backend. The columns are
+/// found by name (header line); `backend` defaults to `f32` and `pixels` to 0 when the file
+/// has no such column.
+pub fn parse_rows(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
     let mut lines = csv
         .lines()
         .enumerate()
@@ -233,73 +282,48 @@ pub fn parse_samples(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
             .position(|h| *h == name)
             .ok_or_else(|| CalibrationError::MissingColumn(name.into()))
     };
-    let names = [
-        "target",
-        "scene",
-        "techniques",
-        "instructions",
-        "primary_rays",
-        "shadow_rays",
-        "reflect_rays",
-        "refract_rays",
-        "straight_rays",
-        "box_tests",
-        "triangle_tests",
-        "ellipsoid_tests",
-        "box_shape_tests",
-        "blob_tests",
-        "blob_field_evals",
-        "shadings",
-        "clip_compares",
-    ];
-    let idx: Vec<usize> = names.iter().map(|n| col(n)).collect::<Result<_, _>>()?;
-    let backend = col("backend").ok();
+    let lead = ["target", "scene", "techniques", "instructions"].map(col);
+    let [target, scene, techniques, instructions] = lead;
+    let (target, scene, techniques, instructions) = (target?, scene?, techniques?, instructions?);
+    let counters = Stats::NAMES
+        .iter()
+        .map(|n| col(n))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (backend, pixels) = (col("backend").ok(), col("pixels").ok());
     let mut out = Vec::new();
     for (i, line) in lines {
+        let line_no = i + 1;
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if let Some(b) = backend {
-            match cells.get(b) {
-                Some(&"f32") => {}
-                Some(_) => continue,
-                None => return Err(CalibrationError::ShortRow { line: i + 1 }),
-            }
-        }
         let cell = |k: usize| {
             cells
-                .get(idx[k])
+                .get(k)
                 .copied()
-                .ok_or(CalibrationError::ShortRow { line: i + 1 })
+                .ok_or(CalibrationError::ShortRow { line: line_no })
         };
         let num = |k: usize| -> Result<u64, CalibrationError> {
             let v = cell(k)?;
             v.parse().map_err(|_| CalibrationError::BadNumber {
-                line: i + 1,
-                column: names[k].into(),
+                line: line_no,
+                column: header[k].into(),
                 value: v.into(),
             })
         };
-        let stats = Stats {
-            primary_rays: num(4)?,
-            shadow_rays: num(5)?,
-            reflect_rays: num(6)?,
-            refract_rays: num(7)?,
-            straight_rays: num(8)?,
-            box_tests: num(9)?,
-            triangle_tests: num(10)?,
-            ellipsoid_tests: num(11)?,
-            box_shape_tests: num(12)?,
-            blob_tests: num(13)?,
-            blob_field_evals: num(14)?,
-            shadings: num(15)?,
-            clip_compares: num(16)?,
-            ..Stats::default()
+        let backend = match backend {
+            Some(b) => cell(b)?,
+            None => "f32",
         };
+        let mut values = [0u64; Stats::COUNT];
+        for (v, &k) in values.iter_mut().zip(&counters) {
+            *v = num(k)?;
+        }
         out.push(Sample {
-            target: cell(0)?.into(),
-            scene: cell(1)?.into(),
-            techniques: cell(2)?.into(),
-            stats,
-            instructions: num(3)?,
+            target: cell(target)?.into(),
+            backend: backend.into(),
+            scene: cell(scene)?.into(),
+            techniques: cell(techniques)?.into(),
+            pixels: pixels.map(num).transpose()?.unwrap_or(0),
+            stats: Stats::from_values(values),
+            instructions: num(instructions)?,
         });
     }
     Ok(out)
@@ -555,6 +579,22 @@ mod tests {
             parse_samples(&format!("{head}\nm4\n")),
             Err(CalibrationError::ShortRow { line: 2 })
         ));
+    }
+
+    /// The row writer reproduces the committed CSV byte for byte from the rows it reads.
+    #[test]
+    fn committed_csv_round_trips_through_the_row_type() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cortex-m-bench.csv");
+        let Ok(csv) = std::fs::read_to_string(path) else {
+            panic!("{path} missing: run scripts/qemu-bench");
+        };
+        let rows = parse_rows(&csv).unwrap();
+        let mut again = Sample::csv_head() + "\n";
+        for r in &rows {
+            again += &r.csv_line();
+            again.push('\n');
+        }
+        assert_eq!(again, csv);
     }
 
     /// The committed model must predict every frame QEMU measured (the committed CSV).
