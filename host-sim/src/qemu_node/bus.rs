@@ -81,6 +81,25 @@ pub(super) struct LockstepBus<N> {
     pub(super) inflight: Option<Vec<u8>>,
 }
 
+impl<N> LockstepBus<N> {
+    /// A bus to `node`, which has not yet run, with nothing in flight.
+    pub(super) fn new(node: N) -> Self {
+        LockstepBus {
+            inner: RefCell::new(BusInner {
+                node,
+                settled: false,
+                tx: None,
+                ended: None,
+                transcript: Vec::new(),
+                error: None,
+            }),
+            banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+            idle: 0,
+            inflight: None,
+        }
+    }
+}
+
 impl<N: NodeSide> RootBus for LockstepBus<N> {
     fn nodes(&self) -> (NodeId, u16) {
         (0, 1)
@@ -232,19 +251,7 @@ pub fn run_rc_buffered<N: NodeSide>(
         writes: vec![0; n],
         stray: 0,
     });
-    let mut bus = LockstepBus {
-        inner: RefCell::new(BusInner {
-            node,
-            settled: false,
-            tx: None,
-            ended: None,
-            transcript: Vec::new(),
-            error: None,
-        }),
-        banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
-        idle: 0,
-        inflight: None,
-    };
+    let mut bus = LockstepBus::new(node);
     let result = {
         let fut = run_bus(0, &mut bus, &NoClock, &root, &scenes[..], &sink);
         let mut fut = std::pin::pin!(fut);

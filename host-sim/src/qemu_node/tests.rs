@@ -1,9 +1,8 @@
-use super::bus::{BusInner, LockstepBus};
+use super::bus::LockstepBus;
 use super::*;
 use links_core::dm::{compile, CompileOptions};
 use links_core::link::{LinkError, RootBus, Transfer};
 use links_core::wire::{self, Down, Up, MAX_FRAME};
-use std::cell::RefCell;
 use std::future::Future;
 use std::task::{Context, Poll, Waker};
 
@@ -90,19 +89,7 @@ fn lock_step_rc_single_and_double_buffered_assemble_the_same_frame() {
 
 #[test]
 fn lock_step_bus_keeps_one_transfer_in_flight() {
-    let mut bus = LockstepBus {
-        inner: RefCell::new(BusInner {
-            node: LocalNode::new(),
-            settled: false,
-            tx: None,
-            ended: None,
-            transcript: Vec::new(),
-            error: None,
-        }),
-        banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
-        idle: 0,
-        inflight: None,
-    };
+    let mut bus = LockstepBus::new(LocalNode::new());
     let mut rx = [0u8; MAX_FRAME];
     fn poll<F: Future>(f: F) -> F::Output {
         let mut f = std::pin::pin!(f);
