@@ -16,62 +16,73 @@
 use links_core::render::Stats;
 use std::fmt;
 
-/// Instructions per operation and the cycles each instruction takes on average.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CycleModel {
-    pub name: &'static str,
-    /// Per primary ray: pixel set-up, clipping sweep, surface, shading set-up, the write.
-    pub per_primary_ray: f64,
-    /// Per reflected, refracted or straight-through ray (spawn, traversal set-up, surface).
-    pub per_secondary_ray: f64,
-    /// Per shadow ray (light direction, offset origin, any-hit walk set-up).
-    pub per_shadow_ray: f64,
-    /// One node visit: reading the node and its slab test (plus traversal bookkeeping).
-    pub per_box_test: f64,
-    pub per_triangle_test: f64,
-    pub per_ellipsoid_test: f64,
-    pub per_box_shape_test: f64,
-    /// Per density-sphere group test (pre-pass over the balls), plus per field evaluation.
-    pub per_blob_test: f64,
-    pub per_blob_field_eval: f64,
-    /// One evaluation of eq. 2.1 (its shadow rays are counted as rays).
-    pub per_shading: f64,
-    /// One integer compare of Y/X screen clipping.
-    pub per_clip_compare: f64,
-    /// Average cycles per instruction.
-    pub cycles_per_instruction: f64,
+/// Defines [`CycleModel`] from one list of weights: each weight's field, the name of the
+/// feature it weighs and how that feature is counted from [`Stats`]. [`FEATURES`],
+/// [`features`], [`CycleModel::weights`] and [`CycleModel::with_weights`] all follow it.
+macro_rules! define_cycle_model {
+    ($($(#[$doc:meta])* $weight:ident: $feature:literal = |$s:ident| $count:expr,)*) => {
+        /// Instructions per operation and the cycles each instruction takes on average.
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct CycleModel {
+            pub name: &'static str,
+            $($(#[$doc])* pub $weight: f64,)*
+            /// Average cycles per instruction.
+            pub cycles_per_instruction: f64,
+        }
+
+        /// The counters the model weighs, in [`CycleModel::weights`] order.
+        pub const FEATURES: [&str; 11] = [$($feature),*];
+
+        /// The feature vector of some counts, in [`FEATURES`] order.
+        pub fn features(s: &Stats) -> [f64; 11] {
+            [$({
+                let $s = s;
+                $count as f64
+            }),*]
+        }
+
+        impl CycleModel {
+            /// The weights in [`FEATURES`] order.
+            pub fn weights(&self) -> [f64; 11] {
+                [$(self.$weight),*]
+            }
+
+            /// A model with these weights (in [`FEATURES`] order).
+            pub fn with_weights(
+                name: &'static str,
+                w: [f64; 11],
+                cycles_per_instruction: f64,
+            ) -> Self {
+                let [$($weight),*] = w;
+                CycleModel {
+                    name,
+                    $($weight,)*
+                    cycles_per_instruction,
+                }
+            }
+        }
+    };
 }
 
-/// The counters the model weighs, in [`CycleModel::weights`] order.
-pub const FEATURES: [&str; 11] = [
-    "primary_rays",
-    "secondary_rays",
-    "shadow_rays",
-    "box_tests",
-    "triangle_tests",
-    "ellipsoid_tests",
-    "box_shape_tests",
-    "blob_tests",
-    "blob_field_evals",
-    "shadings",
-    "clip_compares",
-];
-
-/// The feature vector of some counts, in [`FEATURES`] order.
-pub fn features(s: &Stats) -> [f64; 11] {
-    [
-        s.primary_rays as f64,
-        (s.reflect_rays + s.refract_rays + s.straight_rays) as f64,
-        s.shadow_rays as f64,
-        s.box_tests as f64,
-        s.triangle_tests as f64,
-        s.ellipsoid_tests as f64,
-        s.box_shape_tests as f64,
-        s.blob_tests as f64,
-        s.blob_field_evals as f64,
-        s.shadings as f64,
-        s.clip_compares as f64,
-    ]
+define_cycle_model! {
+    /// Per primary ray: pixel set-up, clipping sweep, surface, shading set-up, the write.
+    per_primary_ray: "primary_rays" = |s| s.primary_rays,
+    /// Per reflected, refracted or straight-through ray (spawn, traversal set-up, surface).
+    per_secondary_ray: "secondary_rays" = |s| (s.reflect_rays + s.refract_rays + s.straight_rays),
+    /// Per shadow ray (light direction, offset origin, any-hit walk set-up).
+    per_shadow_ray: "shadow_rays" = |s| s.shadow_rays,
+    /// One node visit: reading the node and its slab test (plus traversal bookkeeping).
+    per_box_test: "box_tests" = |s| s.box_tests,
+    per_triangle_test: "triangle_tests" = |s| s.triangle_tests,
+    per_ellipsoid_test: "ellipsoid_tests" = |s| s.ellipsoid_tests,
+    per_box_shape_test: "box_shape_tests" = |s| s.box_shape_tests,
+    /// Per density-sphere group test (pre-pass over the balls), plus per field evaluation.
+    per_blob_test: "blob_tests" = |s| s.blob_tests,
+    per_blob_field_eval: "blob_field_evals" = |s| s.blob_field_evals,
+    /// One evaluation of eq. 2.1 (its shadow rays are counted as rays).
+    per_shading: "shadings" = |s| s.shadings,
+    /// One integer compare of Y/X screen clipping.
+    per_clip_compare: "clip_compares" = |s| s.clip_compares,
 }
 
 impl CycleModel {
@@ -100,42 +111,6 @@ impl CycleModel {
         per_clip_compare: 0.0,
         cycles_per_instruction: 1.3,
     };
-
-    /// The weights in [`FEATURES`] order.
-    pub fn weights(&self) -> [f64; 11] {
-        [
-            self.per_primary_ray,
-            self.per_secondary_ray,
-            self.per_shadow_ray,
-            self.per_box_test,
-            self.per_triangle_test,
-            self.per_ellipsoid_test,
-            self.per_box_shape_test,
-            self.per_blob_test,
-            self.per_blob_field_eval,
-            self.per_shading,
-            self.per_clip_compare,
-        ]
-    }
-
-    /// A model with these weights (in [`FEATURES`] order).
-    pub fn with_weights(name: &'static str, w: [f64; 11], cycles_per_instruction: f64) -> Self {
-        CycleModel {
-            name,
-            per_primary_ray: w[0],
-            per_secondary_ray: w[1],
-            per_shadow_ray: w[2],
-            per_box_test: w[3],
-            per_triangle_test: w[4],
-            per_ellipsoid_test: w[5],
-            per_box_shape_test: w[6],
-            per_blob_test: w[7],
-            per_blob_field_eval: w[8],
-            per_shading: w[9],
-            per_clip_compare: w[10],
-            cycles_per_instruction,
-        }
-    }
 
     /// Instructions the counted work takes.
     pub fn instructions(&self, s: &Stats) -> f64 {
