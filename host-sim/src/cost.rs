@@ -556,13 +556,17 @@ mod tests {
         ));
     }
 
+    /// `docs/cortex-m-bench.csv`, as committed.
+    fn committed_csv() -> String {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cortex-m-bench.csv");
+        std::fs::read_to_string(path)
+            .unwrap_or_else(|e| panic!("{path}: {e} (run scripts/qemu-bench)"))
+    }
+
     /// The row writer reproduces the committed CSV byte for byte from the rows it reads.
     #[test]
     fn committed_csv_round_trips_through_the_row_type() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cortex-m-bench.csv");
-        let Ok(csv) = std::fs::read_to_string(path) else {
-            panic!("{path} missing: run scripts/qemu-bench");
-        };
+        let csv = committed_csv();
         let rows = parse_rows(&csv).unwrap();
         let mut again = Sample::csv_head() + "\n";
         for r in &rows {
@@ -575,10 +579,7 @@ mod tests {
     /// The committed model must predict every frame QEMU measured (the committed CSV).
     #[test]
     fn committed_model_predicts_the_measured_frames() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cortex-m-bench.csv");
-        let Ok(csv) = std::fs::read_to_string(path) else {
-            panic!("{path} missing: run scripts/qemu-bench");
-        };
+        let csv = committed_csv();
         let samples = parse_samples(&csv).unwrap();
         let ratios = prediction_ratios(
             &CycleModel::CORTEX_M4F_F32,
