@@ -16,62 +16,73 @@
 use links_core::render::Stats;
 use std::fmt;
 
-/// Instructions per operation and the cycles each instruction takes on average.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CycleModel {
-    pub name: &'static str,
-    /// Per primary ray: pixel set-up, clipping sweep, surface, shading set-up, the write.
-    pub per_primary_ray: f64,
-    /// Per reflected, refracted or straight-through ray (spawn, traversal set-up, surface).
-    pub per_secondary_ray: f64,
-    /// Per shadow ray (light direction, offset origin, any-hit walk set-up).
-    pub per_shadow_ray: f64,
-    /// One node visit: reading the node and its slab test (plus traversal bookkeeping).
-    pub per_box_test: f64,
-    pub per_triangle_test: f64,
-    pub per_ellipsoid_test: f64,
-    pub per_box_shape_test: f64,
-    /// Per density-sphere group test (pre-pass over the balls), plus per field evaluation.
-    pub per_blob_test: f64,
-    pub per_blob_field_eval: f64,
-    /// One evaluation of eq. 2.1 (its shadow rays are counted as rays).
-    pub per_shading: f64,
-    /// One integer compare of Y/X screen clipping.
-    pub per_clip_compare: f64,
-    /// Average cycles per instruction.
-    pub cycles_per_instruction: f64,
+/// Defines [`CycleModel`] from one list of weights: each weight's field, the name of the
+/// feature it weighs and how that feature is counted from [`Stats`]. [`FEATURES`],
+/// [`features`], [`CycleModel::weights`] and [`CycleModel::with_weights`] all follow it.
+macro_rules! define_cycle_model {
+    ($($(#[$doc:meta])* $weight:ident: $feature:literal = |$s:ident| $count:expr,)*) => {
+        /// Instructions per operation and the cycles each instruction takes on average.
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub struct CycleModel {
+            pub name: &'static str,
+            $($(#[$doc])* pub $weight: f64,)*
+            /// Average cycles per instruction.
+            pub cycles_per_instruction: f64,
+        }
+
+        /// The counters the model weighs, in [`CycleModel::weights`] order.
+        pub const FEATURES: [&str; 11] = [$($feature),*];
+
+        /// The feature vector of some counts, in [`FEATURES`] order.
+        pub fn features(s: &Stats) -> [f64; 11] {
+            [$({
+                let $s = s;
+                $count as f64
+            }),*]
+        }
+
+        impl CycleModel {
+            /// The weights in [`FEATURES`] order.
+            pub fn weights(&self) -> [f64; 11] {
+                [$(self.$weight),*]
+            }
+
+            /// A model with these weights (in [`FEATURES`] order).
+            pub fn with_weights(
+                name: &'static str,
+                w: [f64; 11],
+                cycles_per_instruction: f64,
+            ) -> Self {
+                let [$($weight),*] = w;
+                CycleModel {
+                    name,
+                    $($weight,)*
+                    cycles_per_instruction,
+                }
+            }
+        }
+    };
 }
 
-/// The counters the model weighs, in [`CycleModel::weights`] order.
-pub const FEATURES: [&str; 11] = [
-    "primary_rays",
-    "secondary_rays",
-    "shadow_rays",
-    "box_tests",
-    "triangle_tests",
-    "ellipsoid_tests",
-    "box_shape_tests",
-    "blob_tests",
-    "blob_field_evals",
-    "shadings",
-    "clip_compares",
-];
-
-/// The feature vector of some counts, in [`FEATURES`] order.
-pub fn features(s: &Stats) -> [f64; 11] {
-    [
-        s.primary_rays as f64,
-        (s.reflect_rays + s.refract_rays + s.straight_rays) as f64,
-        s.shadow_rays as f64,
-        s.box_tests as f64,
-        s.triangle_tests as f64,
-        s.ellipsoid_tests as f64,
-        s.box_shape_tests as f64,
-        s.blob_tests as f64,
-        s.blob_field_evals as f64,
-        s.shadings as f64,
-        s.clip_compares as f64,
-    ]
+define_cycle_model! {
+    /// Per primary ray: pixel set-up, clipping sweep, surface, shading set-up, the write.
+    per_primary_ray: "primary_rays" = |s| s.primary_rays,
+    /// Per reflected, refracted or straight-through ray (spawn, traversal set-up, surface).
+    per_secondary_ray: "secondary_rays" = |s| (s.reflect_rays + s.refract_rays + s.straight_rays),
+    /// Per shadow ray (light direction, offset origin, any-hit walk set-up).
+    per_shadow_ray: "shadow_rays" = |s| s.shadow_rays,
+    /// One node visit: reading the node and its slab test (plus traversal bookkeeping).
+    per_box_test: "box_tests" = |s| s.box_tests,
+    per_triangle_test: "triangle_tests" = |s| s.triangle_tests,
+    per_ellipsoid_test: "ellipsoid_tests" = |s| s.ellipsoid_tests,
+    per_box_shape_test: "box_shape_tests" = |s| s.box_shape_tests,
+    /// Per density-sphere group test (pre-pass over the balls), plus per field evaluation.
+    per_blob_test: "blob_tests" = |s| s.blob_tests,
+    per_blob_field_eval: "blob_field_evals" = |s| s.blob_field_evals,
+    /// One evaluation of eq. 2.1 (its shadow rays are counted as rays).
+    per_shading: "shadings" = |s| s.shadings,
+    /// One integer compare of Y/X screen clipping.
+    per_clip_compare: "clip_compares" = |s| s.clip_compares,
 }
 
 impl CycleModel {
@@ -100,42 +111,6 @@ impl CycleModel {
         per_clip_compare: 0.0,
         cycles_per_instruction: 1.3,
     };
-
-    /// The weights in [`FEATURES`] order.
-    pub fn weights(&self) -> [f64; 11] {
-        [
-            self.per_primary_ray,
-            self.per_secondary_ray,
-            self.per_shadow_ray,
-            self.per_box_test,
-            self.per_triangle_test,
-            self.per_ellipsoid_test,
-            self.per_box_shape_test,
-            self.per_blob_test,
-            self.per_blob_field_eval,
-            self.per_shading,
-            self.per_clip_compare,
-        ]
-    }
-
-    /// A model with these weights (in [`FEATURES`] order).
-    pub fn with_weights(name: &'static str, w: [f64; 11], cycles_per_instruction: f64) -> Self {
-        CycleModel {
-            name,
-            per_primary_ray: w[0],
-            per_secondary_ray: w[1],
-            per_shadow_ray: w[2],
-            per_box_test: w[3],
-            per_triangle_test: w[4],
-            per_ellipsoid_test: w[5],
-            per_box_shape_test: w[6],
-            per_blob_test: w[7],
-            per_blob_field_eval: w[8],
-            per_shading: w[9],
-            per_clip_compare: w[10],
-            cycles_per_instruction,
-        }
-    }
 
     /// Instructions the counted work takes.
     pub fn instructions(&self, s: &Stats) -> f64 {
@@ -166,14 +141,54 @@ impl Default for CycleModel {
 /// The reference node clock: STM32F407 at 168 MHz.
 pub const DEFAULT_CLOCK_HZ: f64 = 168e6;
 
-/// One measured frame: its operation counts and the instructions QEMU counted.
+/// One measured frame, a row of `docs/cortex-m-bench.csv`: where it ran, what it rendered,
+/// the instructions QEMU counted and every [`Stats`] counter. The QEMU bench's report
+/// (`xtask qemu-bench`) writes these rows ([`Sample::csv_head`], [`Sample::csv_line`]) and
+/// [`parse_rows`] reads them back, so the row format is defined here once.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sample {
     pub target: String,
+    /// The number backend by `Real::NAME` (`f32`, `f32-fast`, `q16.16`).
+    pub backend: String,
     pub scene: String,
     pub techniques: String,
+    pub pixels: u64,
     pub stats: Stats,
     pub instructions: u64,
+}
+
+/// The row's columns before the [`Stats`] counters (which follow in [`Stats::NAMES`] order).
+pub const CSV_LEAD: [&str; 6] = [
+    "target",
+    "backend",
+    "scene",
+    "techniques",
+    "pixels",
+    "instructions",
+];
+
+impl Sample {
+    /// The CSV header: [`CSV_LEAD`] then every [`Stats::NAMES`], comma-separated.
+    pub fn csv_head() -> String {
+        CSV_LEAD
+            .iter()
+            .chain(Stats::NAMES.iter())
+            .copied()
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+
+    /// The row as a CSV line (no newline), in [`Sample::csv_head`]'s column order.
+    pub fn csv_line(&self) -> String {
+        let mut line = format!(
+            "{},{},{},{},{},{}",
+            self.target, self.backend, self.scene, self.techniques, self.pixels, self.instructions
+        );
+        for v in self.stats.values() {
+            line.push_str(&format!(",{v}"));
+        }
+        line
+    }
 }
 
 /// Why a calibration file could not be used.
@@ -219,6 +234,15 @@ impl std::error::Error for CalibrationError {}
 /// model is of f32 code, so rows of other number backends (column `backend`: `f32-fast`,
 /// `q16.16`) are left out; a file without that column holds f32 rows only.
 pub fn parse_samples(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
+    let mut rows = parse_rows(csv)?;
+    rows.retain(|r| r.backend == "f32");
+    Ok(rows)
+}
+
+/// Read every row of `scripts/qemu-bench`'s CSV, whatever its backend. The columns are
+/// found by name (header line); `backend` defaults to `f32` and `pixels` to 0 when the file
+/// has no such column.
+pub fn parse_rows(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
     let mut lines = csv
         .lines()
         .enumerate()
@@ -233,73 +257,48 @@ pub fn parse_samples(csv: &str) -> Result<Vec<Sample>, CalibrationError> {
             .position(|h| *h == name)
             .ok_or_else(|| CalibrationError::MissingColumn(name.into()))
     };
-    let names = [
-        "target",
-        "scene",
-        "techniques",
-        "instructions",
-        "primary_rays",
-        "shadow_rays",
-        "reflect_rays",
-        "refract_rays",
-        "straight_rays",
-        "box_tests",
-        "triangle_tests",
-        "ellipsoid_tests",
-        "box_shape_tests",
-        "blob_tests",
-        "blob_field_evals",
-        "shadings",
-        "clip_compares",
-    ];
-    let idx: Vec<usize> = names.iter().map(|n| col(n)).collect::<Result<_, _>>()?;
-    let backend = col("backend").ok();
+    let lead = ["target", "scene", "techniques", "instructions"].map(col);
+    let [target, scene, techniques, instructions] = lead;
+    let (target, scene, techniques, instructions) = (target?, scene?, techniques?, instructions?);
+    let counters = Stats::NAMES
+        .iter()
+        .map(|n| col(n))
+        .collect::<Result<Vec<_>, _>>()?;
+    let (backend, pixels) = (col("backend").ok(), col("pixels").ok());
     let mut out = Vec::new();
     for (i, line) in lines {
+        let line_no = i + 1;
         let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if let Some(b) = backend {
-            match cells.get(b) {
-                Some(&"f32") => {}
-                Some(_) => continue,
-                None => return Err(CalibrationError::ShortRow { line: i + 1 }),
-            }
-        }
         let cell = |k: usize| {
             cells
-                .get(idx[k])
+                .get(k)
                 .copied()
-                .ok_or(CalibrationError::ShortRow { line: i + 1 })
+                .ok_or(CalibrationError::ShortRow { line: line_no })
         };
         let num = |k: usize| -> Result<u64, CalibrationError> {
             let v = cell(k)?;
             v.parse().map_err(|_| CalibrationError::BadNumber {
-                line: i + 1,
-                column: names[k].into(),
+                line: line_no,
+                column: header[k].into(),
                 value: v.into(),
             })
         };
-        let stats = Stats {
-            primary_rays: num(4)?,
-            shadow_rays: num(5)?,
-            reflect_rays: num(6)?,
-            refract_rays: num(7)?,
-            straight_rays: num(8)?,
-            box_tests: num(9)?,
-            triangle_tests: num(10)?,
-            ellipsoid_tests: num(11)?,
-            box_shape_tests: num(12)?,
-            blob_tests: num(13)?,
-            blob_field_evals: num(14)?,
-            shadings: num(15)?,
-            clip_compares: num(16)?,
-            ..Stats::default()
+        let backend = match backend {
+            Some(b) => cell(b)?,
+            None => "f32",
         };
+        let mut values = [0u64; Stats::COUNT];
+        for (v, &k) in values.iter_mut().zip(&counters) {
+            *v = num(k)?;
+        }
         out.push(Sample {
-            target: cell(0)?.into(),
-            scene: cell(1)?.into(),
-            techniques: cell(2)?.into(),
-            stats,
-            instructions: num(3)?,
+            target: cell(target)?.into(),
+            backend: backend.into(),
+            scene: cell(scene)?.into(),
+            techniques: cell(techniques)?.into(),
+            pixels: pixels.map(num).transpose()?.unwrap_or(0),
+            stats: Stats::from_values(values),
+            instructions: num(instructions)?,
         });
     }
     Ok(out)
@@ -557,13 +556,30 @@ mod tests {
         ));
     }
 
+    /// `docs/cortex-m-bench.csv`, as committed.
+    fn committed_csv() -> String {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cortex-m-bench.csv");
+        std::fs::read_to_string(path)
+            .unwrap_or_else(|e| panic!("{path}: {e} (run scripts/qemu-bench)"))
+    }
+
+    /// The row writer reproduces the committed CSV byte for byte from the rows it reads.
+    #[test]
+    fn committed_csv_round_trips_through_the_row_type() {
+        let csv = committed_csv();
+        let rows = parse_rows(&csv).unwrap();
+        let mut again = Sample::csv_head() + "\n";
+        for r in &rows {
+            again += &r.csv_line();
+            again.push('\n');
+        }
+        assert_eq!(again, csv);
+    }
+
     /// The committed model must predict every frame QEMU measured (the committed CSV).
     #[test]
     fn committed_model_predicts_the_measured_frames() {
-        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/cortex-m-bench.csv");
-        let Ok(csv) = std::fs::read_to_string(path) else {
-            panic!("{path} missing: run scripts/qemu-bench");
-        };
+        let csv = committed_csv();
         let samples = parse_samples(&csv).unwrap();
         let ratios = prediction_ratios(
             &CycleModel::CORTEX_M4F_F32,

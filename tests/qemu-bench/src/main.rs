@@ -178,33 +178,19 @@ mod linebuf {
     }
 }
 
+/// Every `Stats` counter as `name=value`, in [`Stats::NAMES`] order (the RUN line's counters;
+/// `xtask qemu-bench` reads them back by those names, so a new counter needs no change here).
 fn stats_kv(s: &Stats) -> StatsKv<'_> {
     StatsKv(s)
 }
 struct StatsKv<'a>(&'a Stats);
 impl core::fmt::Display for StatsKv<'_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        let s = self.0;
-        write!(
-            f,
-            "primary={} shadow={} reflect={} refract={} straight={} rays={} box={} tri={} ell={} boxshape={} blob={} fevals={} shadings={} clipc={} clipo={} sexit={}",
-            s.primary_rays,
-            s.shadow_rays,
-            s.reflect_rays,
-            s.refract_rays,
-            s.straight_rays,
-            s.rays(),
-            s.box_tests,
-            s.triangle_tests,
-            s.ellipsoid_tests,
-            s.box_shape_tests,
-            s.blob_tests,
-            s.blob_field_evals,
-            s.shadings,
-            s.clip_compares,
-            s.clip_overflows,
-            s.shadow_early_exits
-        )
+        for (i, (name, value)) in Stats::NAMES.iter().zip(self.0.values()).enumerate() {
+            let sep = if i == 0 { "" } else { " " };
+            write!(f, "{sep}{name}={value}")?;
+        }
+        Ok(())
     }
 }
 
