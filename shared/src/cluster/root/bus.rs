@@ -35,6 +35,188 @@ enum Sent {
     Broadcast,
 }
 
+/// One bus task's own state between transfers.
+struct BusState {
+    /// Broadcast position: frame, byte offset (None = SceneEnd next).
+    bframe: u16,
+    boffset: Option<u32>,
+    /// When this bus finished broadcasting each of the two latest frames' scenes (µs), by
+    /// `frame % 2`: a node owing its static region is timed from then.
+    scene_sent: [Option<(u16, u64)>; 2],
+    /// Orphaning events this bus has broadcast `Wake` for.
+    woken: u16,
+    /// Roll calls: when the next may go out while work waits (None: nothing waits), and the
+    /// interval after it (doubles while the wait lasts, up to two time-outs: a lost `Wake` is
+    /// repeated within a bounded delay, a node that never answers costs one small broadcast
+    /// per two time-outs).
+    call_at: Option<u64>,
+    call_every: u64,
+    /// The transfer on the wire (double buffering only).
+    inflight: Option<Sent>,
+}
+
+impl BusState {
+    const NEW: BusState = BusState {
+        bframe: 0,
+        boffset: Some(0),
+        scene_sent: [None; 2],
+        woken: 0,
+        call_at: None,
+        call_every: 0,
+        inflight: None,
+    };
+
+    /// When this bus finished broadcasting frame `f`'s scene (µs), if it has.
+    fn scene_sent(&self, f: u16) -> Option<u64> {
+        self.scene_sent[(f % 2) as usize]
+            .filter(|&(g, _)| g == f)
+            .map(|(_, t)| t)
+    }
+
+    /// The frame to call a roll for now, if any: `waiting` is the frame work waits on
+    /// ([`RootState::roll_call`]), `orphaned` the RC's count of orphaning events, `every`
+    /// the time-out in force.
+    fn roll_call(
+        &mut self,
+        waiting: Option<u16>,
+        orphaned: u16,
+        every: u64,
+        now: u64,
+    ) -> Option<u16> {
+        let frame = match waiting {
+            None => {
+                self.call_at = None;
+                return None;
+            }
+            Some(frame) => frame,
+        };
+        // Jobs became orphans (on any bus): idle nodes must be told to ask for
+        // them at once. Otherwise call once the wait has lasted a time-out.
+        if orphaned > self.woken {
+            self.woken = orphaned;
+            self.call_at = Some(now);
+            self.call_every = every;
+        }
+        let at = *self.call_at.get_or_insert_with(|| {
+            self.call_every = every;
+            now.saturating_add(every)
+        });
+        if now >= at {
+            self.call_at = Some(now.saturating_add(self.call_every));
+            self.call_every = self
+                .call_every
+                .saturating_mul(2)
+                .min(every.saturating_mul(2));
+            return Some(frame);
+        }
+        None
+    }
+
+    /// Compose the next broadcast of the scene (a chunk, or `SceneEnd` after the last) into
+    /// `tx`; returns its length.
+    fn compose_scene<C: RootClock, S: SceneSource + ?Sized>(
+        &mut self,
+        clock: &C,
+        root: &RefCell<RootState>,
+        scenes: &S,
+        tx: &mut [u8],
+    ) -> Result<usize, RootError> {
+        let bframe = self.bframe;
+        let scene = scenes
+            .scene(bframe)
+            .ok_or(RootError::BadScene { frame: bframe })?;
+        let crc = root
+            .borrow_mut()
+            .scene_crc(bframe, scene, scenes.scene_crc(bframe));
+        let n = match self.boffset {
+            Some(off) => {
+                let start = off as usize;
+                let end = (start + SCENE_CHUNK).min(scene.len());
+                let msg = Down::Scene {
+                    frame: bframe,
+                    offset: off,
+                    total: scene.len() as u32,
+                    crc,
+                    data: &scene[start..end],
+                };
+                self.boffset = (end < scene.len()).then_some(end as u32);
+                wire::encode(0, 0, &msg, tx).unwrap_or(0)
+            }
+            None => {
+                let msg = Down::SceneEnd {
+                    frame: bframe,
+                    len: scene.len() as u32,
+                    crc,
+                };
+                self.scene_sent[(bframe % 2) as usize] = Some((bframe, clock.now_us()));
+                self.bframe += 1;
+                self.boffset = Some(0);
+                wire::encode(0, 0, &msg, tx).unwrap_or(0)
+            }
+        };
+        Ok(n)
+    }
+}
+
+/// Every frame is complete: take the transfer still on the wire, broadcast `Stop`.
+async fn stop<B: RootBus, C: RootClock, P: PixelSink>(
+    st: &mut BusState,
+    rx: &mut [u8],
+    bus: &mut B,
+    clock: &C,
+    root: &RefCell<RootState>,
+    sink: &RefCell<P>,
+) -> Result<RootReport, RootError> {
+    if let Some(sent) = st.inflight.take() {
+        let got = bus.finish(rx).await?;
+        complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
+    }
+    let n = wire::encode(0, 0, &Down::Stop, bus.tx_bank()).unwrap_or(0);
+    clock.worked(RcWork::Encode { bytes: n }).await;
+    bus.start(Transfer::Broadcast, n)?;
+    bus.finish(rx).await?;
+    Ok(root.borrow().report())
+}
+
+/// Nothing to send: wait for a node's ready line (returned), the end of the last frame,
+/// the next deadline or roll call, or (`can_send`) the DM producing frame `bframe`.
+#[allow(clippy::too_many_arguments)]
+async fn wait_for_work<B: RootBus, C: RootClock, S: SceneSource + ?Sized>(
+    index: usize,
+    bus: &mut B,
+    clock: &C,
+    root: &RefCell<RootState>,
+    scenes: &S,
+    st: &BusState,
+    sent: Option<u64>,
+    can_send: bool,
+) -> Option<NodeId> {
+    let (first, count) = bus.nodes();
+    let deadline = match (root.borrow().next_deadline(first, count, sent), st.call_at) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    };
+    let timer = async {
+        match deadline {
+            Some(t) => clock.at_us(t).await,
+            None => core::future::pending::<()>().await,
+        }
+    };
+    let bframe = st.bframe;
+    let dm = async {
+        if can_send {
+            scenes.wait_produced(bframe).await
+        } else {
+            core::future::pending::<()>().await
+        }
+    };
+    let end = Finished { root, slot: index };
+    match select4(bus.wait_ready(), end, timer, dm).await {
+        Either4::First(n) => Some(n),
+        _ => None,
+    }
+}
+
 /// Drive one bus until every frame is complete, then broadcast `Stop`. `index` numbers the
 /// bus tasks (0..[`MAX_BUSES`]) sharing `root`.
 ///
@@ -53,105 +235,47 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
 ) -> Result<RootReport, RootError> {
     let mut rx = [0u8; MAX_FRAME];
     let double = root.borrow().cfg.double_buffer;
-    // Broadcast position: frame, byte offset (None = SceneEnd next).
-    let mut bframe: u16 = 0;
-    let mut boffset: Option<u32> = Some(0);
-    // When this bus finished broadcasting each of the two latest frames' scenes (µs), by
-    // `frame % 2`: a node owing its static region is timed from then.
-    let mut scene_sent: [Option<(u16, u64)>; 2] = [None; 2];
-    // Orphaning events this bus has broadcast `Wake` for.
-    let mut woken: u16 = 0;
-    // Roll calls: when the next may go out while work waits (None: nothing waits), and the
-    // interval after it (doubles while the wait lasts, up to two time-outs: a lost `Wake` is
-    // repeated within a bounded delay, a node that never answers costs one small broadcast
-    // per two time-outs).
-    let mut call_at: Option<u64> = None;
-    let mut call_every: u64 = 0;
-    // The transfer on the wire (double buffering only).
-    let mut inflight: Option<Sent> = None;
+    let mut st = BusState::NEW;
     let (first, count) = bus.nodes();
     loop {
         if root.borrow().finished() {
-            if let Some(sent) = inflight.take() {
-                let got = bus.finish(&mut rx).await?;
-                complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
-            }
-            let n = wire::encode(0, 0, &Down::Stop, bus.tx_bank()).unwrap_or(0);
-            clock.worked(RcWork::Encode { bytes: n }).await;
-            bus.start(Transfer::Broadcast, n)?;
-            bus.finish(&mut rx).await?;
-            return Ok(root.borrow().report());
+            return stop(&mut st, &mut rx, bus, clock, root, sink).await;
         }
         // 1. Choose the next transfer and compose it into the idle TX bank.
         let mut ready = bus.ready();
         let mut wake: Option<u16> = None;
         if ready.is_none() {
             let now = clock.now_us();
-            let f = root.borrow().handing_out();
-            let sent = scene_sent[(f % 2) as usize]
-                .filter(|&(g, _)| g == f)
-                .map(|(_, t)| t);
+            let sent = st.scene_sent(root.borrow().handing_out());
             root.borrow_mut().expire(first, count, now, sent);
-            let waiting = root.borrow().roll_call(first, count, bframe);
-            let every = root.borrow().timeout_us();
-            match waiting {
-                None => call_at = None,
-                Some(frame) => {
-                    // Jobs became orphans (on any bus): idle nodes must be told to ask for
-                    // them at once. Otherwise call once the wait has lasted a time-out.
-                    if root.borrow().orphaned() > woken {
-                        woken = root.borrow().orphaned();
-                        call_at = Some(now);
-                        call_every = every;
-                    }
-                    let at = *call_at.get_or_insert_with(|| {
-                        call_every = every;
-                        now.saturating_add(every)
-                    });
-                    if now >= at {
-                        wake = Some(frame);
-                        call_at = Some(now.saturating_add(call_every));
-                        call_every = call_every.saturating_mul(2).min(every.saturating_mul(2));
-                    }
-                }
-            }
-            let can_send = root.borrow().may_broadcast(bframe);
-            if wake.is_none() && !(can_send && scenes.produced(bframe)) {
+            let (waiting, orphaned, every) = {
+                let r = root.borrow();
+                (
+                    r.roll_call(first, count, st.bframe),
+                    r.orphaned(),
+                    r.timeout_us(),
+                )
+            };
+            wake = st.roll_call(waiting, orphaned, every, now);
+            let can_send = root.borrow().may_broadcast(st.bframe);
+            if wake.is_none() && !(can_send && scenes.produced(st.bframe)) {
                 // Nothing to send now. The frame on the wire may change that: take it first.
-                if let Some(sent) = inflight.take() {
+                if let Some(sent) = st.inflight.take() {
                     let got = bus.finish(&mut rx).await?;
                     complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
                     continue;
                 }
-                let deadline = match (root.borrow().next_deadline(first, count, sent), call_at) {
-                    (Some(a), Some(b)) => Some(a.min(b)),
-                    (a, b) => a.or(b),
-                };
-                let timer = async {
-                    match deadline {
-                        Some(t) => clock.at_us(t).await,
-                        None => core::future::pending::<()>().await,
-                    }
-                };
-                let dm = async {
-                    if can_send {
-                        scenes.wait_produced(bframe).await
-                    } else {
-                        core::future::pending::<()>().await
-                    }
-                };
-                let end = Finished { root, slot: index };
-                match select4(bus.wait_ready(), end, timer, dm).await {
-                    Either4::First(n) => ready = Some(n),
-                    _ => continue,
+                match wait_for_work(index, bus, clock, root, scenes, &st, sent, can_send).await {
+                    Some(n) => ready = Some(n),
+                    None => continue,
                 }
             }
         }
         // A node whose exchange is still on the wire (or not yet taken) that is ready again
         // already has our reply: take its last frame before composing the next reply.
-        if let (Some(node), Some(Sent::Exchange(busy))) = (ready, inflight) {
+        if let (Some(node), Some(Sent::Exchange(busy))) = (ready, st.inflight) {
             if node == busy {
-                inflight = None;
+                st.inflight = None;
                 let got = bus.finish(&mut rx).await?;
                 complete(
                     Sent::Exchange(node),
@@ -183,42 +307,10 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                 )
                 .unwrap_or(0),
             ),
-            None => {
-                let scene = scenes
-                    .scene(bframe)
-                    .ok_or(RootError::BadScene { frame: bframe })?;
-                let crc = root
-                    .borrow_mut()
-                    .scene_crc(bframe, scene, scenes.scene_crc(bframe));
-                let tx = bus.tx_bank();
-                let n = match boffset {
-                    Some(off) => {
-                        let start = off as usize;
-                        let end = (start + SCENE_CHUNK).min(scene.len());
-                        let msg = Down::Scene {
-                            frame: bframe,
-                            offset: off,
-                            total: scene.len() as u32,
-                            crc,
-                            data: &scene[start..end],
-                        };
-                        boffset = (end < scene.len()).then_some(end as u32);
-                        wire::encode(0, 0, &msg, tx).unwrap_or(0)
-                    }
-                    None => {
-                        let msg = Down::SceneEnd {
-                            frame: bframe,
-                            len: scene.len() as u32,
-                            crc,
-                        };
-                        scene_sent[(bframe % 2) as usize] = Some((bframe, clock.now_us()));
-                        bframe += 1;
-                        boffset = Some(0);
-                        wire::encode(0, 0, &msg, tx).unwrap_or(0)
-                    }
-                };
-                (Sent::Broadcast, n)
-            }
+            None => (
+                Sent::Broadcast,
+                st.compose_scene(clock, root, scenes, bus.tx_bank())?,
+            ),
         };
         let crc_bytes = root.borrow_mut().take_crc_work();
         if crc_bytes > 0 {
@@ -227,7 +319,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
         clock.worked(RcWork::Encode { bytes: n }).await;
         // 2. The transfer on the wire must end before this one starts; then take its frame
         // while this one is on the wire.
-        let prev = match inflight.take() {
+        let prev = match st.inflight.take() {
             Some(sent) => Some((sent, bus.finish(&mut rx).await?)),
             None => None,
         };
@@ -240,7 +332,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
             complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
         }
         if double {
-            inflight = Some(next);
+            st.inflight = Some(next);
         } else {
             let got = bus.finish(&mut rx).await?;
             complete(next, &rx[..got.min(rx.len())], clock, root, sink).await;

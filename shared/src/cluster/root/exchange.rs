@@ -1,6 +1,7 @@
 //! One exchange with a node: the RC's reply (jobs, scene repair, acknowledgement) and the
 //! node's half taken (status, pixel runs).
 
+use super::state::NodeSlot;
 use super::*;
 use crate::cluster::link::NodeId;
 use crate::cluster::wire::{self, Down, SceneState, Up, SCENE_CHUNK};
@@ -136,106 +137,116 @@ impl RootState {
         self.report.accepted += 1;
         match env.msg {
             Up::Poll => {}
-            Up::Status { scene } => match scene {
-                SceneState::Ready { frame } => {
-                    slot.ready[(frame % 2) as usize] = Some(frame);
-                    if slot.repair.is_some_and(|(f, _)| f == frame) {
-                        slot.repair = None;
-                    }
-                    if slot.pieces.is_some_and(|p| p.frame == frame) {
-                        slot.pieces = None;
-                    }
-                }
-                SceneState::Missing {
-                    frame,
-                    mut chunks,
-                    pieces,
-                } => {
-                    // What it holds of its first missing chunk.
-                    let first = (0..wire::MAX_CHUNKS as u32)
-                        .find(|&c| chunks[(c / 32) as usize] & (1 << (c % 32)) != 0);
-                    if let (Some(p), Some(c)) = (&mut slot.pieces, first) {
-                        if p.frame == frame {
-                            p.have = Some((c as u8, pieces));
-                        }
-                    }
-                    // A chunk being sent in pieces that the node now has is done.
-                    if let Some(p) = &mut slot.pieces {
-                        if let Some((c, _)) = p.cycle {
-                            if p.frame == frame && chunks[(c / 32) as usize] & (1 << (c % 32)) == 0
-                            {
-                                p.cycle = None;
-                            }
-                        }
-                    }
-                    // The node wrote this before our reply in this exchange reached it.
-                    if let Some(c) = slot.repairing {
-                        chunks[(c / 32) as usize] &= !(1 << (c % 32));
-                    }
-                    slot.repair = Some((frame, chunks));
-                }
-                SceneState::None => {}
-            },
-            Up::Pixels { .. } | Up::PixelsRle { .. } => {
-                let mut buf = [0u8; 3 * wire::MAX_RUN];
-                let (job, frame, y, x, rgb, done) = match env.msg {
-                    Up::Pixels {
-                        job,
-                        frame,
-                        y,
-                        x,
-                        rgb,
-                        done,
-                    } => (job, frame, y, x, rgb, done),
-                    Up::PixelsRle {
-                        job,
-                        frame,
-                        y,
-                        x,
-                        len,
-                        data,
-                        done,
-                    } => {
-                        let Some(out) = buf.get_mut(..3 * len as usize) else {
-                            self.report.rejected += 1;
-                            return;
-                        };
-                        if wire::rle_decode(data, out).is_err() {
-                            self.report.rejected += 1;
-                            return;
-                        }
-                        (job, frame, y, x, &*out, done)
-                    }
-                    _ => return,
-                };
-                let Some(k) = slot
-                    .jobs
-                    .iter()
-                    .position(|j| j.is_some_and(|j| j.id == job && j.frame == frame))
-                else {
+            Up::Status { scene } => slot.take_status(scene),
+            msg @ (Up::Pixels { .. } | Up::PixelsRle { .. }) => self.take_pixels(node, msg, sink),
+        }
+    }
+
+    /// Take a run of pixels (plain or run-length coded) that `node` sent in sequence.
+    fn take_pixels<P: PixelSink>(&mut self, node: NodeId, msg: Up<'_>, sink: &mut P) {
+        let slot = &mut self.nodes[node as usize];
+        let mut buf = [0u8; 3 * wire::MAX_RUN];
+        let (job, frame, y, x, rgb, done) = match msg {
+            Up::Pixels {
+                job,
+                frame,
+                y,
+                x,
+                rgb,
+                done,
+            } => (job, frame, y, x, rgb, done),
+            Up::PixelsRle {
+                job,
+                frame,
+                y,
+                x,
+                len,
+                data,
+                done,
+            } => {
+                let Some(out) = buf.get_mut(..3 * len as usize) else {
                     self.report.rejected += 1;
                     return;
                 };
-                let n = rgb.len() / 3;
-                if rgb.len() % 3 != 0 || y as u32 >= self.height || x as u32 + n as u32 > self.width
-                {
+                if wire::rle_decode(data, out).is_err() {
                     self.report.rejected += 1;
                     return;
                 }
-                sink.pixels(frame, y, x, rgb);
-                self.report.pixels += n as u64;
-                if done {
-                    slot.jobs[k] = None;
-                    if slot.jobs[0].is_none() {
-                        slot.jobs.swap(0, 1);
-                    }
-                    if let Some(p) = self.prog(frame) {
-                        p.done += 1;
-                    }
-                    self.advance_schedule();
-                    self.update_complete();
+                (job, frame, y, x, &*out, done)
+            }
+            _ => return,
+        };
+        let Some(k) = slot
+            .jobs
+            .iter()
+            .position(|j| j.is_some_and(|j| j.id == job && j.frame == frame))
+        else {
+            self.report.rejected += 1;
+            return;
+        };
+        let n = rgb.len() / 3;
+        if rgb.len() % 3 != 0 || y as u32 >= self.height || x as u32 + n as u32 > self.width {
+            self.report.rejected += 1;
+            return;
+        }
+        sink.pixels(frame, y, x, rgb);
+        self.report.pixels += n as u64;
+        if done {
+            slot.jobs[k] = None;
+            if slot.jobs[0].is_none() {
+                slot.jobs.swap(0, 1);
+            }
+            if let Some(p) = self.prog(frame) {
+                p.done += 1;
+            }
+            self.advance_schedule();
+            self.update_complete();
+        }
+    }
+}
+
+impl NodeSlot {
+    /// Take a node's report of its scene (ready, or the chunks it lacks).
+    fn take_status(&mut self, scene: SceneState) {
+        let slot = self;
+        match scene {
+            SceneState::Ready { frame } => {
+                slot.ready[(frame % 2) as usize] = Some(frame);
+                if slot.repair.is_some_and(|(f, _)| f == frame) {
+                    slot.repair = None;
+                }
+                if slot.pieces.is_some_and(|p| p.frame == frame) {
+                    slot.pieces = None;
                 }
             }
+            SceneState::Missing {
+                frame,
+                mut chunks,
+                pieces,
+            } => {
+                // What it holds of its first missing chunk.
+                let first = (0..wire::MAX_CHUNKS as u32)
+                    .find(|&c| chunks[(c / 32) as usize] & (1 << (c % 32)) != 0);
+                if let (Some(p), Some(c)) = (&mut slot.pieces, first) {
+                    if p.frame == frame {
+                        p.have = Some((c as u8, pieces));
+                    }
+                }
+                // A chunk being sent in pieces that the node now has is done.
+                if let Some(p) = &mut slot.pieces {
+                    if let Some((c, _)) = p.cycle {
+                        if p.frame == frame && chunks[(c / 32) as usize] & (1 << (c % 32)) == 0 {
+                            p.cycle = None;
+                        }
+                    }
+                }
+                // The node wrote this before our reply in this exchange reached it.
+                if let Some(c) = slot.repairing {
+                    chunks[(c / 32) as usize] &= !(1 << (c % 32));
+                }
+                slot.repair = Some((frame, chunks));
+            }
+            SceneState::None => {}
         }
     }
 }
