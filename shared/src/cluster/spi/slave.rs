@@ -159,22 +159,7 @@ impl<'b> SlaveTask<'b> {
     /// One armed transfer (exposed for tests).
     pub async fn step<P: SlavePort>(&mut self, port: &mut P, shared: &SlaveShared<'b>) {
         // Take a newly posted frame if the armed bank is idle (TX double buffer).
-        let (rxb, from_free) = shared.with(|s| {
-            s.changed = false;
-            if let (None, Some(len)) = (self.armed_len, s.spare_len) {
-                if let Some(spare) = s.spare.take() {
-                    s.spare = self.armed.take();
-                    self.armed = Some(spare);
-                    self.armed_len = Some(len);
-                    s.spare_len = None;
-                }
-            }
-            s.armed_posted = self.armed_len.is_some();
-            match s.free.iter_mut().find_map(|b| b.take()) {
-                Some(b) => (Some(b), true),
-                None => (None, false),
-            }
-        });
+        let (rxb, from_free) = shared.with(|s| self.take_posted(s));
         let (Some(txb), Some(rxb)) = (self.armed.take(), rxb.or_else(|| self.scratch.take()))
         else {
             // Unreachable by construction; recover rather than panic.
@@ -207,46 +192,7 @@ impl<'b> SlaveTask<'b> {
         };
         self.armed = Some(txb);
         shared.with(|s| {
-            if outcome.is_some() {
-                s.counters.transfers += 1;
-            } else {
-                s.counters.rearms += 1;
-            }
-            let deliver = match outcome {
-                Some(Outcome::Deliver {
-                    len,
-                    exchanged,
-                    body,
-                }) => {
-                    if exchanged {
-                        s.counters.exchanges += 1;
-                    } else {
-                        s.counters.broadcasts += 1;
-                    }
-                    if !body {
-                        s.counters.bad_bodies += 1;
-                    }
-                    Some((if body { len } else { 0 }, exchanged))
-                }
-                Some(Outcome::Retransmit { body }) => {
-                    s.counters.exchanges += 1;
-                    s.counters.retransmits += 1;
-                    if !body {
-                        s.counters.bad_bodies += 1;
-                    }
-                    None
-                }
-                Some(Outcome::BadBroadcast) => {
-                    s.counters.broadcasts += 1;
-                    s.counters.bad_bodies += 1;
-                    None
-                }
-                Some(Outcome::BadHeader) => {
-                    s.counters.bad_headers += 1;
-                    None
-                }
-                None => None,
-            };
+            let deliver = count(&mut s.counters, outcome);
             if let Some((_, true)) = deliver {
                 // Our frame went out and was acknowledged: the armed bank is idle.
                 self.armed_len = None;
@@ -284,6 +230,25 @@ impl<'b> SlaveTask<'b> {
         });
     }
 
+    /// Swap a newly posted frame into the armed TX bank if that bank is idle (TX double
+    /// buffer) and take a free RX bank; returns it and whether it was one (not scratch).
+    fn take_posted(&mut self, s: &mut SlaveState<'b>) -> (Option<&'b mut Bank>, bool) {
+        s.changed = false;
+        if let (None, Some(len)) = (self.armed_len, s.spare_len) {
+            if let Some(spare) = s.spare.take() {
+                s.spare = self.armed.take();
+                self.armed = Some(spare);
+                self.armed_len = Some(len);
+                s.spare_len = None;
+            }
+        }
+        s.armed_posted = self.armed_len.is_some();
+        match s.free.iter_mut().find_map(|b| b.take()) {
+            Some(b) => (Some(b), true),
+            None => (None, false),
+        }
+    }
+
     /// Judge a finished transfer.
     fn finish(&self, rx: &[u8]) -> Outcome {
         let Some(h) = get_header(rx, RC_MAGIC) else {
@@ -313,6 +278,51 @@ impl<'b> SlaveTask<'b> {
             }
             _ => Outcome::BadHeader,
         }
+    }
+}
+
+/// Count a transfer's outcome (`None`: re-armed without one); returns what to hand the node
+/// logic: the body's length (0 if damaged) and whether it was an exchange.
+fn count(counters: &mut SlaveCounters, outcome: Option<Outcome>) -> Option<(usize, bool)> {
+    if outcome.is_some() {
+        counters.transfers += 1;
+    } else {
+        counters.rearms += 1;
+    }
+    match outcome {
+        Some(Outcome::Deliver {
+            len,
+            exchanged,
+            body,
+        }) => {
+            if exchanged {
+                counters.exchanges += 1;
+            } else {
+                counters.broadcasts += 1;
+            }
+            if !body {
+                counters.bad_bodies += 1;
+            }
+            Some((if body { len } else { 0 }, exchanged))
+        }
+        Some(Outcome::Retransmit { body }) => {
+            counters.exchanges += 1;
+            counters.retransmits += 1;
+            if !body {
+                counters.bad_bodies += 1;
+            }
+            None
+        }
+        Some(Outcome::BadBroadcast) => {
+            counters.broadcasts += 1;
+            counters.bad_bodies += 1;
+            None
+        }
+        Some(Outcome::BadHeader) => {
+            counters.bad_headers += 1;
+            None
+        }
+        None => None,
     }
 }
 
