@@ -12,7 +12,7 @@ use crate::cluster::{
     render_cluster, simulate_frame, ClusterRender, RunCache, SimConfig, SimReport,
 };
 use links_core::node::NodeConfig;
-use links_core::sched::{Policy, Shape};
+use links_core::sched::{Policy, Split};
 use std::path::Path;
 
 /// Parse a scheduling policy: `decreasing`, `static`, `fixed=N` (runs) or `fixed-rect=N`.
@@ -26,10 +26,10 @@ pub fn parse_policy(s: &str) -> Result<Policy, String> {
     };
     match s {
         "decreasing" => Ok(Policy::DECREASING),
-        "static" => Ok(Policy::Static { shape: Shape::Rect }),
+        "static" => Ok(Policy::Static { shape: Split::Rect }),
         _ => match s.split_once('=') {
-            Some(("fixed", n)) => fixed(n, Shape::Span),
-            Some(("fixed-rect", n)) => fixed(n, Shape::Rect),
+            Some(("fixed", n)) => fixed(n, Split::Span),
+            Some(("fixed-rect", n)) => fixed(n, Split::Rect),
             _ => Err(format!(
                 "unknown policy '{s}' (expected decreasing, static, fixed=N or fixed-rect=N)"
             )),
@@ -435,19 +435,19 @@ mod tests {
             parse_policy("fixed=1024"),
             Ok(Policy::Fixed {
                 divisions: 1024,
-                shape: Shape::Span
+                shape: Split::Span
             })
         );
         assert_eq!(
             parse_policy("fixed-rect=64"),
             Ok(Policy::Fixed {
                 divisions: 64,
-                shape: Shape::Rect
+                shape: Split::Rect
             })
         );
         assert_eq!(
             parse_policy("static"),
-            Ok(Policy::Static { shape: Shape::Rect })
+            Ok(Policy::Static { shape: Split::Rect })
         );
         assert!(parse_policy("fixed=0").unwrap_err().contains("positive"));
         assert!(parse_policy("round-robin")

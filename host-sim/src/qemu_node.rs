@@ -17,7 +17,7 @@ use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer}
 use links_core::node::{run_node, NodeConfig, NodeError, NodeReport, RealTime, Tracing};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
-use links_core::wire::{self, Down, Up, MAX_FRAME, MAX_SCENE};
+use links_core::wire::{self, Down, Up, MAX_MESSAGE, MAX_SCENE};
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::fmt;
@@ -347,7 +347,7 @@ pub fn run_rc_buffered<N: NodeSide>(
             transcript: Vec::new(),
             error: None,
         }),
-        banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+        banks: [vec![0; MAX_MESSAGE], vec![0; MAX_MESSAGE]],
         idle: 0,
         inflight: None,
     };
@@ -895,11 +895,11 @@ mod tests {
                 transcript: Vec::new(),
                 error: None,
             }),
-            banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+            banks: [vec![0; MAX_MESSAGE], vec![0; MAX_MESSAGE]],
             idle: 0,
             inflight: None,
         };
-        let mut rx = [0u8; MAX_FRAME];
+        let mut rx = [0u8; MAX_MESSAGE];
         fn poll<F: Future>(f: F) -> F::Output {
             let mut f = std::pin::pin!(f);
             match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
@@ -917,7 +917,7 @@ mod tests {
         assert_eq!(poll(bus.finish(&mut rx)), Ok(0));
         // Past the bank, and nodes not on the bus, are errors.
         assert!(matches!(
-            bus.start(Transfer::Broadcast, MAX_FRAME + 1),
+            bus.start(Transfer::Broadcast, MAX_MESSAGE + 1),
             Err(LinkError::TooLong { .. })
         ));
         assert_eq!(
@@ -974,7 +974,7 @@ mod tests {
             },
             _ => unreachable!(),
         };
-        let mut buf = vec![0u8; wire::MAX_FRAME];
+        let mut buf = vec![0u8; wire::MAX_MESSAGE];
         let n = wire::encode(env.seq, env.ack, &msg, &mut buf).unwrap();
         buf.truncate(n);
         *f = buf;

@@ -25,7 +25,7 @@ use links_core::spi::{
     Armed, Bank, MasterLink, MasterPort, PortError, Select, SlaveBanks, SlavePort, SlaveShared,
     ACK, BANK, HEADER, NAK,
 };
-use links_core::wire::{self, MAX_FRAME};
+use links_core::wire::{self, MAX_MESSAGE};
 use links_host::frame::{render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::cell::RefCell;
@@ -372,7 +372,7 @@ fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
             let mut got = Vec::new();
             for _ in 0..4 {
                 let node = master.wait_ready().await;
-                let mut rx = [0u8; MAX_FRAME];
+                let mut rx = [0u8; MAX_MESSAGE];
                 let n = master
                     .exchange(node, &down, &mut rx)
                     .await
@@ -385,7 +385,7 @@ fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
             got
         };
         let nc = async {
-            let mut rx = [0u8; MAX_FRAME];
+            let mut rx = [0u8; MAX_MESSAGE];
             match handle.recv(&mut rx).await.expect("no error") {
                 Incoming::Exchanged { len } => rx[..len].to_vec(),
                 Incoming::Broadcast { .. } => panic!("no broadcast was sent"),
@@ -454,7 +454,7 @@ fn garbled_headers_never_deliver_and_the_link_recovers() {
             loop {
                 tries += 1;
                 let node = master.wait_ready().await;
-                let mut rx = [0u8; MAX_FRAME];
+                let mut rx = [0u8; MAX_MESSAGE];
                 let n = master.exchange(node, b"world", &mut rx).await.unwrap();
                 if n > 0 {
                     assert_eq!(&rx[..n], b"hello");
@@ -482,7 +482,7 @@ fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
     let mut master = MasterLink::new(FakeMaster { bus: bus.clone() }, 10, [mtx0, mtx1], mrx);
     assert_eq!(master.nodes(), (10, 2));
     assert_eq!(master.ready(), None);
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     let n = run(master.exchange(11, b"x", &mut rx)).unwrap();
     assert_eq!(n, 0);
     assert_eq!(master.counters.not_ready, 1);
@@ -495,7 +495,7 @@ fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
         run(master.exchange(9, b"x", &mut rx)).is_err(),
         "not on this bus"
     );
-    let big = vec![0u8; MAX_FRAME + 1];
+    let big = vec![0u8; MAX_MESSAGE + 1];
     assert!(run(master.exchange(10, &big, &mut rx)).is_err());
     assert!(run(master.broadcast(&big)).is_err());
 }
@@ -529,7 +529,7 @@ fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
     assert_eq!(c.broadcasts, 3);
     assert_eq!(c.overflows, 1, "the third found both banks full");
     let mut handle = shared.handle();
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     for k in 0..2u8 {
         let got = run(handle.recv(&mut rx)).unwrap();
         assert_eq!(got, Incoming::Broadcast { len: 100 });
@@ -557,7 +557,7 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
         i: 0,
     };
     let rc = async {
-        let mut rx = [0u8; MAX_FRAME];
+        let mut rx = [0u8; MAX_MESSAGE];
         assert_eq!(master.finish(&mut rx).await, Err(LinkError::Aborted));
         polls(20).await;
         master.tx_bank()[..64].fill(1);
@@ -579,7 +579,7 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
             Err(LinkError::NoSuchNode { node: 1 })
         );
         assert!(matches!(
-            master.start(Transfer::Broadcast, MAX_FRAME + 1),
+            master.start(Transfer::Broadcast, MAX_MESSAGE + 1),
             Err(LinkError::TooLong { .. })
         ));
         polls(20).await;
@@ -588,7 +588,7 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
     let Either::First(()) = run(select(rc, link));
     assert_eq!(shared.counters().broadcasts, 2);
     let mut handle = shared.handle();
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     for k in 1..=2u8 {
         let got = run(handle.recv(&mut rx)).unwrap();
         assert_eq!(got, Incoming::Broadcast { len: 64 });
@@ -619,7 +619,7 @@ fn a_corrupt_broadcast_is_counted_and_dropped() {
     let Either::First(()) = run(select(rc, task.run(&mut port, &shared)));
     let c = shared.counters();
     assert_eq!((c.broadcasts, c.bad_bodies), (2, 1));
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     let got = run(shared.handle().recv(&mut rx)).unwrap();
     assert_eq!(got, Incoming::Broadcast { len: 64 });
     assert_eq!(rx[..64], [8u8; 64], "only the intact one is delivered");
@@ -771,7 +771,7 @@ fn cluster_over_the_link_survives_corrupt_bytes_and_lost_edges() {
 
 #[test]
 fn wire_frames_fit_a_bank() {
-    let mut buf = [0u8; MAX_FRAME];
+    let mut buf = [0u8; MAX_MESSAGE];
     let n = wire::encode(1, 2, &wire::Down::Stop, &mut buf).unwrap();
     assert!(HEADER + n < BANK);
 }

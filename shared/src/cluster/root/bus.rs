@@ -3,7 +3,7 @@
 
 use super::*;
 use crate::cluster::link::{NodeId, RootBus, Transfer};
-use crate::cluster::wire::{self, Down, MAX_FRAME, SCENE_CHUNK};
+use crate::cluster::wire::{self, Down, MAX_MESSAGE, SCENE_CHUNK};
 use core::cell::RefCell;
 use embassy_futures::select::{select4, Either4};
 
@@ -233,7 +233,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
     scenes: &S,
     sink: &RefCell<P>,
 ) -> Result<RootReport, RootError> {
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     let double = root.borrow().cfg.double_buffer;
     let mut st = BusState::NEW;
     let (first, count) = bus.nodes();

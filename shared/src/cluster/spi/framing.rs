@@ -1,16 +1,16 @@
 //! The framing both ends share: the header and trailer phases, the DMA bank, CRC-16.
 
-use crate::cluster::wire::MAX_FRAME;
+use crate::cluster::wire::MAX_MESSAGE;
 
 /// Bytes of the header phase.
 pub const HEADER: usize = 8;
 /// Bytes of the trailer phase (exchange only).
 pub const TRAILER: usize = 1;
 /// Size of one DMA bank: header, the largest frame, trailer, rounded up to a word.
-pub const BANK: usize = (HEADER + MAX_FRAME + TRAILER).div_ceil(4) * 4;
+pub const BANK: usize = (HEADER + MAX_MESSAGE + TRAILER).div_ceil(4) * 4;
 /// One DMA bank. On the STM32F4 banks must sit in SRAM (DMA cannot reach the CCM).
 pub type Bank = [u8; BANK];
-const _: () = assert!(BANK >= HEADER + MAX_FRAME + TRAILER && BANK.is_multiple_of(4));
+const _: () = assert!(BANK >= HEADER + MAX_MESSAGE + TRAILER && BANK.is_multiple_of(4));
 
 /// Trailer byte: the node's frame arrived intact.
 pub const ACK: u8 = 0xAC;
@@ -63,7 +63,7 @@ pub(super) fn get_header(bytes: &[u8], magic: u8) -> Option<Header> {
         return None;
     }
     let len = u16::from_le_bytes([h[2], h[3]]);
-    if len as usize > MAX_FRAME {
+    if len as usize > MAX_MESSAGE {
         return None;
     }
     Some(Header {
@@ -117,7 +117,7 @@ mod tests {
         // A length beyond a frame is refused even with a valid CRC.
         let mut big = [0u8; HEADER];
         big[0] = NC_MAGIC;
-        big[2..4].copy_from_slice(&(MAX_FRAME as u16 + 1).to_le_bytes());
+        big[2..4].copy_from_slice(&(MAX_MESSAGE as u16 + 1).to_le_bytes());
         let c = CRC16.checksum(&big[..6]).to_le_bytes();
         big[6..8].copy_from_slice(&c);
         assert_eq!(nc_header(&big), None);

@@ -2,7 +2,7 @@
 
 use super::framing::*;
 use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
-use crate::cluster::wire::MAX_FRAME;
+use crate::cluster::wire::MAX_MESSAGE;
 
 /// Which chip-selects to assert.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -219,17 +219,17 @@ impl<P: MasterPort> RootBus for MasterLink<'_, P> {
     }
 
     fn tx_bank(&mut self) -> &mut [u8] {
-        &mut self.tx[self.idle][HEADER..HEADER + MAX_FRAME]
+        &mut self.tx[self.idle][HEADER..HEADER + MAX_MESSAGE]
     }
 
     fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
         if self.started.is_some() {
             return Err(LinkError::Busy);
         }
-        if len > MAX_FRAME {
+        if len > MAX_MESSAGE {
             return Err(LinkError::TooLong {
                 len: len as u32,
-                max: MAX_FRAME as u32,
+                max: MAX_MESSAGE as u32,
             });
         }
         if let Transfer::Exchange(node) = transfer {

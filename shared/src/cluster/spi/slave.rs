@@ -3,7 +3,7 @@
 
 use super::framing::*;
 use crate::cluster::link::{Incoming, LinkError, NodeLink};
-use crate::cluster::wire::MAX_FRAME;
+use crate::cluster::wire::MAX_MESSAGE;
 use core::cell::RefCell;
 use core::future::{poll_fn, Future};
 use core::task::{Poll, Waker};
@@ -346,10 +346,10 @@ pub struct SlaveHandle<'s, 'b> {
 
 impl NodeLink for SlaveHandle<'_, '_> {
     fn post(&mut self, frame: &[u8]) -> Result<(), LinkError> {
-        if frame.len() > MAX_FRAME {
+        if frame.len() > MAX_MESSAGE {
             return Err(LinkError::TooLong {
                 len: frame.len() as u32,
-                max: MAX_FRAME as u32,
+                max: MAX_MESSAGE as u32,
             });
         }
         self.shared.with(|s| {
