@@ -235,7 +235,7 @@ impl Bank {
 }
 
 /// The shortest pixel run a node sends when its frames keep getting lost (see
-/// [`Nc::run_cap`]).
+/// `Nc::run_cap`).
 pub const MIN_RUN: usize = 16;
 
 /// A frame kept until acknowledged.

@@ -4,7 +4,6 @@
 use super::*;
 use crate::cluster::link::NodeId;
 use crate::cluster::sched::Policy;
-use crate::cluster::wire::Job;
 
 impl RootState {
     /// Note an exchange with `node` at `now_us`; a node declared dead is live again. If it
@@ -133,17 +132,8 @@ impl RootState {
         let Some(region) = self.sched.next_for(n as NodeId) else {
             return false;
         };
-        let frame = self.sched_frame;
-        self.nodes[n].jobs[free] = Some(Job {
-            id: self.next_job,
-            frame,
-            region,
-        });
-        self.next_job += 1;
-        self.report.jobs += 1;
-        if let Some(p) = self.prog(frame) {
-            p.issued += 1;
-        }
+        let job = self.new_job(self.sched_frame, region);
+        self.nodes[n].jobs[free] = Some(job);
         true
     }
 

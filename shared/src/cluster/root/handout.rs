@@ -4,7 +4,7 @@
 use super::*;
 use crate::cluster::link::NodeId;
 use crate::cluster::sched::Scheduler;
-use crate::cluster::wire::{Job, JOB_QUEUE};
+use crate::cluster::wire::{Job, Region, JOB_QUEUE};
 
 impl RootState {
     /// A job held by a dead node, as (node, queue index), oldest frame first.
@@ -80,6 +80,21 @@ impl RootState {
         }
     }
 
+    /// A new job for `region` of `frame`, counted as issued.
+    pub(super) fn new_job(&mut self, frame: u16, region: Region) -> Job {
+        let job = Job {
+            id: self.next_job,
+            frame,
+            region,
+        };
+        self.next_job += 1;
+        self.report.jobs += 1;
+        if let Some(p) = self.prog(frame) {
+            p.issued += 1;
+        }
+        job
+    }
+
     /// Top up a node's job list (called when composing its exchange reply).
     pub(super) fn assign(&mut self, node: NodeId) {
         loop {
@@ -100,16 +115,7 @@ impl RootState {
             let Some(region) = self.sched.next_for(node) else {
                 return;
             };
-            let job = Job {
-                id: self.next_job,
-                frame,
-                region,
-            };
-            self.next_job += 1;
-            self.report.jobs += 1;
-            if let Some(p) = self.prog(frame) {
-                p.issued += 1;
-            }
+            let job = self.new_job(frame, region);
             if let Some(free) = self.nodes[node as usize]
                 .jobs
                 .iter_mut()
