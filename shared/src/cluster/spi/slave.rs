@@ -232,6 +232,7 @@ impl<'b> SlaveTask<'b> {
 
     /// Swap a newly posted frame into the armed TX bank if that bank is idle (TX double
     /// buffer) and take a free RX bank; returns it and whether it was one (not scratch).
+    #[inline(always)]
     fn take_posted(&mut self, s: &mut SlaveState<'b>) -> (Option<&'b mut Bank>, bool) {
         s.changed = false;
         if let (None, Some(len)) = (self.armed_len, s.spare_len) {
@@ -283,6 +284,7 @@ impl<'b> SlaveTask<'b> {
 
 /// Count a transfer's outcome (`None`: re-armed without one); returns what to hand the node
 /// logic: the body's length (0 if damaged) and whether it was an exchange.
+#[inline(always)]
 fn count(counters: &mut SlaveCounters, outcome: Option<Outcome>) -> Option<(usize, bool)> {
     if outcome.is_some() {
         counters.transfers += 1;
