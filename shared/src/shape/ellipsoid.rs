@@ -115,87 +115,72 @@ impl<T: Real> Ellipsoid<T> {
                     None
                 }
             }
-            Some(cut) => Self::cut_hit(&cut, o, d, t0, t1, t_err, t_max),
-        }
-    }
-
-    /// The first crossing in (`t_err`, `t_max`) of the shell roots `t0 <= t1` (ray origin `o`,
-    /// direction `d` in the unit frame) kept by the cut plane: the open bowl, or (capped) the
-    /// solid between the shell and the plane.
-    #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn cut_hit(
-        cut: &CutPlane<T>,
-        o: Vec3<T>,
-        d: Vec3<T>,
-        t0: T,
-        t1: T,
-        t_err: T,
-        t_max: T,
-    ) -> Option<EllipsoidHit<T>> {
-        let valid = |t: T| t > t_err && t < t_max;
-        let kept = |t: T| cut.n.dot(o + d * t) <= cut.d;
-        if !cut.capped {
-            if valid(t0) && kept(t0) {
-                return Some(EllipsoidHit {
-                    t: t0,
-                    part: EllipsoidPart::Shell,
-                });
-            }
-            if valid(t1) && kept(t1) {
-                return Some(EllipsoidHit {
-                    t: t1,
-                    part: EllipsoidPart::Shell,
-                });
-            }
-            return None;
-        }
-        // Capped: the solid is [t0, t1] ∩ {t : n·(o + t d) <= d}.
-        let nd = cut.n.dot(d);
-        let no = cut.n.dot(o);
-        let (mut lo, mut lo_part) = (t0, EllipsoidPart::Shell);
-        let (mut hi, mut hi_part) = (t1, EllipsoidPart::Shell);
-        if nd == T::ZERO {
-            if no > cut.d {
-                return None;
-            }
-        } else {
-            let tp = (cut.d - no) / nd;
-            if nd > T::ZERO {
-                if tp < hi {
-                    hi = tp;
-                    hi_part = EllipsoidPart::Cap;
+            Some(cut) => {
+                let kept = |t: T| cut.n.dot(o + d * t) <= cut.d;
+                if !cut.capped {
+                    if valid(t0) && kept(t0) {
+                        return Some(EllipsoidHit {
+                            t: t0,
+                            part: EllipsoidPart::Shell,
+                        });
+                    }
+                    if valid(t1) && kept(t1) {
+                        return Some(EllipsoidHit {
+                            t: t1,
+                            part: EllipsoidPart::Shell,
+                        });
+                    }
+                    return None;
                 }
-            } else if tp > lo {
-                lo = tp;
-                lo_part = EllipsoidPart::Cap;
+                // Capped: the solid is [t0, t1] ∩ {t : n·(o + t d) <= d}.
+                let nd = cut.n.dot(d);
+                let no = cut.n.dot(o);
+                let (mut lo, mut lo_part) = (t0, EllipsoidPart::Shell);
+                let (mut hi, mut hi_part) = (t1, EllipsoidPart::Shell);
+                if nd == T::ZERO {
+                    if no > cut.d {
+                        return None;
+                    }
+                } else {
+                    let tp = (cut.d - no) / nd;
+                    if nd > T::ZERO {
+                        if tp < hi {
+                            hi = tp;
+                            hi_part = EllipsoidPart::Cap;
+                        }
+                    } else if tp > lo {
+                        lo = tp;
+                        lo_part = EllipsoidPart::Cap;
+                    }
+                }
+                if lo > hi {
+                    return None;
+                }
+                // The plane root's error bound, in the same unit-frame terms.
+                let tp_err =
+                    T::err_gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon());
+                let valid_part = |t: T, part: EllipsoidPart| {
+                    let e = if part == EllipsoidPart::Cap {
+                        tp_err.max(t_err)
+                    } else {
+                        t_err
+                    };
+                    t > e && t < t_max
+                };
+                if valid_part(lo, lo_part) {
+                    Some(EllipsoidHit {
+                        t: lo,
+                        part: lo_part,
+                    })
+                } else if valid_part(hi, hi_part) {
+                    Some(EllipsoidHit {
+                        t: hi,
+                        part: hi_part,
+                    })
+                } else {
+                    None
+                }
             }
-        }
-        if lo > hi {
-            return None;
-        }
-        // The plane root's error bound, in the same unit-frame terms.
-        let tp_err = T::err_gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon());
-        let valid_part = |t: T, part: EllipsoidPart| {
-            let e = if part == EllipsoidPart::Cap {
-                tp_err.max(t_err)
-            } else {
-                t_err
-            };
-            t > e && t < t_max
-        };
-        if valid_part(lo, lo_part) {
-            Some(EllipsoidHit {
-                t: lo,
-                part: lo_part,
-            })
-        } else if valid_part(hi, hi_part) {
-            Some(EllipsoidHit {
-                t: hi,
-                part: hi_part,
-            })
-        } else {
-            None
         }
     }
 

@@ -288,20 +288,6 @@ fn safe_step<T: Real>(a: T, v: T, lip: T, curv: T, w: T) -> T {
     h1.max(h2)
 }
 
-/// What [`BlobGroup::intersect`]'s pre-pass learns about the balls along a ray.
-#[derive(Clone, Copy, Debug)]
-struct Prepass<T> {
-    /// Smallest radius of a ball that matters.
-    d_min: T,
-    /// Scale of the coordinates.
-    scale: T,
-    /// The first two events (ball entries or exits) after the start.
-    e1: T,
-    e2: T,
-    /// Whether the start lies inside some ball's influence.
-    covered: bool,
-}
-
 impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
     /// Field value `Σ f_i(|p - c_i|)` at `p`.
     pub fn field(&self, p: Vec3<T>) -> T {
@@ -506,13 +492,28 @@ impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
             t_max * len
         };
 
-        let Prepass {
-            d_min,
-            scale,
-            e1,
-            e2,
-            covered,
-        } = self.prepass(o, u, s_min, s_max)?;
+        // Pre-pass: which balls matter, their smallest radius, the scale of the
+        // coordinates, and the first event.
+        let mut any_positive = false;
+        let mut d_min = T::MAX;
+        let mut scale = T::ZERO;
+        let (mut e1, mut e2) = (T::MAX, T::MAX);
+        let mut covered = false;
+        for i in 0..self.count {
+            if let Some(sp) = self.span(i, o, u) {
+                push_event(&mut e1, &mut e2, s_min, sp.t_in);
+                push_event(&mut e1, &mut e2, s_min, sp.t_out);
+                covered |= sp.t_in <= s_min && sp.t_out > s_min;
+                if sp.t_out > s_min && sp.t_in < s_max {
+                    any_positive |= sp.k.b > T::ZERO;
+                    d_min = d_min.min(sp.k.d);
+                    scale = scale.max(sp.tc.abs() + sp.k.d + sp.k.d);
+                }
+            }
+        }
+        if !any_positive {
+            return None;
+        }
         let eps = T::epsilon();
         let tol = (eps.sqrt() * T::HALF * d_min).max(T::from_i32(64) * eps * scale);
         let t_res = T::from_i32(8) * eps * (scale + s_min.abs());
@@ -610,40 +611,6 @@ impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
             }
             s = s_new;
         }
-    }
-
-    /// Pre-pass: which balls matter, their smallest radius, the scale of the coordinates,
-    /// and the first events along the ray (`u` unit, from `o`) in `[s_min, s_max)`; `None`
-    /// when no ball there adds to the field.
-    #[inline(always)]
-    fn prepass(&self, o: Vec3<T>, u: Vec3<T>, s_min: T, s_max: T) -> Option<Prepass<T>> {
-        let mut any_positive = false;
-        let mut d_min = T::MAX;
-        let mut scale = T::ZERO;
-        let (mut e1, mut e2) = (T::MAX, T::MAX);
-        let mut covered = false;
-        for i in 0..self.count {
-            if let Some(sp) = self.span(i, o, u) {
-                push_event(&mut e1, &mut e2, s_min, sp.t_in);
-                push_event(&mut e1, &mut e2, s_min, sp.t_out);
-                covered |= sp.t_in <= s_min && sp.t_out > s_min;
-                if sp.t_out > s_min && sp.t_in < s_max {
-                    any_positive |= sp.k.b > T::ZERO;
-                    d_min = d_min.min(sp.k.d);
-                    scale = scale.max(sp.tc.abs() + sp.k.d + sp.k.d);
-                }
-            }
-        }
-        if !any_positive {
-            return None;
-        }
-        Some(Prepass {
-            d_min,
-            scale,
-            e1,
-            e2,
-            covered,
-        })
     }
 
     /// Narrow a bracketed crossing: `lo` on the starting side, `hi` crossed. Safeguarded
