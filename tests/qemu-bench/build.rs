@@ -235,7 +235,7 @@ fn host_render<R: Real>(
     view.check_storage::<R>()
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut tracer = Tracer::<R>::with_techniques(view, techniques);
-    let (w, h) = (tracer.frame().width, tracer.frame().height);
+    let (w, h) = (tracer.camera().width, tracer.camera().height);
     let mut pixels = vec![[0u8; 3]; (w * h) as usize];
     for (y, row) in pixels.chunks_mut(w as usize).enumerate() {
         render_run(&mut tracer, y as u32, 0, row).expect("run inside the frame");

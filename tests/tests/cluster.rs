@@ -3,7 +3,7 @@
 //! exact broadcast byte counts; determinism.
 
 use links_core::node::NodeConfig;
-use links_core::sched::{Policy, Shape};
+use links_core::sched::{Policy, Split};
 use links_core::wire::{self, Down, SCENE_CHUNK};
 use links_host::cluster::star::{BroadcastDrop, Faults, NodeDeath};
 use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimError, SimReport};
@@ -24,14 +24,14 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
     let want = reference(&img);
     let cases = [
         (1, 1, Policy::DECREASING),
-        (3, 1, Policy::Static { shape: Shape::Span }),
-        (8, 2, Policy::Static { shape: Shape::Rect }),
+        (3, 1, Policy::Static { shape: Split::Span }),
+        (8, 2, Policy::Static { shape: Split::Rect }),
         (
             5,
             1,
             Policy::Fixed {
                 divisions: 48,
-                shape: Shape::Rect,
+                shape: Split::Rect,
             },
         ),
         (
@@ -39,7 +39,7 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
             3,
             Policy::Fixed {
                 divisions: 100,
-                shape: Shape::Span,
+                shape: Split::Span,
             },
         ),
         (16, 4, Policy::DECREASING),
@@ -271,7 +271,7 @@ fn broadcast_bytes_are_exact() {
         },
     );
     // Every bus carries the scene in SCENE_CHUNK pieces, its SceneEnd and a Stop.
-    let mut buf = [0u8; wire::MAX_FRAME];
+    let mut buf = [0u8; wire::MAX_MESSAGE];
     let mut want = 0u64;
     for (i, chunk) in img.chunks(SCENE_CHUNK).enumerate() {
         let m = Down::Scene {
@@ -583,7 +583,7 @@ mod hostile_bus {
     struct HostileBus {
         rng: Rng,
         left: u32,
-        tx: [u8; wire::MAX_FRAME],
+        tx: [u8; wire::MAX_MESSAGE],
         inflight: Option<Transfer>,
     }
 
@@ -688,7 +688,7 @@ mod hostile_bus {
             let mut bus = HostileBus {
                 rng: Rng(seed * 104729),
                 left: 3000,
-                tx: [0; wire::MAX_FRAME],
+                tx: [0; wire::MAX_MESSAGE],
                 inflight: None,
             };
             drive(async {
@@ -924,7 +924,7 @@ fn rc_double_buffering_hides_the_rcs_work_and_keeps_the_frame() {
     // The broadcast's chunk encoding is hidden behind the wire when double-buffered, and
     // serial with it when not: the single-buffered frame is later by at least that.
     let chunks = img.len().div_ceil(SCENE_CHUNK);
-    let mut buf = [0u8; wire::MAX_FRAME];
+    let mut buf = [0u8; wire::MAX_MESSAGE];
     let n = wire::encode(
         0,
         0,
@@ -1050,7 +1050,7 @@ fn a_node_that_missed_a_wake_broadcast_is_woken_again() {
     let want = reference(&img);
     let cfg = SimConfig {
         nodes: 2,
-        policy: Policy::Static { shape: Shape::Span },
+        policy: Policy::Static { shape: Split::Span },
         ..SimConfig::default()
     };
     let clean = run(&img, cfg.clone());

@@ -33,13 +33,13 @@ use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, 
 use links_core::num::{FastF32, Fx, Real, Storage};
 use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Tracer};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootError, RootState};
-use links_core::sched::{Policy, Shape};
+use links_core::sched::{Policy, Split};
 use links_core::spi::{
     self, Armed, Bank, MasterLink, MasterPort, PortError, Select, SlaveBanks, SlavePort,
     SlaveShared, ACK, BANK, CRC16, HEADER, NAK,
 };
 use links_core::wire::{
-    self, Down, Job, Region, SceneState, Up, CRC32, MAX_CHUNKS, MAX_FRAME, MAX_RUN, MAX_SCENE,
+    self, Down, Job, Region, SceneState, Up, CRC32, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
     SCENE_CHUNK,
 };
 use links_core::{desc::TransparencyMode, serial};
@@ -775,10 +775,10 @@ fn check_accepted(img: &[u8], view: SceneView<'_>, rng: &mut Rng, tally: &mut Ta
     let cfg = RootConfig {
         policy: *rng.pick(&[
             Policy::DECREASING,
-            Policy::Static { shape: Shape::Rect },
+            Policy::Static { shape: Split::Rect },
             Policy::Fixed {
                 divisions,
-                shape: Shape::Span,
+                shape: Split::Span,
             },
         ]),
         nodes: rng.range(1, 16) as u16,
@@ -995,7 +995,7 @@ macro_rules! wire_msg {
     ($t:ident) => {
         impl WireMsg for $t<'_> {
             fn frame(&self, seq: u16, ack: u16) -> Vec<u8> {
-                let mut buf = vec![0u8; 2 * MAX_FRAME];
+                let mut buf = vec![0u8; 2 * MAX_MESSAGE];
                 let n = wire::encode(seq, ack, self, &mut buf).expect("fits two frames");
                 buf.truncate(n);
                 buf
@@ -1126,7 +1126,11 @@ struct ScriptLink<'a> {
 
 impl NodeLink for ScriptLink<'_> {
     fn post(&mut self, frame: &[u8]) -> Result<(), LinkError> {
-        assert!(frame.len() <= MAX_FRAME, "a node frame of {}", frame.len());
+        assert!(
+            frame.len() <= MAX_MESSAGE,
+            "a node frame of {}",
+            frame.len()
+        );
         // The node sends only frames that decode, whatever it was sent.
         let env = wire::decode::<Up>(frame).expect("the node posts valid frames");
         self.posts += 1;
@@ -1157,7 +1161,7 @@ impl NodeLink for ScriptLink<'_> {
         let mut f = wire_frame(self.seq, ack, &item.msg);
         self.seq = self.seq.wrapping_add(1);
         if let Some(seed) = item.mutate {
-            mutate_bytes(&mut Rng(seed), &mut f, MAX_FRAME + 8);
+            mutate_bytes(&mut Rng(seed), &mut f, MAX_MESSAGE + 8);
             if self.fix_crc {
                 fix_wire_crc(&mut f);
             }
@@ -1415,7 +1419,7 @@ impl ScriptBus {
                         .front()
                         .map(|(_, f)| f.clone())
                         .unwrap_or_else(|| wire_frame(nc.next_seq, 0, &Up::Poll));
-                    mutate_bytes(rng, &mut f, MAX_FRAME);
+                    mutate_bytes(rng, &mut f, MAX_MESSAGE);
                     if rng.chance(85) {
                         fix_wire_crc(&mut f);
                     }
@@ -1489,7 +1493,7 @@ impl RootBus for ScriptBus {
         if self.started.is_some() {
             return Err(LinkError::Busy);
         }
-        assert!(len <= MAX_FRAME);
+        assert!(len <= MAX_MESSAGE);
         // The RC sends only frames that decode.
         let sent = self.tx[..len].to_vec();
         let env = wire::decode::<Down>(&sent).expect("the RC sends valid frames");
@@ -1556,8 +1560,8 @@ fn root_session(img: &[u8], rng: &mut Rng, tally: &mut Tally) {
     let cfg = RootConfig {
         policy: *rng.pick(&[
             Policy::DECREASING,
-            Policy::Static { shape: Shape::Rect },
-            Policy::Static { shape: Shape::Span },
+            Policy::Static { shape: Split::Rect },
+            Policy::Static { shape: Split::Span },
             Policy::Decreasing {
                 factor: 2,
                 min_pixels: 1,
@@ -1578,7 +1582,7 @@ fn root_session(img: &[u8], rng: &mut Rng, tally: &mut Tally) {
             })
             .collect(),
         next: 0,
-        tx: vec![0u8; MAX_FRAME],
+        tx: vec![0u8; MAX_MESSAGE],
         started: None,
         reply: Vec::new(),
         transfers: 0,
@@ -1702,7 +1706,7 @@ fn wire() {
             input.extend_from_slice(&st.corpus[rng.below(st.corpus.len())]);
         }
         if rng.chance(80) {
-            mutate_bytes(rng, input, MAX_FRAME + 64);
+            mutate_bytes(rng, input, MAX_MESSAGE + 64);
             if rng.chance(85) {
                 fix_wire_crc(input);
             }
@@ -1767,7 +1771,7 @@ fn rc_transfer(rng: &mut Rng, corpus: &[Vec<u8>]) -> Vec<u8> {
     let body = if !corpus.is_empty() && rng.chance(70) {
         corpus[rng.below(corpus.len())].clone()
     } else {
-        let n = rng.below(MAX_FRAME + 1);
+        let n = rng.below(MAX_MESSAGE + 1);
         rng.bytes(n)
     };
     let broadcast = rng.chance(40);
@@ -1790,7 +1794,7 @@ fn mutate_link_bytes(rng: &mut Rng, t: &mut Vec<u8>) {
                 let v = match rng.below(4) {
                     0 => len.wrapping_add(1),
                     1 => len.wrapping_sub(1),
-                    2 => *rng.pick(&[0, MAX_FRAME as u16, MAX_FRAME as u16 + 1, u16::MAX]),
+                    2 => *rng.pick(&[0, MAX_MESSAGE as u16, MAX_MESSAGE as u16 + 1, u16::MAX]),
                     _ => rng.next() as u16,
                 };
                 t[2..4].copy_from_slice(&v.to_le_bytes());
@@ -1833,7 +1837,7 @@ fn slave_session(rng: &mut Rng, corpus: &[Vec<u8>], input: &mut Vec<u8>, tally: 
         cancel_next: false,
     };
     let mut handle = shared.handle();
-    let mut rx = vec![0u8; MAX_FRAME];
+    let mut rx = vec![0u8; MAX_MESSAGE];
     let mut delivered = 0u64;
     for _ in 0..n + 2 {
         port.cancel_next = rng.chance(5);
@@ -1843,14 +1847,14 @@ fn slave_session(rng: &mut Rng, corpus: &[Vec<u8>], input: &mut Vec<u8>, tally: 
         if rng.chance(30) {
             // The node posts a frame (sometimes too long): the link takes it or refuses it.
             let len = if rng.chance(90) {
-                rng.below(MAX_FRAME + 1)
+                rng.below(MAX_MESSAGE + 1)
             } else {
-                MAX_FRAME + 1
+                MAX_MESSAGE + 1
             };
             let f = rng.bytes(len);
             let r = handle.post(&f);
             assert!(
-                len <= MAX_FRAME || r.is_err(),
+                len <= MAX_MESSAGE || r.is_err(),
                 "an oversize frame was posted"
             );
         }
@@ -1864,7 +1868,7 @@ fn slave_session(rng: &mut Rng, corpus: &[Vec<u8>], input: &mut Vec<u8>, tally: 
                 Incoming::Exchanged { len } => (len, false),
                 Incoming::Broadcast { len } => (len, true),
             };
-            assert!(len <= MAX_FRAME);
+            assert!(len <= MAX_MESSAGE);
             if len > 0 && !clocked.is_empty() {
                 // Delivered bytes are a body whose header (kind, length, CRC) is intact.
                 let body = &clocked[HEADER..HEADER + len];
@@ -1939,7 +1943,7 @@ fn nc_transfer(rng: &mut Rng, corpus: &[Vec<u8>]) -> Vec<u8> {
     let body = if !corpus.is_empty() && rng.chance(70) {
         corpus[rng.below(corpus.len())].clone()
     } else {
-        let n = rng.below(MAX_FRAME + 1);
+        let n = rng.below(MAX_MESSAGE + 1);
         rng.bytes(n)
     };
     // The node header: magic 0x5a, flags (bit 0: posted), length, body CRC, header CRC.
@@ -1992,11 +1996,11 @@ fn master_session(
         p.ready_after = rng.chance(5);
         p.trailer = None;
         let len = if rng.chance(95) {
-            rng.below(MAX_FRAME + 1)
+            rng.below(MAX_MESSAGE + 1)
         } else {
-            MAX_FRAME + 1 + rng.below(8)
+            MAX_MESSAGE + 1 + rng.below(8)
         };
-        let out = rng.bytes(len.min(MAX_FRAME));
+        let out = rng.bytes(len.min(MAX_MESSAGE));
         link.tx_bank()[..out.len()].copy_from_slice(&out);
         let transfer = if rng.chance(25) {
             Transfer::Broadcast
@@ -2007,7 +2011,7 @@ fn master_session(
             Ok(()) => {}
             Err(e) => {
                 assert!(
-                    len > MAX_FRAME || matches!(transfer, Transfer::Exchange(n) if n >= nodes),
+                    len > MAX_MESSAGE || matches!(transfer, Transfer::Exchange(n) if n >= nodes),
                     "start refused: {e}"
                 );
                 continue;
@@ -2016,7 +2020,7 @@ fn master_session(
         let mut rx = vec![
             0u8;
             if rng.chance(90) {
-                MAX_FRAME
+                MAX_MESSAGE
             } else {
                 rng.below(64)
             }
@@ -2066,7 +2070,7 @@ fn link() {
             }
         })
         .collect();
-    corpus.retain(|f| f.len() <= MAX_FRAME);
+    corpus.retain(|f| f.len() <= MAX_MESSAGE);
     // An input is a session of up to 12 transfers; "accepted": some frame was handed on.
     fuzz("link", &mut corpus, |corpus, rng, input, tally| {
         let delivered = if rng.chance(50) {

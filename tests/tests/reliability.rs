@@ -4,7 +4,7 @@
 
 use links_core::image::SceneView;
 use links_core::render::{render_run, Tracer};
-use links_core::sched::{Policy, Shape};
+use links_core::sched::{Policy, Split};
 use links_host::cluster::star::{BroadcastDrop, BusCounters, Faults, NodeDeath, Noise};
 use links_host::cluster::{simulate_frame, RunCache, SimConfig, SimReport};
 use links_host::cost::{CycleModel, DEFAULT_CLOCK_HZ};
@@ -57,7 +57,7 @@ fn a_static_region_of_a_node_that_died_before_taking_it_is_reissued() {
     for nodes in [2u16, 8] {
         let cfg = SimConfig {
             nodes,
-            policy: Policy::Static { shape: Shape::Rect },
+            policy: Policy::Static { shape: Split::Rect },
             node_timeout_s: 0.05,
             ..SimConfig::default()
         };
@@ -187,14 +187,14 @@ fn one_node_killed_at_any_moment_finishes_within_the_bound_under_every_policy() 
     let want = reference(&img);
     let policies = [
         Policy::DECREASING,
-        Policy::Static { shape: Shape::Rect },
+        Policy::Static { shape: Split::Rect },
         Policy::Fixed {
             divisions: 48,
-            shape: Shape::Span,
+            shape: Split::Span,
         },
         Policy::Fixed {
             divisions: 48,
-            shape: Shape::Rect,
+            shape: Split::Rect,
         },
     ];
     let cache = RunCache::new();
@@ -344,7 +344,7 @@ fn an_idle_node_that_lost_its_job_list_asks_again() {
             &img,
             &SimConfig {
                 nodes: 4,
-                policy: Policy::Static { shape: Shape::Span },
+                policy: Policy::Static { shape: Split::Span },
                 node_timeout_s: 0.02,
                 // Node 3 dies at once: its region is adopted by an idle node after a roll
                 // call, through exchanges that lose half the RC's replies.
@@ -377,10 +377,10 @@ fn lost_broadcasts_are_repaired_under_every_policy() {
     let want = reference(&img);
     for policy in [
         Policy::DECREASING,
-        Policy::Static { shape: Shape::Rect },
+        Policy::Static { shape: Split::Rect },
         Policy::Fixed {
             divisions: 48,
-            shape: Shape::Span,
+            shape: Split::Span,
         },
     ] {
         let cfg = SimConfig {

@@ -16,7 +16,7 @@ use links_core::sched::Policy;
 use links_core::spi::{ACK, BANK, HEADER, NAK};
 use links_core::testkit::serial::{read_back, ReadBack};
 use links_core::testkit::spi::*;
-use links_core::wire::{self, MAX_FRAME};
+use links_core::wire::{self, MAX_MESSAGE};
 use links_host::frame::{render_frame, Precision};
 use links_host::scene_file::load_scene;
 use std::cell::RefCell;
@@ -47,7 +47,7 @@ fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
             let mut got = Vec::new();
             for _ in 0..4 {
                 let node = master.wait_ready().await;
-                let mut rx = [0u8; MAX_FRAME];
+                let mut rx = [0u8; MAX_MESSAGE];
                 let n = master
                     .exchange(node, &down, &mut rx)
                     .await
@@ -60,7 +60,7 @@ fn exchange_swaps_frames_and_a_malformed_frame_is_nakked_and_resent() {
             got
         };
         let nc = async {
-            let mut rx = [0u8; MAX_FRAME];
+            let mut rx = [0u8; MAX_MESSAGE];
             match handle.recv(&mut rx).await.expect("no error") {
                 Incoming::Exchanged { len } => rx[..len].to_vec(),
                 Incoming::Broadcast { .. } => panic!("no broadcast was sent"),
@@ -120,7 +120,7 @@ fn garbled_headers_never_deliver_and_the_link_recovers() {
             loop {
                 tries += 1;
                 let node = master.wait_ready().await;
-                let mut rx = [0u8; MAX_FRAME];
+                let mut rx = [0u8; MAX_MESSAGE];
                 let n = master.exchange(node, b"world", &mut rx).await.unwrap();
                 if n > 0 {
                     assert_eq!(&rx[..n], b"hello");
@@ -144,7 +144,7 @@ fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
     let mut master = master_link(&bus, 10);
     assert_eq!(master.nodes(), (10, 2));
     assert_eq!(master.ready(), None);
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     let n = run(master.exchange(11, b"x", &mut rx)).unwrap();
     assert_eq!(n, 0);
     assert_eq!(master.counters.not_ready, 1);
@@ -157,7 +157,7 @@ fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
         run(master.exchange(9, b"x", &mut rx)).is_err(),
         "not on this bus"
     );
-    let big = vec![0u8; MAX_FRAME + 1];
+    let big = vec![0u8; MAX_MESSAGE + 1];
     assert!(run(master.exchange(10, &big, &mut rx)).is_err());
     assert!(run(master.broadcast(&big)).is_err());
 }
@@ -182,7 +182,7 @@ fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
     assert_eq!(c.broadcasts, 3);
     assert_eq!(c.overflows, 1, "the third found both banks full");
     let mut handle = shared.handle();
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     for k in 0..2u8 {
         let got = run(handle.recv(&mut rx)).unwrap();
         assert_eq!(got, Incoming::Broadcast { len: 100 });
@@ -201,7 +201,7 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
     let mut master = master_link(&bus, 0);
     let (shared, task, mut port) = slave_link(&bus, 0);
     let rc = async {
-        let mut rx = [0u8; MAX_FRAME];
+        let mut rx = [0u8; MAX_MESSAGE];
         assert_eq!(master.finish(&mut rx).await, Err(LinkError::Aborted));
         polls(20).await;
         master.tx_bank()[..64].fill(1);
@@ -223,7 +223,7 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
             Err(LinkError::NoSuchNode { node: 1 })
         );
         assert!(matches!(
-            master.start(Transfer::Broadcast, MAX_FRAME + 1),
+            master.start(Transfer::Broadcast, MAX_MESSAGE + 1),
             Err(LinkError::TooLong { .. })
         ));
         polls(20).await;
@@ -232,7 +232,7 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
     let Either::First(()) = run(select(rc, link));
     assert_eq!(shared.counters().broadcasts, 2);
     let mut handle = shared.handle();
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     for k in 1..=2u8 {
         let got = run(handle.recv(&mut rx)).unwrap();
         assert_eq!(got, Incoming::Broadcast { len: 64 });
@@ -257,7 +257,7 @@ fn a_corrupt_broadcast_is_counted_and_dropped() {
     let Either::First(()) = run(select(rc, task.run(&mut port, &shared)));
     let c = shared.counters();
     assert_eq!((c.broadcasts, c.bad_bodies), (2, 1));
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     let got = run(shared.handle().recv(&mut rx)).unwrap();
     assert_eq!(got, Incoming::Broadcast { len: 64 });
     assert_eq!(rx[..64], [8u8; 64], "only the intact one is delivered");
@@ -403,7 +403,7 @@ fn cluster_over_the_link_survives_corrupt_bytes_and_lost_edges() {
 
 #[test]
 fn wire_frames_fit_a_bank() {
-    let mut buf = [0u8; MAX_FRAME];
+    let mut buf = [0u8; MAX_MESSAGE];
     let n = wire::encode(1, 2, &wire::Down::Stop, &mut buf).unwrap();
     assert!(HEADER + n < BANK);
 }

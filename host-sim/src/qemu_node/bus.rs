@@ -5,7 +5,7 @@ use super::*;
 use links_core::link::{LinkError, NodeId, RootBus, Transfer};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
-use links_core::wire::MAX_FRAME;
+use links_core::wire::MAX_MESSAGE;
 use std::cell::RefCell;
 use std::future::Future;
 use std::task::{Context, Poll, Waker};
@@ -93,7 +93,7 @@ impl<N> LockstepBus<N> {
                 transcript: Vec::new(),
                 error: None,
             }),
-            banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+            banks: [vec![0; MAX_MESSAGE], vec![0; MAX_MESSAGE]],
             idle: 0,
             inflight: None,
         }

@@ -2,7 +2,7 @@ use super::bus::LockstepBus;
 use super::*;
 use links_core::dm::{compile, CompileOptions};
 use links_core::link::{LinkError, RootBus, Transfer};
-use links_core::wire::{self, Down, Up, MAX_FRAME};
+use links_core::wire::{self, Down, Up, MAX_MESSAGE};
 use std::future::Future;
 use std::task::{Context, Poll, Waker};
 
@@ -90,7 +90,7 @@ fn lock_step_rc_single_and_double_buffered_assemble_the_same_frame() {
 #[test]
 fn lock_step_bus_keeps_one_transfer_in_flight() {
     let mut bus = LockstepBus::new(LocalNode::new());
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     fn poll<F: Future>(f: F) -> F::Output {
         let mut f = std::pin::pin!(f);
         match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
@@ -108,7 +108,7 @@ fn lock_step_bus_keeps_one_transfer_in_flight() {
     assert_eq!(poll(bus.finish(&mut rx)), Ok(0));
     // Past the bank, and nodes not on the bus, are errors.
     assert!(matches!(
-        bus.start(Transfer::Broadcast, MAX_FRAME + 1),
+        bus.start(Transfer::Broadcast, MAX_MESSAGE + 1),
         Err(LinkError::TooLong { .. })
     ));
     assert_eq!(
@@ -165,7 +165,7 @@ fn flip_pixel(f: &mut Vec<u8>) -> bool {
         },
         _ => unreachable!(),
     };
-    let mut buf = vec![0u8; wire::MAX_FRAME];
+    let mut buf = vec![0u8; wire::MAX_MESSAGE];
     let n = wire::encode(env.seq, env.ack, &msg, &mut buf).unwrap();
     buf.truncate(n);
     *f = buf;

@@ -4,7 +4,7 @@
 
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
-use links_core::sched::{Policy, Shape};
+use links_core::sched::{Policy, Split};
 
 /// Parse a scheduling policy: `decreasing`, `static`, `fixed=N` (runs) or `fixed-rect=N`.
 pub fn parse_policy(s: &str) -> Result<Policy, String> {
@@ -17,10 +17,10 @@ pub fn parse_policy(s: &str) -> Result<Policy, String> {
     };
     match s {
         "decreasing" => Ok(Policy::DECREASING),
-        "static" => Ok(Policy::Static { shape: Shape::Rect }),
+        "static" => Ok(Policy::Static { shape: Split::Rect }),
         _ => match s.split_once('=') {
-            Some(("fixed", n)) => fixed(n, Shape::Span),
-            Some(("fixed-rect", n)) => fixed(n, Shape::Rect),
+            Some(("fixed", n)) => fixed(n, Split::Span),
+            Some(("fixed-rect", n)) => fixed(n, Split::Rect),
             _ => Err(format!(
                 "unknown policy '{s}' (expected decreasing, static, fixed=N or fixed-rect=N)"
             )),
@@ -173,19 +173,19 @@ mod tests {
             parse_policy("fixed=1024"),
             Ok(Policy::Fixed {
                 divisions: 1024,
-                shape: Shape::Span
+                shape: Split::Span
             })
         );
         assert_eq!(
             parse_policy("fixed-rect=64"),
             Ok(Policy::Fixed {
                 divisions: 64,
-                shape: Shape::Rect
+                shape: Split::Rect
             })
         );
         assert_eq!(
             parse_policy("static"),
-            Ok(Policy::Static { shape: Shape::Rect })
+            Ok(Policy::Static { shape: Split::Rect })
         );
         assert!(parse_policy("fixed=0").unwrap_err().contains("positive"));
         assert!(parse_policy("round-robin")

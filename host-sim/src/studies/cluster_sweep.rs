@@ -7,7 +7,7 @@
 
 use crate::sim::cluster::{simulate, SimConfig, SimError};
 use crate::studies::chart::draw_legend;
-use links_core::sched::{Policy, Shape};
+use links_core::sched::{Policy, Split};
 use plotters::prelude::*;
 use rayon::prelude::*;
 use std::fmt::Write as _;
@@ -32,12 +32,12 @@ impl NamedPolicy {
     /// node), fixed 1024 scanline runs (LINKS-1's best count), decreasing sizes.
     pub fn standard() -> Vec<NamedPolicy> {
         vec![
-            NamedPolicy::new("static", Policy::Static { shape: Shape::Rect }),
+            NamedPolicy::new("static", Policy::Static { shape: Split::Rect }),
             NamedPolicy::new(
                 "fixed-1024",
                 Policy::Fixed {
                     divisions: 1024,
-                    shape: Shape::Span,
+                    shape: Split::Span,
                 },
             ),
             NamedPolicy::new("decreasing", Policy::DECREASING),
@@ -186,18 +186,18 @@ pub fn sweep_divisions(
             "runs".into(),
             Policy::Fixed {
                 divisions: d,
-                shape: Shape::Span,
+                shape: Split::Span,
             },
         ));
         policies.push((
             "rects".into(),
             Policy::Fixed {
                 divisions: d,
-                shape: Shape::Rect,
+                shape: Split::Rect,
             },
         ));
     }
-    policies.push(("static".into(), Policy::Static { shape: Shape::Rect }));
+    policies.push(("static".into(), Policy::Static { shape: Split::Rect }));
     policies.push(("decreasing".into(), Policy::DECREASING));
     let cache = base.cache.clone().unwrap_or_default();
     let results: Vec<Result<Option<DivisionPoint>, SimError>> = pool(threads)?.install(|| {

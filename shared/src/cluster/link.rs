@@ -110,7 +110,7 @@ pub trait RootBus {
     /// [`RootBus::wait_ready`] would make).
     fn ready(&self) -> Option<NodeId>;
 
-    /// The idle TX bank (at least [`crate::wire::MAX_FRAME`] bytes): compose the next frame
+    /// The idle TX bank (at least [`crate::wire::MAX_MESSAGE`] bytes): compose the next frame
     /// here, also while a transfer is in flight.
     fn tx_bank(&mut self) -> &mut [u8];
 

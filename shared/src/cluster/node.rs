@@ -15,7 +15,7 @@
 
 use super::link::{Incoming, LinkError, NodeLink};
 use super::wire::{
-    self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_FRAME, MAX_RUN, MAX_SCENE,
+    self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
     PIECES_PER_CHUNK, SCENE_CHUNK, SCENE_PIECE,
 };
 use crate::image::SceneView;
@@ -235,7 +235,7 @@ impl Bank {
 }
 
 /// The shortest pixel run a node sends when its frames keep getting lost (see
-/// [`Nc::run_cap`]).
+/// `Nc::run_cap`).
 pub const MIN_RUN: usize = 16;
 
 /// A frame kept until acknowledged.
@@ -244,7 +244,7 @@ struct Slot {
     len: usize,
     /// Exchange number it was last sent in.
     sent_in: u32,
-    buf: [u8; MAX_FRAME],
+    buf: [u8; MAX_MESSAGE],
 }
 
 /// The run rendered and waiting for a free bank.
@@ -316,7 +316,7 @@ impl Nc {
             seq,
             len: 0,
             sent_in: self.exchanges,
-            buf: [0; MAX_FRAME],
+            buf: [0; MAX_MESSAGE],
         };
         slot.len = f(seq, &mut slot.buf).ok()?;
         self.next_seq = self.next_seq.wrapping_add(1);
@@ -506,7 +506,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
         report: *report,
     };
     let mut pix: [Rgb8; MAX_RUN] = [[0; 3]; MAX_RUN];
-    let mut rx = [0u8; MAX_FRAME];
+    let mut rx = [0u8; MAX_MESSAGE];
     let mut coded = [0u8; 3 * MAX_RUN];
     let mut poll = [0u8; 16];
     while !nc.stopped {

@@ -8,17 +8,18 @@
 //!   `remaining / (factor · nodes)` pixels, never below `min_pixels` (guided
 //!   self-scheduling), so early jobs amortise the traffic and late ones balance the finish.
 //!
-//! Sub-screens are raster-order runs of pixels ([`Shape::Span`], the paper's scanline runs)
-//! or rectangles ([`Shape::Rect`], a grid as close to square cells as the count allows).
+//! Sub-screens are raster-order runs of pixels ([`Split::Span`], the paper's scanline runs)
+//! or rectangles ([`Split::Rect`], a grid as close to square cells as the count allows).
 
 use super::link::NodeId;
 use super::wire::Region;
 use core::fmt;
 
-/// The form of a sub-screen.
+/// How the screen is split into sub-screens: raster-order runs of pixels or rectangles (the
+/// form of every sub-screen).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub enum Shape {
+pub enum Split {
     Span,
     Rect,
 }
@@ -27,8 +28,8 @@ pub enum Shape {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Policy {
-    Static { shape: Shape },
-    Fixed { divisions: u32, shape: Shape },
+    Static { shape: Split },
+    Fixed { divisions: u32, shape: Split },
     Decreasing { factor: u32, min_pixels: u32 },
 }
 
@@ -127,7 +128,7 @@ impl Scheduler {
                 if factor == 0 || min_pixels == 0 {
                     return Err(SchedError::Empty);
                 }
-                (1, Shape::Span)
+                (1, Split::Span)
             }
         };
         if count == 0 {
@@ -136,7 +137,7 @@ impl Scheduler {
         if count > total {
             return Err(SchedError::TooFine { divisions: count });
         }
-        let grid = if shape == Shape::Rect {
+        let grid = if shape == Split::Rect {
             let g = grid_for(count, width, height);
             if g.0 > width || g.1 > height {
                 return Err(SchedError::TooFine { divisions: count });
@@ -168,9 +169,9 @@ impl Scheduler {
     }
 
     /// Region `i` of `count` equal pieces of the screen in the given shape.
-    fn piece(&self, i: u32, count: u32, shape: Shape) -> Region {
+    fn piece(&self, i: u32, count: u32, shape: Split) -> Region {
         match shape {
-            Shape::Span => {
+            Split::Span => {
                 let total = self.width as u64 * self.height as u64;
                 let a = (total * i as u64 / count as u64) as u32;
                 let b = (total * (i as u64 + 1) / count as u64) as u32;
@@ -179,7 +180,7 @@ impl Scheduler {
                     len: b - a,
                 }
             }
-            Shape::Rect => {
+            Split::Rect => {
                 let (cols, rows) = self.grid;
                 let (c, r) = (i % cols, i / cols);
                 let x0 = self.width * c / cols;
@@ -311,19 +312,19 @@ mod tests {
     #[test]
     fn every_policy_covers_every_pixel_exactly_once() {
         let policies = [
-            Policy::Static { shape: Shape::Span },
-            Policy::Static { shape: Shape::Rect },
+            Policy::Static { shape: Split::Span },
+            Policy::Static { shape: Split::Rect },
             Policy::Fixed {
                 divisions: 7,
-                shape: Shape::Span,
+                shape: Split::Span,
             },
             Policy::Fixed {
                 divisions: 48,
-                shape: Shape::Rect,
+                shape: Split::Rect,
             },
             Policy::Fixed {
                 divisions: 3840,
-                shape: Shape::Span,
+                shape: Split::Span,
             },
             Policy::DECREASING,
             Policy::Decreasing {
@@ -344,7 +345,7 @@ mod tests {
             Scheduler::new(
                 Policy::Fixed {
                     divisions: 48,
-                    shape: Shape::Rect,
+                    shape: Split::Rect,
                 },
                 64,
                 60,
@@ -381,7 +382,7 @@ mod tests {
         }
         assert!(last <= 64);
         // Static: each node exactly once.
-        let mut s = Scheduler::new(Policy::Static { shape: Shape::Span }, 64, 60, 4).unwrap();
+        let mut s = Scheduler::new(Policy::Static { shape: Split::Span }, 64, 60, 4).unwrap();
         assert_eq!(
             s.next_for(2),
             Some(Region::Span {
@@ -410,7 +411,7 @@ mod tests {
             Scheduler::new(
                 Policy::Fixed {
                     divisions: 0,
-                    shape: Shape::Span
+                    shape: Split::Span
                 },
                 4,
                 4,
@@ -423,7 +424,7 @@ mod tests {
             Scheduler::new(
                 Policy::Fixed {
                     divisions: 17,
-                    shape: Shape::Span
+                    shape: Split::Span
                 },
                 4,
                 4,
@@ -436,7 +437,7 @@ mod tests {
             Scheduler::new(
                 Policy::Fixed {
                     divisions: 7,
-                    shape: Shape::Rect
+                    shape: Split::Rect
                 },
                 4,
                 4,

@@ -1,12 +1,12 @@
 //! Every message on the RC-NC bus (the "ICD"): versioned, postcard-encoded, CRC-32 checked.
 //!
-//! ## Frame layout
+//! ## Message layout
 //! ```text
 //! postcard(Envelope { version, seq, ack, msg }) ++ CRC-32/ISO-HDLC (4 bytes, little-endian)
 //! ```
 //! SPI transfers are length-delimited (the link's handshake phase carries the length), so a
-//! frame needs no COBS stuffing on the bus; a byte stream (serial readback) wraps the same
-//! frame in COBS. The CRC covers every byte before it; a frame whose CRC, version or layout
+//! message needs no COBS stuffing on the bus; a byte stream (serial readback) wraps the same
+//! message in COBS. The CRC covers every byte before it; a message whose CRC, version or layout
 //! is wrong decodes to a [`WireError`], never a panic.
 //!
 //! Messages borrow their payloads from the received bytes (pixel runs, scene chunks), so
@@ -14,15 +14,15 @@
 //!
 //! ## Reliability
 //! RC -> NC exchange messages ([`Down::Work`]) carry *state*, not deltas (the node's whole
-//! job queue), so a lost one is simply superseded by the next. NC -> RC frames carry a sequence
+//! job queue), so a lost one is simply superseded by the next. NC -> RC messages carry a sequence
 //! number; the RC acknowledges the highest in-order one in every reply (`ack`), and a node
-//! keeps each frame in its bank until acknowledged and sends it again otherwise (go-back-N with
+//! keeps each message in its bank until acknowledged and sends it again otherwise (go-back-N with
 //! a window of two: the two DMA banks).
 
 use core::fmt;
 use serde::{Deserialize, Serialize};
 
-/// Protocol version carried in every frame (4: scene repairs may come in pieces).
+/// Protocol version carried in every message (4: scene repairs may come in pieces).
 pub const PROTOCOL_VERSION: u8 = 4;
 /// Most pixels in one [`Up::Pixels`] message (one full 512-pixel scanline).
 pub const MAX_RUN: usize = 512;
@@ -41,12 +41,12 @@ pub const MAX_SCENE: usize = 128 * 1024;
 pub const MAX_CHUNKS: usize = MAX_SCENE / SCENE_CHUNK;
 /// Jobs a node holds at once: the one it renders and the next (prefetch hides the round trip).
 pub const JOB_QUEUE: usize = 2;
-/// Bytes of CRC at the end of every frame.
+/// Bytes of CRC at the end of every message.
 pub const CRC_LEN: usize = 4;
-/// Upper bound of an encoded frame (the largest is a full pixel run or a scene chunk).
-pub const MAX_FRAME: usize = 3 * MAX_RUN + 40;
+/// Upper bound of an encoded message (the largest is a full pixel run or a scene chunk).
+pub const MAX_MESSAGE: usize = 3 * MAX_RUN + 40;
 
-/// The CRC every frame carries (CRC-32/ISO-HDLC, as Ethernet and zip).
+/// The CRC every message carries (CRC-32/ISO-HDLC, as Ethernet and zip).
 pub const CRC32: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// A sub-screen: what a node renders for one job.
@@ -172,7 +172,7 @@ pub enum Up<'a> {
     /// The node's scene changed state (sequenced: delivered reliably).
     Status { scene: SceneState },
     /// Not sequenced, carries nothing: "swap with me so I learn your `ack`" (a node with
-    /// unacknowledged frames and nothing new to send).
+    /// unacknowledged messages and nothing new to send).
     Poll,
     /// Finished pixels of job `job`: `rgb` holds RGB8 triples of scanline `y` from column
     /// `x` (the address + colour record, LINKS-1's 54-bit pixel analog, per run). `done`
@@ -250,20 +250,20 @@ pub fn rle_decode(data: &[u8], out: &mut [u8]) -> Result<(), WireError> {
     }
 }
 
-/// The header and message of a frame.
+/// A message as sent: its header fields (version, sequence, acknowledgement) and its payload.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Envelope<M> {
     pub version: u8,
-    /// Sender's sequence number (NC frames; 0 in broadcasts).
+    /// Sender's sequence number (NC messages; 0 in broadcasts).
     pub seq: u16,
-    /// RC frames: the highest in-order NC sequence number received. NC frames: the last
+    /// RC messages: the highest in-order NC sequence number received. NC messages: the last
     /// RC exchange it decoded (diagnostic only).
     pub ack: u16,
     pub msg: M,
 }
 
-/// Why bytes are not a valid frame.
+/// Why bytes are not a valid message.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum WireError {
@@ -271,9 +271,9 @@ pub enum WireError {
     BadCrc,
     /// CRC fine but the contents are not a message of this protocol.
     Malformed,
-    /// A frame of another protocol version.
+    /// A message of another protocol version.
     Version { found: u8 },
-    /// The output buffer is too small for the frame.
+    /// The output buffer is too small for the message.
     BufferFull,
 }
 
@@ -293,7 +293,7 @@ impl fmt::Display for WireError {
 
 impl core::error::Error for WireError {}
 
-/// Encode a message into `buf`; returns the frame's length.
+/// Encode a message into `buf`; returns the message's length.
 pub fn encode<M: Serialize>(
     seq: u16,
     ack: u16,
@@ -322,7 +322,7 @@ pub fn encode<M: Serialize>(
     Ok(n + CRC_LEN)
 }
 
-/// Decode a frame (checking CRC and version). The message borrows from `bytes`.
+/// Decode a message (checking CRC and version). The message borrows from `bytes`.
 pub fn decode<'a, M: Deserialize<'a>>(bytes: &'a [u8]) -> Result<Envelope<M>, WireError> {
     if bytes.len() < CRC_LEN {
         return Err(WireError::BadCrc);
@@ -401,7 +401,7 @@ mod tests {
             Down::Wake { frame: 4 },
         ];
         for d in downs {
-            roundtrip(d, &mut [0u8; MAX_FRAME]);
+            roundtrip(d, &mut [0u8; MAX_MESSAGE]);
         }
         let ups = [
             Up::Status {
@@ -437,12 +437,12 @@ mod tests {
             },
         ];
         for u in ups {
-            roundtrip(u, &mut [0u8; MAX_FRAME]);
+            roundtrip(u, &mut [0u8; MAX_MESSAGE]);
         }
     }
 
     #[test]
-    fn largest_frames_fit_max_frame() {
+    fn largest_messages_fit_max_message() {
         let rgb = [0xffu8; 3 * MAX_RUN];
         let up = Up::Pixels {
             job: u32::MAX,
@@ -452,9 +452,9 @@ mod tests {
             rgb: &rgb,
             done: true,
         };
-        let mut buf = [0u8; MAX_FRAME];
+        let mut buf = [0u8; MAX_MESSAGE];
         let n = encode(u16::MAX, u16::MAX, &up, &mut buf).expect("fits");
-        assert!(n <= MAX_FRAME);
+        assert!(n <= MAX_MESSAGE);
         let chunk = [0xffu8; SCENE_CHUNK];
         let d = Down::Scene {
             frame: u16::MAX,
@@ -463,7 +463,7 @@ mod tests {
             crc: u32::MAX,
             data: &chunk,
         };
-        assert!(encode(u16::MAX, u16::MAX, &d, &mut buf).expect("fits") <= MAX_FRAME);
+        assert!(encode(u16::MAX, u16::MAX, &d, &mut buf).expect("fits") <= MAX_MESSAGE);
     }
 
     #[test]
@@ -481,7 +481,7 @@ mod tests {
             Up::Poll,
         ];
         for m in msgs {
-            let (mut a, mut b) = ([0u8; MAX_FRAME], [0u8; MAX_FRAME]);
+            let (mut a, mut b) = ([0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE]);
             let n = encode(5, 6, &m, &mut a).unwrap();
             let env = Envelope {
                 version: PROTOCOL_VERSION,
@@ -493,8 +493,8 @@ mod tests {
             assert_eq!(&a[..n], &*want);
             // The payload as a block gives the bytes of serde's element-wise sequence.
             if let Up::Pixels { rgb, .. } = m {
-                let mut seq = [0u8; MAX_FRAME];
-                let mut blk = [0u8; MAX_FRAME];
+                let mut seq = [0u8; MAX_MESSAGE];
+                let mut blk = [0u8; MAX_MESSAGE];
                 struct Blk<'a>(&'a [u8]);
                 impl Serialize for Blk<'_> {
                     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
@@ -506,7 +506,7 @@ mod tests {
                 assert_eq!(seq[..s1], blk[..s2]);
             }
             // Exactly full fits; one byte less does not.
-            let mut c = [0u8; MAX_FRAME];
+            let mut c = [0u8; MAX_MESSAGE];
             assert_eq!(encode(5, 6, &m, &mut c[..n]), Ok(n));
             assert_eq!(
                 encode(5, 6, &m, &mut c[..n - 1]),
@@ -516,7 +516,7 @@ mod tests {
     }
 
     #[test]
-    fn exact_size_of_a_pixel_frame() {
+    fn exact_size_of_a_pixel_message() {
         // version 1 + seq 1 + ack 1 + variant 1 + job 1 + frame 1 + y 1 + x 1
         // + len varint 2 + 384 bytes + done 1 + crc 4 = 399
         let rgb = [0u8; 384];
@@ -528,7 +528,7 @@ mod tests {
             rgb: &rgb,
             done: false,
         };
-        let mut buf = [0u8; MAX_FRAME];
+        let mut buf = [0u8; MAX_MESSAGE];
         assert_eq!(encode(1, 0, &up, &mut buf), Ok(399));
     }
 
@@ -543,7 +543,7 @@ mod tests {
             rgb: &rgb,
             done: true,
         };
-        let mut buf = [0u8; MAX_FRAME];
+        let mut buf = [0u8; MAX_MESSAGE];
         let n = encode(1, 0, &up, &mut buf).unwrap();
         for bit in 0..n * 8 {
             let mut b = buf;

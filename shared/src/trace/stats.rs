@@ -1,5 +1,5 @@
 //! The renderer's deterministic operation counts ([`Stats`]), defined from one list of
-//! counters by [`define_stats!`].
+//! counters by `define_stats!`.
 
 /// Defines [`Stats`] from one list of counters: the struct, its field names in order, its
 /// values in the same order, and addition. Every other list of the counters (the cost model's

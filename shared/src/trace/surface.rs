@@ -6,6 +6,7 @@ use super::traversal::{blob_group, Hit, HitDetail};
 use crate::geom::{Ray, Vec3};
 use crate::image::{ShapeRef, NONE};
 use crate::num::Real;
+use crate::shape::ellipsoid::LocalSurface;
 
 /// A finished hit: where, how accurately, which way the surface faces, what it is made of.
 #[derive(Clone, Copy, Debug)]
@@ -19,6 +20,22 @@ pub struct Surface<T> {
     pub uv: [T; 2],
     pub material: u32,
     pub shape: ShapeRef,
+}
+
+impl<T: Copy> Surface<T> {
+    /// The surface of a hit on a quadric-like shape (one normal for shading and geometry).
+    #[inline(always)]
+    fn local(ls: LocalSurface<T>, uv: [T; 2], material: u32, shape: ShapeRef) -> Self {
+        Surface {
+            p: ls.p,
+            p_error: ls.p_error,
+            ng: ls.n,
+            ns: ls.n,
+            uv,
+            material,
+            shape,
+        }
+    }
 }
 
 impl<T: Real> Tracer<'_, T> {
@@ -76,15 +93,7 @@ impl<T: Real> Tracer<'_, T> {
                         T::ONE - q.y.max(-T::ONE).min(T::ONE).acos() / T::PI,
                     ]
                 };
-                Surface {
-                    p: ls.p,
-                    p_error: ls.p_error,
-                    ng: ls.n,
-                    ns: ls.n,
-                    uv,
-                    material: rec.material,
-                    shape,
-                }
+                Surface::local(ls, uv, rec.material, shape)
             }
             HitDetail::Box(h) => {
                 let rec = s.boxshape::<T>(shape.index);
@@ -97,15 +106,7 @@ impl<T: Real> Tracer<'_, T> {
                     _ => (q.x, q.y),
                 };
                 let uv = [(a + T::ONE) * T::HALF, (b + T::ONE) * T::HALF];
-                Surface {
-                    p: ls.p,
-                    p_error: ls.p_error,
-                    ng: ls.n,
-                    ns: ls.n,
-                    uv,
-                    material: rec.material,
-                    shape,
-                }
+                Surface::local(ls, uv, rec.material, shape)
             }
             HitDetail::Blob { t_error } => {
                 let (g, group) = blob_group(*s, shape.index);

@@ -221,7 +221,7 @@ fn render_frame<R: Real>(tracer: &mut Tracer<'_, R>, w: u32, h: u32, out: &mut [
 
 /// `GRID x GRID` primary rays spread over the frame, with their reciprocal directions.
 fn grid_rays<R: Real>(tracer: &Tracer<'_, R>) -> [(Ray<R>, RayInv<R>); (GRID * GRID) as usize] {
-    let (w, h) = (tracer.frame().width, tracer.frame().height);
+    let (w, h) = (tracer.camera().width, tracer.camera().height);
     let mut rays = [(
         Ray::new(Vec3::zero(), Vec3::zero()),
         RayInv::new(Vec3::splat(R::ONE)),

@@ -6,7 +6,7 @@
 //! Shared by `main.rs` (scripts/qemu-bench prints them as `WIRE` lines) and usable alone.
 
 use core::hint::black_box;
-use links_core::wire::{self, Down, Job, Region, SceneState, Up, MAX_FRAME, MAX_RUN};
+use links_core::wire::{self, Down, Job, Region, SceneState, Up, MAX_MESSAGE, MAX_RUN};
 
 /// A counter of instructions (the benchmark's SysTick-based one).
 pub trait Meter {
@@ -30,7 +30,7 @@ fn per(m: &mut impl Meter, f: &mut dyn FnMut()) -> u64 {
 /// Run every measurement; returns false if a round trip failed.
 pub fn run(m: &mut impl Meter) -> bool {
     let mut ok = true;
-    let mut buf = [0u8; MAX_FRAME];
+    let mut buf = [0u8; MAX_MESSAGE];
     let mut data = [0u8; 3 * MAX_RUN];
     for (i, d) in data.iter_mut().enumerate() {
         *d = (i * 7 + i / 5) as u8;

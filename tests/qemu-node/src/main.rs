@@ -34,7 +34,7 @@ use links_core::image::SceneView;
 use links_core::link::{Incoming, LinkError, NodeLink};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
 use links_core::render::{RenderError, Rgb8, Stats};
-use links_core::wire::{CRC32, MAX_FRAME, MAX_SCENE};
+use links_core::wire::{CRC32, MAX_MESSAGE, MAX_SCENE};
 
 /// QEMU mps2: SysTick counts the 25 MHz clock; with `-icount shift=0` one instruction takes
 /// 1 ns, so one tick is 40 instructions.
@@ -118,7 +118,7 @@ struct SemihostLink {
     /// The TX bank holds a frame not yet exchanged.
     posted: bool,
     /// One record: kind, length, frame.
-    out: [u8; 5 + MAX_FRAME],
+    out: [u8; 5 + MAX_MESSAGE],
     /// Instructions spent in `post` and `recv` (copies and semihosting calls; waiting for
     /// the RC executes none).
     instr: u64,
@@ -133,7 +133,7 @@ impl SemihostLink {
         let n = payload.len();
         let rec = self.out.get_mut(..5 + n).ok_or(LinkError::TooLong {
             len: n as u32,
-            max: MAX_FRAME as u32,
+            max: MAX_MESSAGE as u32,
         })?;
         rec[0] = kind;
         rec[1..5].copy_from_slice(&(n as u32).to_le_bytes());
@@ -267,7 +267,7 @@ fn main() -> ! {
         down,
         up,
         posted: false,
-        out: [0; 5 + MAX_FRAME],
+        out: [0; 5 + MAX_MESSAGE],
         instr: 0,
         records_in: 0,
         records_out: 0,

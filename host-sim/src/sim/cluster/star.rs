@@ -10,7 +10,7 @@
 use super::exec::{PollFn, Ps, SharedClock};
 use super::framemem::FrameMemory;
 use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
-use links_core::wire::MAX_FRAME;
+use links_core::wire::MAX_MESSAGE;
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::rc::Rc;
@@ -582,7 +582,7 @@ impl SimBus {
             star: star.clone(),
             clock,
             bus,
-            banks: [vec![0; MAX_FRAME], vec![0; MAX_FRAME]],
+            banks: [vec![0; MAX_MESSAGE], vec![0; MAX_MESSAGE]],
             idle: 0,
         }
     }
@@ -625,7 +625,7 @@ impl RootBus for SimBus {
     }
 
     fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
-        let max = MAX_FRAME as u32;
+        let max = MAX_MESSAGE as u32;
         let down = self.banks[self.idle]
             .get(..len)
             .ok_or(LinkError::TooLong {

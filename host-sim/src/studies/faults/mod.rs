@@ -108,7 +108,7 @@ pub struct FaultSweep {
 impl FaultSweepConfig {
     /// The sweep of docs/reliability.md on `nodes` nodes with time-out `timeout_s`.
     pub fn standard(nodes: u16, timeout_s: f64) -> Self {
-        use links_core::sched::{Policy, Shape};
+        use links_core::sched::{Policy, Split};
         let div = 4 * nodes as u32;
         Self {
             base: SimConfig {
@@ -119,19 +119,19 @@ impl FaultSweepConfig {
             },
             policies: vec![
                 NamedPolicy::new("decreasing", Policy::DECREASING),
-                NamedPolicy::new("static", Policy::Static { shape: Shape::Rect }),
+                NamedPolicy::new("static", Policy::Static { shape: Split::Rect }),
                 NamedPolicy::new(
                     &format!("fixed={div}"),
                     Policy::Fixed {
                         divisions: div,
-                        shape: Shape::Span,
+                        shape: Split::Span,
                     },
                 ),
                 NamedPolicy::new(
                     &format!("fixed-rect={div}"),
                     Policy::Fixed {
                         divisions: div,
-                        shape: Shape::Rect,
+                        shape: Split::Rect,
                     },
                 ),
             ],

@@ -1,0 +1,268 @@
+//! The RC side: the master's port trait and [`MasterLink`], the [`RootBus`] over it.
+
+use super::framing::*;
+use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
+use crate::cluster::wire::MAX_MESSAGE;
+
+/// Which chip-selects to assert.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Select {
+    /// One node (index on this bus, 0-based).
+    One(u16),
+    /// Every node on the bus (broadcast).
+    All,
+}
+
+/// The RC's hardware for one bus: an SPI master with DMA, chip-select GPIOs, handshake
+/// inputs with edge interrupts.
+#[allow(async_fn_in_trait)]
+pub trait MasterPort {
+    /// Nodes on the bus.
+    fn count(&self) -> u16;
+    /// Level of node `i`'s handshake line.
+    fn ready(&self, i: u16) -> bool;
+    /// Resolve when some handshake line may have gone high (an edge interrupt, or a polling
+    /// period so that a lost edge costs little).
+    async fn wait_any_ready(&mut self);
+    /// Assert chip-selects, then wait the set-up time the nodes need to drive MISO.
+    async fn select(&mut self, sel: Select);
+    /// Release every chip-select (and hold them high for the nodes' re-arm time).
+    async fn deselect(&mut self);
+    /// One full-duplex DMA transfer; `tx` and `rx` have equal lengths.
+    async fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), PortError>;
+}
+
+/// What the RC's link saw.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MasterCounters {
+    pub exchanges: u32,
+    pub broadcasts: u32,
+    /// Exchanges whose node frame was malformed (answered with [`NAK`]).
+    pub naks: u32,
+    /// Node headers that failed their magic, CRC or length check (the transfer ends after
+    /// the header phase and the node is asked again).
+    pub bad_headers: u32,
+    /// `exchange` called for a node whose handshake line was low (not clocked).
+    pub not_ready: u32,
+    /// Selected nodes that did not drop their handshake line (not clocked).
+    pub no_ack: u32,
+    pub port_errors: u32,
+    pub bytes: u64,
+}
+
+/// The RC's end of one bus: the [`RootBus`] the root logic drives, over a [`MasterPort`].
+///
+/// Two TX banks (double buffering): the RC composes the next frame in the idle one
+/// ([`RootBus::tx_bank`], the body after the header room) while the other holds the
+/// transfer handed over with [`RootBus::start`]. The transfer is clocked in
+/// [`RootBus::finish`] (header phase, body, trailer: the phases need the CPU in between, and
+/// `MasterPort::transfer` is an async DMA transfer that runs only while awaited), so what
+/// the banks buy is that composing never waits for a bank; the wire and the composing do
+/// not overlap yet (that needs the phases driven from the DMA interrupt: docs/hardware.md).
+pub struct MasterLink<'b, P> {
+    port: P,
+    first: NodeId,
+    tx: [&'b mut Bank; 2],
+    /// The TX bank the RC composes into.
+    idle: usize,
+    rx: &'b mut Bank,
+    /// The transfer handed over and not yet finished: what, and its frame's length (in the
+    /// bank that is not idle).
+    started: Option<(Transfer, usize)>,
+    next_scan: u16,
+    pub counters: MasterCounters,
+}
+
+impl<'b, P: MasterPort> MasterLink<'b, P> {
+    /// A bus whose nodes are numbered `first..first + port.count()` in the root logic; `tx`
+    /// (two, double-buffered) and `rx` are the DMA banks.
+    pub fn new(port: P, first: NodeId, tx: [&'b mut Bank; 2], rx: &'b mut Bank) -> Self {
+        Self {
+            port,
+            first,
+            tx,
+            idle: 0,
+            rx,
+            started: None,
+            next_scan: 0,
+            counters: MasterCounters::default(),
+        }
+    }
+
+    pub fn port(&self) -> &P {
+        &self.port
+    }
+
+    pub fn port_mut(&mut self) -> &mut P {
+        &mut self.port
+    }
+
+    /// The node index on this bus of `node`.
+    fn index(&self, node: NodeId) -> Result<u16, LinkError> {
+        node.checked_sub(self.first)
+            .filter(|&i| i < self.port.count())
+            .ok_or(LinkError::NoSuchNode { node })
+    }
+
+    /// The node frame of an exchange (after the header phase): clock the body and trailer
+    /// from TX bank `b`. Returns the node frame's length if intact.
+    async fn body(&mut self, b: usize, n: usize) -> Result<Option<usize>, PortError> {
+        let Some(h) = nc_header(&self.rx[..HEADER]) else {
+            self.counters.bad_headers += 1;
+            return Ok(None);
+        };
+        let nlen = if h.kind & FLAG_POSTED != 0 {
+            h.len as usize
+        } else {
+            0
+        };
+        let l = n.max(nlen);
+        let tx = &mut *self.tx[b];
+        tx[HEADER + n..HEADER + l].fill(0);
+        self.port
+            .transfer(&tx[HEADER..HEADER + l], &mut self.rx[HEADER..HEADER + l])
+            .await?;
+        let ok = nlen == 0 || body_ok(&self.rx[..], &h);
+        let t = [if ok { ACK } else { NAK }];
+        let mut back = [0u8];
+        self.port.transfer(&t, &mut back).await?;
+        self.counters.bytes += (HEADER + l + TRAILER) as u64;
+        if ok {
+            Ok(Some(nlen))
+        } else {
+            self.counters.naks += 1;
+            Ok(None)
+        }
+    }
+
+    /// Clock an exchange of TX bank `b` (`n` bytes of frame) with node index `i`; the
+    /// node's frame is then in the RX bank. Returns its length (0: none, or not intact).
+    async fn clock_exchange(&mut self, b: usize, i: u16, n: usize) -> usize {
+        // Handshake ordering: never clock a node that is not armed.
+        if !self.port.ready(i) {
+            self.counters.not_ready += 1;
+            return 0;
+        }
+        let h = rc_header(false, &self.tx[b][HEADER..HEADER + n]);
+        self.tx[b][..HEADER].copy_from_slice(&h);
+        self.rx[..HEADER].fill(0);
+        self.port.select(Select::One(i)).await;
+        if self.port.ready(i) {
+            // The node drops its line when selected (the handshake's acknowledgement); a
+            // line still high means it is not listening: clock nothing.
+            self.port.deselect().await;
+            self.counters.no_ack += 1;
+            return 0;
+        }
+        let got = match self
+            .port
+            .transfer(&self.tx[b][..HEADER], &mut self.rx[..HEADER])
+            .await
+        {
+            Ok(()) => self.body(b, n).await,
+            Err(e) => Err(e),
+        };
+        self.port.deselect().await;
+        self.counters.exchanges += 1;
+        match got {
+            Ok(Some(len)) => len,
+            Ok(None) => 0,
+            Err(PortError) => {
+                self.counters.port_errors += 1;
+                0
+            }
+        }
+    }
+
+    /// Clock a broadcast of TX bank `b` (`n` bytes of frame) to every node.
+    async fn clock_broadcast(&mut self, b: usize, n: usize) {
+        let h = rc_header(true, &self.tx[b][HEADER..HEADER + n]);
+        self.tx[b][..HEADER].copy_from_slice(&h);
+        self.port.select(Select::All).await;
+        let r = self
+            .port
+            .transfer(&self.tx[b][..HEADER + n], &mut self.rx[..HEADER + n])
+            .await;
+        self.port.deselect().await;
+        self.counters.broadcasts += 1;
+        self.counters.bytes += (HEADER + n) as u64;
+        if r.is_err() {
+            self.counters.port_errors += 1;
+        }
+    }
+}
+
+impl<P: MasterPort> RootBus for MasterLink<'_, P> {
+    fn nodes(&self) -> (NodeId, u16) {
+        (self.first, self.port.count())
+    }
+
+    async fn wait_ready(&mut self) -> NodeId {
+        loop {
+            if let Some(n) = self.ready() {
+                return n;
+            }
+            self.port.wait_any_ready().await;
+        }
+    }
+
+    fn ready(&self) -> Option<NodeId> {
+        let count = self.port.count();
+        // A node whose exchange was handed over but not clocked still shows its line: it
+        // is ready only after that exchange (the root logic then finishes it first).
+        (0..count)
+            .map(|i| (self.next_scan + i) % count)
+            .find(|&i| self.port.ready(i))
+            .map(|i| self.first + i)
+    }
+
+    fn tx_bank(&mut self) -> &mut [u8] {
+        &mut self.tx[self.idle][HEADER..HEADER + MAX_MESSAGE]
+    }
+
+    fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
+        if self.started.is_some() {
+            return Err(LinkError::Busy);
+        }
+        if len > MAX_MESSAGE {
+            return Err(LinkError::TooLong {
+                len: len as u32,
+                max: MAX_MESSAGE as u32,
+            });
+        }
+        if let Transfer::Exchange(node) = transfer {
+            let i = self.index(node)?;
+            self.next_scan = (i + 1) % self.port.count();
+        }
+        self.started = Some((transfer, len));
+        self.idle ^= 1;
+        Ok(())
+    }
+
+    async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+        let (transfer, n) = self.started.take().ok_or(LinkError::Aborted)?;
+        let b = self.idle ^ 1;
+        let len = match transfer {
+            Transfer::Exchange(node) => {
+                let i = self.index(node)?;
+                self.clock_exchange(b, i, n).await
+            }
+            Transfer::Broadcast => {
+                self.clock_broadcast(b, n).await;
+                0
+            }
+        };
+        match rx.get_mut(..len) {
+            Some(dst) => {
+                dst.copy_from_slice(&self.rx[HEADER..HEADER + len]);
+                Ok(len)
+            }
+            None => Err(LinkError::TooLong {
+                len: len as u32,
+                max: rx.len() as u32,
+            }),
+        }
+    }
+}
