@@ -65,6 +65,12 @@ impl From<String> for CliError {
     }
 }
 
+impl From<crate::sim::options::OptionError> for CliError {
+    fn from(e: crate::sim::options::OptionError) -> Self {
+        CliError::Usage(e.to_string())
+    }
+}
+
 impl From<ImageFileError> for CliError {
     fn from(e: ImageFileError) -> Self {
         CliError::Image(e)

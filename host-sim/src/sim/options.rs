@@ -5,65 +5,160 @@
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
 use links_core::sched::{Policy, Split};
+use std::fmt;
+use std::str::FromStr;
 
-/// Parse a scheduling policy: `decreasing`, `static`, `fixed=N` (runs) or `fixed-rect=N`.
-pub fn parse_policy(s: &str) -> Result<Policy, String> {
-    let fixed = |n: &str, shape| {
-        n.parse::<u32>()
-            .ok()
-            .filter(|&d| d > 0)
-            .map(|divisions| Policy::Fixed { divisions, shape })
-            .ok_or_else(|| format!("'{s}': the sub-screen count must be a positive integer"))
-    };
-    match s {
-        "decreasing" => Ok(Policy::DECREASING),
-        "static" => Ok(Policy::Static { shape: Split::Rect }),
-        _ => match s.split_once('=') {
-            Some(("fixed", n)) => fixed(n, Split::Span),
-            Some(("fixed-rect", n)) => fixed(n, Split::Rect),
-            _ => Err(format!(
+/// A `--policy` value: `decreasing`, `static`, `fixed=N` (runs) or `fixed-rect=N`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PolicyArg(pub Policy);
+
+impl FromStr for PolicyArg {
+    type Err = OptionError;
+
+    fn from_str(s: &str) -> Result<Self, OptionError> {
+        let fixed = |n: &str, shape| {
+            n.parse::<u32>()
+                .ok()
+                .filter(|&d| d > 0)
+                .map(|divisions| PolicyArg(Policy::Fixed { divisions, shape }))
+                .ok_or_else(|| OptionError::BadDivisions(s.into()))
+        };
+        match s {
+            "decreasing" => Ok(PolicyArg(Policy::DECREASING)),
+            "static" => Ok(PolicyArg(Policy::Static { shape: Split::Rect })),
+            _ => match s.split_once('=') {
+                Some(("fixed", n)) => fixed(n, Split::Span),
+                Some(("fixed-rect", n)) => fixed(n, Split::Rect),
+                _ => Err(OptionError::UnknownPolicy(s.into())),
+            },
+        }
+    }
+}
+
+/// Parse a scheduling policy (see [`PolicyArg`]).
+pub fn parse_policy(s: &str) -> Result<Policy, OptionError> {
+    s.parse::<PolicyArg>().map(|p| p.0)
+}
+
+/// A `--kill` value: `NODE@SECONDS` or `FIRST-LAST@SECONDS` (nodes `FIRST..=LAST` all stop
+/// answering at that virtual time).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Kill {
+    /// The text as given (errors about the nodes quote it).
+    pub text: String,
+    pub first: u16,
+    pub last: u16,
+    pub at_s: f64,
+}
+
+impl FromStr for Kill {
+    type Err = OptionError;
+
+    fn from_str(s: &str) -> Result<Self, OptionError> {
+        let bad = || OptionError::BadKill(s.into());
+        let (nodes, at) = s.split_once('@').ok_or_else(bad)?;
+        let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
+        if !(at_s.is_finite() && at_s >= 0.0) {
+            return Err(OptionError::KillTime(s.into()));
+        }
+        let (first, last) = nodes.split_once('-').unwrap_or((nodes, nodes));
+        let first: u16 = first.trim().parse().map_err(|_| bad())?;
+        let last: u16 = last.trim().parse().map_err(|_| bad())?;
+        if last < first {
+            return Err(OptionError::EmptyRange {
+                text: s.into(),
+                first,
+                last,
+            });
+        }
+        Ok(Kill {
+            text: s.into(),
+            first,
+            last,
+            at_s,
+        })
+    }
+}
+
+impl Kill {
+    /// One death per node of the range.
+    pub fn deaths(&self) -> impl Iterator<Item = NodeDeath> + '_ {
+        (self.first..=self.last).map(|node| NodeDeath {
+            node,
+            at_s: self.at_s,
+        })
+    }
+}
+
+/// Parse `NODE@SECONDS` or `FIRST-LAST@SECONDS` into one death per node (see [`Kill`]).
+pub fn parse_deaths(s: &str) -> Result<Vec<NodeDeath>, OptionError> {
+    Ok(s.parse::<Kill>()?.deaths().collect())
+}
+
+/// Why a cluster option was refused (the text names the option and the value).
+#[derive(Clone, Debug, PartialEq)]
+pub enum OptionError {
+    UnknownPolicy(String),
+    /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
+    BadDivisions(String),
+    BadKill(String),
+    KillTime(String),
+    EmptyRange {
+        text: String,
+        first: u16,
+        last: u16,
+    },
+    NoSuchNode {
+        text: String,
+        node: u16,
+        nodes: u16,
+    },
+    /// `--ber-down` / `--ber-up` outside 0..=0.5.
+    BitErrorRate {
+        option: &'static str,
+        rate: f64,
+    },
+    DropProbability(f64),
+}
+
+impl fmt::Display for OptionError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            OptionError::UnknownPolicy(s) => write!(
+                f,
                 "unknown policy '{s}' (expected decreasing, static, fixed=N or fixed-rect=N)"
-            )),
-        },
+            ),
+            OptionError::BadDivisions(s) => {
+                write!(f, "'{s}': the sub-screen count must be a positive integer")
+            }
+            OptionError::BadKill(s) => write!(
+                f,
+                "--kill '{s}': expected NODE@SECONDS or FIRST-LAST@SECONDS, e.g. 10@0.3"
+            ),
+            OptionError::KillTime(s) => {
+                write!(f, "--kill '{s}': the time must be a number of seconds >= 0")
+            }
+            OptionError::EmptyRange { text, first, last } => {
+                write!(f, "--kill '{text}': the range {first}-{last} is empty")
+            }
+            OptionError::NoSuchNode { text, node, nodes } => write!(
+                f,
+                "--kill '{text}': node {node} does not exist ({nodes} nodes: 0 to {})",
+                nodes.saturating_sub(1)
+            ),
+            OptionError::BitErrorRate { option, rate } => write!(
+                f,
+                "{option} {rate}: a bit-error rate is a probability per bit, from 0 to 0.5"
+            ),
+            OptionError::DropProbability(p) => write!(
+                f,
+                "--drop-broadcast {p}: a probability from 0 to below 1 (at 1 no node hears any broadcast)"
+            ),
+        }
     }
 }
 
-/// Parse `NODE@SECONDS` (a node that stops answering at that virtual time).
-pub fn parse_death(s: &str) -> Result<crate::sim::cluster::star::NodeDeath, String> {
-    let bad = || format!("'{s}': expected NODE@SECONDS, e.g. 10@0.3");
-    let (node, at) = s.split_once('@').ok_or_else(bad)?;
-    let node = node.trim().parse().map_err(|_| bad())?;
-    let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
-    if !(at_s.is_finite() && at_s >= 0.0) {
-        return Err(bad());
-    }
-    Ok(crate::sim::cluster::star::NodeDeath { node, at_s })
-}
-
-/// Parse `NODE@SECONDS` or `FIRST-LAST@SECONDS` (nodes `FIRST..=LAST` all stop answering at
-/// that virtual time).
-pub fn parse_deaths(s: &str) -> Result<Vec<NodeDeath>, String> {
-    let bad = || format!("--kill '{s}': expected NODE@SECONDS or FIRST-LAST@SECONDS, e.g. 10@0.3");
-    let (nodes, at) = s.split_once('@').ok_or_else(bad)?;
-    let at_s: f64 = at.trim().parse().map_err(|_| bad())?;
-    if !(at_s.is_finite() && at_s >= 0.0) {
-        return Err(format!(
-            "--kill '{s}': the time must be a number of seconds >= 0"
-        ));
-    }
-    let (first, last) = match nodes.split_once('-') {
-        Some((a, b)) => (a, b),
-        None => (nodes, nodes),
-    };
-    let first: u16 = first.trim().parse().map_err(|_| bad())?;
-    let last: u16 = last.trim().parse().map_err(|_| bad())?;
-    if last < first {
-        return Err(format!("--kill '{s}': the range {first}-{last} is empty"));
-    }
-    Ok((first..=last)
-        .map(|node| NodeDeath { node, at_s })
-        .collect())
-}
+impl std::error::Error for OptionError {}
 
 /// Fault injection options of `links render --nodes N`.
 #[derive(clap::Args, Clone, Debug, Default)]
@@ -89,19 +184,15 @@ pub struct FaultArgs {
 
 /// Set the faults of `args` on `cfg` (whose node count is already set), with errors that
 /// name the option.
-pub fn apply_faults(cfg: &mut SimConfig, args: &FaultArgs) -> Result<(), String> {
-    for (name, v) in [("--ber-down", args.ber_down), ("--ber-up", args.ber_up)] {
-        if !(v.is_finite() && (0.0..=0.5).contains(&v)) {
-            return Err(format!(
-                "{name} {v}: a bit-error rate is a probability per bit, from 0 to 0.5"
-            ));
+pub fn apply_faults(cfg: &mut SimConfig, args: &FaultArgs) -> Result<(), OptionError> {
+    for (option, rate) in [("--ber-down", args.ber_down), ("--ber-up", args.ber_up)] {
+        if !(rate.is_finite() && (0.0..=0.5).contains(&rate)) {
+            return Err(OptionError::BitErrorRate { option, rate });
         }
     }
     let p = args.drop_broadcast;
     if !(p.is_finite() && (0.0..1.0).contains(&p)) {
-        return Err(format!(
-            "--drop-broadcast {p}: a probability from 0 to below 1 (at 1 no node hears any broadcast)"
-        ));
+        return Err(OptionError::DropProbability(p));
     }
     cfg.noise = Noise {
         ber_down: args.ber_down,
@@ -111,14 +202,14 @@ pub fn apply_faults(cfg: &mut SimConfig, args: &FaultArgs) -> Result<(), String>
     };
     cfg.deaths.clear();
     for k in &args.kills {
-        for d in parse_deaths(k)? {
+        let kill: Kill = k.parse()?;
+        for d in kill.deaths() {
             if d.node >= cfg.nodes {
-                return Err(format!(
-                    "--kill '{k}': node {} does not exist ({} nodes: 0 to {})",
-                    d.node,
-                    cfg.nodes,
-                    cfg.nodes - 1
-                ));
+                return Err(OptionError::NoSuchNode {
+                    text: kill.text.clone(),
+                    node: d.node,
+                    nodes: cfg.nodes,
+                });
             }
             cfg.deaths.push(d);
         }
@@ -187,9 +278,13 @@ mod tests {
             parse_policy("static"),
             Ok(Policy::Static { shape: Split::Rect })
         );
-        assert!(parse_policy("fixed=0").unwrap_err().contains("positive"));
+        assert!(parse_policy("fixed=0")
+            .unwrap_err()
+            .to_string()
+            .contains("positive"));
         assert!(parse_policy("round-robin")
             .unwrap_err()
+            .to_string()
             .contains("unknown policy"));
     }
 
@@ -205,10 +300,22 @@ mod tests {
         let r = parse_deaths("4-6@1").unwrap();
         assert_eq!(r.iter().map(|d| d.node).collect::<Vec<_>>(), vec![4, 5, 6]);
         assert!(r.iter().all(|d| d.at_s == 1.0));
-        assert!(parse_deaths("6-4@1").unwrap_err().contains("empty"));
-        assert!(parse_deaths("3").unwrap_err().contains("NODE@SECONDS"));
-        assert!(parse_deaths("3@-1").unwrap_err().contains(">= 0"));
-        assert!(parse_deaths("x@1").unwrap_err().contains("NODE@SECONDS"));
+        assert!(parse_deaths("6-4@1")
+            .unwrap_err()
+            .to_string()
+            .contains("empty"));
+        assert!(parse_deaths("3")
+            .unwrap_err()
+            .to_string()
+            .contains("NODE@SECONDS"));
+        assert!(parse_deaths("3@-1")
+            .unwrap_err()
+            .to_string()
+            .contains(">= 0"));
+        assert!(parse_deaths("x@1")
+            .unwrap_err()
+            .to_string()
+            .contains("NODE@SECONDS"));
     }
 
     #[test]
@@ -235,7 +342,7 @@ mod tests {
             cfg.deaths.iter().map(|d| d.node).collect::<Vec<_>>(),
             vec![2, 5, 6, 7]
         );
-        let bad = |f: FaultArgs| apply_faults(&mut cfg.clone(), &f).unwrap_err();
+        let bad = |f: FaultArgs| apply_faults(&mut cfg.clone(), &f).unwrap_err().to_string();
         let e = bad(FaultArgs {
             kills: vec!["8@0.1".into()],
             ..args.clone()
