@@ -47,7 +47,7 @@ fn bound_s(clean: &SimReport, timeout_s: f64, node: u16) -> f64 {
     clean.time_s + 2.0 * timeout_s + clean.node_compute_s[node as usize]
 }
 
-/// Issue 10 item 2: under the static policy a node that dies before it takes its region
+/// Under the static policy a node that dies before it takes its region
 /// (here during the scene broadcast) never asks for it, holds nothing and so was never timed
 /// out: the frame never finished ("passed its time limit").
 #[test]
@@ -78,7 +78,7 @@ fn a_static_region_of_a_node_that_died_before_taking_it_is_reissued() {
     }
 }
 
-/// Issue 10 item 3: a time-out far shorter than a run gives bursts of false alarms (every
+/// A time-out far shorter than a run gives bursts of false alarms (every
 /// node silent for its first run is declared dead, then speaks again). The time-out doubled
 /// on each one, without a cap, so one real death afterwards stalled the frame for
 /// `2^alarms` time-outs. Now the time-out in force never exceeds twice the longest silence
@@ -112,7 +112,7 @@ fn false_alarms_do_not_stretch_the_recovery_from_a_real_death() {
     }
 }
 
-/// Issue 10 item 6: a scene larger than a node's scene bank was refused only by the RC, as
+/// A scene larger than a node's scene bank was refused only by the RC, as
 /// "frame 0 has no usable scene image". The refusal now comes before the cluster starts and
 /// names the image size and the bank (the board's, `nc_fw::plan::SCENE_EVEN`).
 #[test]
@@ -136,7 +136,7 @@ fn a_scene_larger_than_a_node_bank_is_refused_naming_both_sizes() {
     );
 }
 
-/// Issue 10 item 6: a cluster that cannot finish said only "passed its time limit". The
+/// A cluster that cannot finish said only "passed its time limit". The
 /// error now names the sub-screens never returned, the nodes holding them, and the nodes
 /// that never had the scene.
 #[test]

@@ -1,4 +1,4 @@
-//! The RC for the QEMU node check (issue 6): compiles a scene, runs the firmware's node loop
+//! The RC for the QEMU node check: compiles a scene, runs the firmware's node loop
 //! (`tests/qemu-node`) on Cortex-M4F under QEMU with the real root logic driving it over
 //! semihosting FIFOs, and checks the assembled frame against the simulator's single-node
 //! render and every transfer against the same node loop run on the host. See

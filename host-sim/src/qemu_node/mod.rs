@@ -1,4 +1,4 @@
-//! The RC side of the QEMU node check (issue 6): the real root logic
+//! The RC side of the QEMU node check: the real root logic
 //! (`links_core::root::run_bus`) drives one node computer in lock step, frame by frame, over
 //! the IMSU link, and the frame it assembles is checked against the simulator's.
 //!

@@ -1,5 +1,5 @@
-//! `links chart accuracy`: speed against accuracy for every number backend (issue 3's
-//! chart). Accuracy is measured here, on the host (each backend's render of every bundled
+//! `links chart accuracy`: speed against accuracy for every number backend.
+//! Accuracy is measured here, on the host (each backend's render of every bundled
 //! scene against the f64 render); speed comes from the Cortex-M instruction counts that
 //! `scripts/qemu-bench` measured under QEMU (`docs/cortex-m-bench.csv`). One point per
 //! target x backend x scene: x = instructions per pixel (log), y = PSNR vs f64.

@@ -305,7 +305,7 @@ fn photo1(o: &mut String, d: &Data) {
         per_pixel("photo1-d0", |r| r.sample.stats.shadow_rays),
         per_pixel("photo1-noshadow", |r| r.sample.stats.shadings),
     );
-    o.push_str("\nIssue 3 asks for these numbers; as one list (instructions per pixel, primary rays + shading,\nthen with shadows):\n\n");
+    o.push_str("\nThe speed target's numbers, as one list (instructions per pixel, primary rays + shading,\nthen with shadows):\n\n");
     let get = |t, b| p.get(&(t, b)).copied().unwrap_or((0.0, 0.0));
     for (label, t, b) in [
         ("Cortex-M4F hard-float f32", M4, "f32"),
@@ -322,7 +322,7 @@ fn photo1(o: &mut String, d: &Data) {
     } else {
         format!("met: {}", f0(ns0))
     };
-    let _ = writeln!(o, "\nTarget of issue 3 (<= 1,500 instructions/pixel for photo1 primary + shading on M4F, `--max-depth 0 --no-shadows`): {verdict}.");
+    let _ = writeln!(o, "\nSpeed target (<= 1,500 instructions/pixel for photo1 primary + shading on M4F, `--max-depth 0 --no-shadows`): {verdict}.");
 }
 
 fn single_ops(o: &mut String, d: &Data) {
