@@ -139,7 +139,7 @@ pub struct ServeReport {
     /// Retransmit requests answered.
     pub resends: u32,
     /// Malformed frames received from the PC.
-    pub bad_frames: u32,
+    pub bad_packets: u32,
 }
 
 /// The RC end of a frame readback: one rendered frame and the protocol state.
@@ -248,7 +248,7 @@ impl SimRc {
                 continue;
             }
             let step = session.feed(byte[0]);
-            report.bad_frames = session.bad_frames();
+            report.bad_packets = session.bad_packets();
             match step {
                 Step::Nothing | Step::Reply(_) => continue,
                 _ => deadline = Instant::now() + timeout,
@@ -325,7 +325,7 @@ pub struct ReceivedUpload {
     /// Retransmit requests sent.
     pub naks: u32,
     /// Frames that failed to decode (corrupted on the line).
-    pub bad_frames: u32,
+    pub bad_packets: u32,
     /// Whether a `StartRender` followed, and for how many frames.
     pub start_render: Option<u16>,
 }
@@ -361,7 +361,7 @@ pub fn receive_upload<P: Read + Write>(
             return Ok(ReceivedUpload {
                 image,
                 naks: session.upload.naks(),
-                bad_frames: session.bad_frames(),
+                bad_packets: session.bad_packets(),
                 start_render,
             });
         }

@@ -85,7 +85,7 @@ fn readback_over_a_pty_matches_the_simulated_frame_pixel_for_pixel() {
     assert!(err.contains("2 malformed messages repaired"), "{err}");
     let served = rc_thread.join().unwrap().expect("the RC got its FrameAck");
     assert_eq!(served.resends, 1, "one request covers both gaps");
-    assert_eq!(served.bad_frames, 0);
+    assert_eq!(served.bad_packets, 0);
 }
 
 #[test]
@@ -105,7 +105,7 @@ fn clean_readback_needs_no_retransmission() {
     .unwrap();
     assert_eq!((r.width, r.height, r.frame), (40, 30, 0));
     assert_eq!(r.rgb, rgb);
-    assert_eq!((r.bad_frames, r.resends), (0, 0));
+    assert_eq!((r.bad_packets, r.resends), (0, 0));
     assert_eq!(r.crc, links_core::wire::CRC32.checksum(&rgb));
     let served = rc_thread.join().unwrap().unwrap();
     assert_eq!(served.resends, 0);
@@ -148,7 +148,7 @@ fn a_lost_frame_end_is_asked_for_after_the_silence() {
     assert_eq!(r.rgb, rgb);
     // The first run and the FrameEnd were corrupted: a Resend after the silence repairs
     // both (more than one only if this machine stalls the RC thread for 300 ms).
-    assert_eq!(r.bad_frames, 2);
+    assert_eq!(r.bad_packets, 2);
     assert!(r.resends >= 1);
     assert_eq!(rc_thread.join().unwrap().unwrap().resends, r.resends);
 }
@@ -186,7 +186,7 @@ fn upload_over_a_pty_arrives_intact_after_a_corrupted_chunk() {
     assert!(o.status.success(), "{err}");
     let got = rc_thread.join().unwrap().expect("upload received");
     assert!(got.image == image, "the SceneImage arrived changed");
-    assert_eq!((got.naks, got.bad_frames), (1, 1));
+    assert_eq!((got.naks, got.bad_packets), (1, 1));
     assert_eq!(got.start_render, Some(1));
     let chunks = image.len().div_ceil(512) + 1;
     assert!(

@@ -70,7 +70,7 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
             "{nodes} nodes, {buses} buses, {policy:?}"
         );
         assert_eq!(r.root.pixels, 64 * 60);
-        assert_eq!(r.root.bad_frames, 0);
+        assert_eq!(r.root.bad_messages, 0);
         let px: u64 = r.node_reports.iter().map(|n| n.pixels).sum();
         assert_eq!(px, 64 * 60);
         assert!(r.time_s > 0.0);
@@ -162,12 +162,12 @@ fn corrupted_frames_are_caught_and_resent() {
     assert!(up > 10 && down > 10 && bcast > 5, "{up} {down} {bcast}");
     // Every corrupted NC frame is caught by the RC's CRC, every corrupted RC frame by the
     // node's, and the lost frames are sent again.
-    assert!(r.root.bad_frames > 0);
-    let node_bad: u32 = r.node_reports.iter().map(|n| n.bad_frames).sum();
-    let resent: u32 = r.node_reports.iter().map(|n| n.frames_resent).sum();
+    assert!(r.root.bad_messages > 0);
+    let node_bad: u32 = r.node_reports.iter().map(|n| n.bad_messages).sum();
+    let resent: u32 = r.node_reports.iter().map(|n| n.messages_resent).sum();
     assert!(node_bad > 0 && resent > 0);
     // The RC sees every exchange it clocks: each corrupted NC frame is caught exactly once.
-    assert_eq!(r.root.bad_frames as u64, up);
+    assert_eq!(r.root.bad_messages as u64, up);
     // Nodes catch what reaches them (a node that has stopped reads no more).
     assert!(
         node_bad as u64 <= down + bcast && node_bad as u64 >= down / 2,
@@ -572,7 +572,7 @@ mod hostile_bus {
                 [&mut a, &mut b],
                 &mut report,
             ));
-            assert!(report.bad_frames > 0 && report.chunks > 0, "{report:?}");
+            assert!(report.bad_messages > 0 && report.chunks > 0, "{report:?}");
             jobs += report.jobs;
             bad_jobs += report.bad_jobs;
         }
@@ -708,7 +708,7 @@ mod hostile_bus {
             });
             let rep = root.borrow().report();
             assert!(
-                rep.bad_frames > 0 && rep.rejected > 0 && rep.accepted > 0,
+                rep.bad_messages > 0 && rep.rejected > 0 && rep.accepted > 0,
                 "{rep:?}"
             );
         }
@@ -812,7 +812,7 @@ fn work_of_a_node_that_dies_is_reissued() {
         "{} vs {t0}",
         r.time_s
     );
-    assert_eq!(r.root.bad_frames, 0);
+    assert_eq!(r.root.bad_messages, 0);
     // The last node, late in the frame, on the second of two buses (its `Wake` and the
     // re-issue cross buses).
     let r = with_deaths(&img, 8, 2, &[(7, 0.8 * t0)], timeout);

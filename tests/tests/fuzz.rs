@@ -2439,7 +2439,7 @@ fn pc_serial_session(rng: &mut Rng, input: &mut Vec<u8>, tally: &mut Tally) -> b
             _ => {}
         }
     }
-    tally.note("serial PC frames decoded", dec.good_frames() as u64);
+    tally.note("serial PC packets decoded", dec.good_packets() as u64);
     let whole = asm
         .as_ref()
         .is_some_and(|a| a.frame == frame && a.missing_span().is_none());

@@ -279,7 +279,7 @@ fn bit_errors_of_1e_3_both_ways_and_a_quarter_of_the_nodes_killed_keep_the_frame
                 "{scene} seed {seed}: {up} {down}"
             );
             // The RC catches every corrupted node frame, once.
-            assert_eq!(noisy.root.bad_frames as u64, up, "{scene} seed {seed}");
+            assert_eq!(noisy.root.bad_messages as u64, up, "{scene} seed {seed}");
             // What it costs (virtual time), bounded: 1 KB scene chunks alone would have
             // taken photo1 hundreds of seconds.
             let cost = noisy.time_s / clean.time_s;
@@ -316,7 +316,7 @@ fn bit_errors_of_1e_3_both_ways_and_a_quarter_of_the_nodes_killed_keep_the_frame
                 r.root
             );
             println!(
-                "{scene} seed {seed}: fault-free {:.4} s; bit errors 1e-3 both ways {:.4} s ({cost:.2}x; {up} up / {down} down / {bcast} broadcast frames corrupted, {} scene repairs); and nodes 1, 5 killed at {mid:.4} s: {:.4} s ({:.2}x; {} declared dead, {} re-issued)",
+                "{scene} seed {seed}: fault-free {:.4} s; bit errors 1e-3 both ways {:.4} s ({cost:.2}x; {up} up / {down} down / {bcast} broadcast messages corrupted, {} scene repairs); and nodes 1, 5 killed at {mid:.4} s: {:.4} s ({:.2}x; {} declared dead, {} re-issued)",
                 clean.time_s,
                 noisy.time_s,
                 noisy.root.repairs,

@@ -358,7 +358,7 @@ fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
     assert!(rr.broadcasts > 0 && mc.exchanges > 0);
     if faults.is_empty() && lose_edges == 0 {
         assert_eq!(mc.naks + mc.bad_headers, 0);
-        assert_eq!(rr.bad_frames, 0);
+        assert_eq!(rr.bad_messages, 0);
     } else {
         let hit = b.faults_hit as u64;
         let node_bad: u32 = nodes

@@ -29,16 +29,16 @@ pub fn simulated_frame(image: &[u8]) -> Result<Vec<u8>, String> {
 pub fn check_outcome(o: &RcOutcome, want: &[u8], corrupted: u32) -> Result<(), String> {
     let r = &o.root;
     let dup = if corrupted == 0 { r.out_of_order } else { 0 };
-    if r.bad_frames > 0 || r.rejected > 0 || dup > 0 {
+    if r.bad_messages > 0 || r.rejected > 0 || dup > 0 {
         return Err(format!(
             "the RC could not use every node frame: {} failed CRC/decoding, {} rejected, {} out of order",
-            r.bad_frames, r.rejected, r.out_of_order
+            r.bad_messages, r.rejected, r.out_of_order
         ));
     }
     if o.end.result != "Ok(())" {
         return Err(format!("the node loop failed: {}", o.end.result));
     }
-    for want in [format!("bad_frames: {corrupted},"), "bad_jobs: 0,".into()] {
+    for want in [format!("bad_messages: {corrupted},"), "bad_jobs: 0,".into()] {
         if !o.end.report.contains(&want) {
             return Err(format!(
                 "the node's count of bad input is wrong (want {want}): {}",

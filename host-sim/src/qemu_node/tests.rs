@@ -212,7 +212,7 @@ fn a_frame_failing_its_crc_fails_the_check() {
     // The node sends the frame again (go-back-N), so the frame completes, but the bad
     // frame is counted and the check fails.
     let o = run_rc(&img, node).unwrap();
-    assert_eq!(o.root.bad_frames, 1);
+    assert_eq!(o.root.bad_messages, 1);
     let e = check_outcome(&o, &want, 0).unwrap_err();
     assert!(e.contains("1 failed CRC"), "{e}");
 }

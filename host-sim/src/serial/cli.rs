@@ -139,7 +139,7 @@ pub fn readback_command(
         r.width,
         r.height,
         r.crc,
-        r.bad_frames,
+        r.bad_packets,
         r.resends
     ))
 }

@@ -61,7 +61,7 @@ pub struct Readback {
     pub rgb: Vec<u8>,
     pub crc: u32,
     /// Malformed frames received (each repaired by a retransmission).
-    pub bad_frames: u32,
+    pub bad_packets: u32,
     /// Retransmit requests sent.
     pub resends: u32,
 }
@@ -194,7 +194,7 @@ pub fn readback_with_clock<P: Read + Write>(
         opts,
         progress,
         asm: None,
-        bad_frames: 0,
+        bad_packets: 0,
         resends: 0,
         crc_retry: false,
         watch: Watch::new(),
@@ -212,7 +212,7 @@ pub fn readback_with_clock<P: Read + Write>(
                 return Err(HostSerialError::Version { found })
             }
             Some(Err(_)) => {
-                rb.bad_frames += 1;
+                rb.bad_packets += 1;
                 continue;
             }
             Some(Ok(p)) => p,
@@ -259,7 +259,7 @@ struct Reading<'o> {
     progress: &'o dyn Fn(ReadbackEvent),
     /// The frame being read (`None` before the first header).
     asm: Option<FrameAssembly>,
-    bad_frames: u32,
+    bad_packets: u32,
     /// Retransmit requests sent for the frame being read.
     resends: u32,
     /// Whether the whole frame was asked for again after a CRC mismatch.
@@ -401,7 +401,7 @@ impl Reading<'_> {
                 height: a.height as u32,
                 rgb,
                 crc,
-                bad_frames: self.bad_frames,
+                bad_packets: self.bad_packets,
                 resends: self.resends,
             }));
         }

@@ -64,7 +64,7 @@ pub struct UploadReport {
     /// Messages sent again after no answer came in time.
     pub timeouts: u32,
     /// Malformed frames received from the RC.
-    pub bad_frames: u32,
+    pub bad_packets: u32,
 }
 
 /// Answers (or other messages, or malformed frames) in one wait that move nothing, after
@@ -98,7 +98,7 @@ fn answer<P: Read + Write>(
                 return Err(HostSerialError::Version { found })
             }
             Some(Err(_)) => {
-                report.bad_frames += 1;
+                report.bad_packets += 1;
                 return Ok(Some(Answer::Other("malformed frame")));
             }
             Some(Ok(p)) => {

@@ -226,12 +226,12 @@ pub fn fault_summary(r: &SimReport) -> String {
         return String::new();
     }
     format!(
-        " | faults: {} declared dead ({} revived), {} sub-screens re-issued, time-out {:.3} s; {corrupted} frames corrupted, {} rejected by CRC at the RC; {dropped} broadcast copies lost, {} scene repairs",
+        " | faults: {} declared dead ({} revived), {} sub-screens re-issued, time-out {:.3} s; {corrupted} messages corrupted, {} rejected by CRC at the RC; {dropped} broadcast copies lost, {} scene repairs",
         root.timeouts,
         root.revived,
         root.reissued,
         root.timeout_us as f64 * 1e-6,
-        root.bad_frames,
+        root.bad_messages,
         root.repairs
     )
 }

@@ -126,11 +126,11 @@ pub struct NodeReport {
     pub jobs: u32,
     pub pixels: u64,
     /// Frames posted, of which re-sent after a missing acknowledgement, and polls.
-    pub frames_posted: u32,
-    pub frames_resent: u32,
+    pub messages_posted: u32,
+    pub messages_resent: u32,
     pub polls: u32,
     /// Frames from the RC that failed their CRC or were malformed.
-    pub bad_frames: u32,
+    pub bad_messages: u32,
     /// Jobs dropped because their region or scene was unusable.
     pub bad_jobs: u32,
     /// Scene chunks written.
@@ -146,10 +146,10 @@ impl defmt::Format for NodeReport {
             "jobs={} pixels={} posted={} resent={} polls={} bad={} bad_jobs={} chunks={}",
             self.jobs,
             self.pixels,
-            self.frames_posted,
-            self.frames_resent,
+            self.messages_posted,
+            self.messages_resent,
             self.polls,
-            self.bad_frames,
+            self.bad_messages,
             self.bad_jobs,
             self.chunks
         )
@@ -441,7 +441,7 @@ fn scene_chunk(
         || end > total
         || !(whole_chunk || pieces)
     {
-        nc.report.bad_frames += 1;
+        nc.report.bad_messages += 1;
         return false;
     }
     nc.banks[b].expect(frame, total, crc);
@@ -539,7 +539,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
             if let Some(s) = &mut nc.slots[nc.resend] {
                 s.sent_in = nc.exchanges;
                 link.post(&s.buf[..s.len])?;
-                nc.report.frames_resent += 1;
+                nc.report.messages_resent += 1;
                 posted = true;
             }
             nc.resend += 1;
@@ -586,7 +586,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
             }
         }
         if posted {
-            nc.report.frames_posted += 1;
+            nc.report.messages_posted += 1;
         } else if nc.unacked() > 0 || woken || nc.reask {
             let n = wire::encode(nc.next_seq, nc.last_rc_seq, &Up::Poll, &mut poll).unwrap_or(0);
             link.post(&poll[..n])?;
@@ -624,7 +624,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                     }
                     handle_down(&mut nc, &mut banks, env.msg, exchanged);
                 }
-                _ => nc.report.bad_frames += 1,
+                _ => nc.report.bad_messages += 1,
             }
             *report = nc.report;
             if exchanged {
@@ -759,7 +759,7 @@ fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>, exchanged
         Down::SceneEnd { frame, len, crc } => {
             let b = (frame % 2) as usize;
             if len as usize > banks[b].len() || len as usize > wire::MAX_SCENE || len == 0 {
-                nc.report.bad_frames += 1;
+                nc.report.bad_messages += 1;
                 return;
             }
             nc.banks[b].expect(frame, len, crc);

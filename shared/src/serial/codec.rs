@@ -151,12 +151,12 @@ impl<const N: usize> Decoder<N> {
     }
 
     /// Frames decoded so far.
-    pub fn good_frames(&self) -> u32 {
+    pub fn good_packets(&self) -> u32 {
         self.good
     }
 
     /// Malformed frames seen so far (bad CRC, stuffing, version, layout, oversize).
-    pub fn bad_frames(&self) -> u32 {
+    pub fn bad_packets(&self) -> u32 {
         self.bad
     }
 }

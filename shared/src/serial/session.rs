@@ -46,8 +46,8 @@ impl<'b> Session<'b> {
     }
 
     /// Malformed frames received from the PC so far.
-    pub fn bad_frames(&self) -> u32 {
-        self.dec.bad_frames()
+    pub fn bad_packets(&self) -> u32 {
+        self.dec.bad_packets()
     }
 
     /// The line was reset (USB reconnect): forget a partial frame.

@@ -229,8 +229,8 @@ fn every_corrupted_byte_is_an_error_never_a_wrong_message() {
                 "byte {i} ^ {flip:#x} decoded: {results:?}"
             );
             assert!(!results.is_empty(), "byte {i} ^ {flip:#x}: reported");
-            assert_eq!(dec.good_frames(), 0);
-            assert_eq!(dec.bad_frames() as usize, results.len());
+            assert_eq!(dec.good_packets(), 0);
+            assert_eq!(dec.bad_packets() as usize, results.len());
             // The decoder is in step again for the next frame.
             let next = feed_all(&mut dec, &frame[..n]);
             assert_eq!(next, vec![Ok(good.1.clone())]);
@@ -349,7 +349,7 @@ fn oversize_frames_are_skipped_without_panic() {
     }
     let o = Err(SerialError::Oversize);
     assert_eq!(got, vec![o, Ok(true), o, o, Ok(true)]);
-    assert_eq!((dec.good_frames(), dec.bad_frames()), (2, 3));
+    assert_eq!((dec.good_packets(), dec.bad_packets()), (2, 3));
 }
 
 #[test]
@@ -396,9 +396,9 @@ fn random_bytes_never_panic_the_decoder() {
         }
     }
     assert!(reported > 100);
-    assert_eq!(dec.good_frames() + dec.bad_frames(), reported);
+    assert_eq!(dec.good_packets() + dec.bad_packets(), reported);
     assert_eq!(
-        dec.good_frames(),
+        dec.good_packets(),
         0,
         "random bytes pass a CRC-32 (1 in 4e9)"
     );
@@ -897,7 +897,7 @@ fn random_runs_and_random_faults_lose_only_the_damaged_frames() {
     }
     assert!(damaged > 0);
     assert_eq!(rows, intact);
-    assert!(dec.bad_frames() as usize >= damaged);
+    assert!(dec.bad_packets() as usize >= damaged);
 }
 
 #[test]

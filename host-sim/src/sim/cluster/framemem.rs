@@ -22,7 +22,7 @@ pub struct FrameMemory {
     /// Pixel runs written, pixels written, frames rejected by CRC.
     pub runs: u64,
     pub pixels: u64,
-    pub bad_frames: u64,
+    pub bad_messages: u64,
 }
 
 impl Default for FrameMemory {
@@ -40,7 +40,7 @@ impl FrameMemory {
             stale: 0,
             runs: 0,
             pixels: 0,
-            bad_frames: 0,
+            bad_messages: 0,
         }
     }
 
@@ -85,12 +85,12 @@ impl FrameMemory {
                     if wire::rle_decode(data, &mut rgb).is_ok() {
                         self.put(frame, y, x, &rgb);
                     } else {
-                        self.bad_frames += 1;
+                        self.bad_messages += 1;
                     }
                 }
                 _ => {}
             },
-            Err(_) => self.bad_frames += 1,
+            Err(_) => self.bad_messages += 1,
         }
     }
 

@@ -101,7 +101,7 @@ pub fn faults_markdown(s: &FaultSweep, command: &str) -> String {
         "up only (s)",
         "both (s)",
         "both / fault-free",
-        "frames corrupted (both)",
+        "messages corrupted (both)",
         "scene repairs (both)",
     ]));
     let mut rates: Vec<f64> = s.bers.iter().map(|b| b.ber).collect();

@@ -91,7 +91,7 @@ pub struct RootReport {
     pub jobs: u32,
     pub pixels: u64,
     /// Node frames that failed CRC or decoding.
-    pub bad_frames: u32,
+    pub bad_messages: u32,
     /// Node frames out of sequence (duplicates after a lost acknowledgement, or frames
     /// behind a lost one), dropped.
     pub out_of_order: u32,

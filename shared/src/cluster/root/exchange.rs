@@ -120,7 +120,7 @@ impl RootState {
         let env = match wire::decode::<Up>(bytes) {
             Ok(e) => e,
             Err(_) => {
-                self.report.bad_frames += 1;
+                self.report.bad_messages += 1;
                 return;
             }
         };
