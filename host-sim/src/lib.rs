@@ -1,8 +1,8 @@
-//! The host side of LINKS-1: scene files, procedural scene generators, and the `links` CLI.
+//! The host side of LINKS-1: scene files, procedural scene generators, the cluster
+//! simulator, the studies that write the docs, the PC side of the serial line and the `links`
+//! CLI. The layer map and one frame's data flow: `docs/architecture.md`.
 
 pub mod cli;
-pub mod cli_image;
-pub mod cost;
 pub mod gen;
 pub mod limits;
 pub mod png_codec;
@@ -10,14 +10,17 @@ pub mod qemu_node;
 pub mod scene_file;
 pub mod serial;
 pub mod sim;
-pub mod sim_rc;
 pub mod studies;
 pub mod vec3;
 
-// The paths these modules had before they were grouped into `sim`, `studies` and `serial`.
+// The paths these modules had before they were grouped into `cli`, `sim`, `studies` and
+// `serial`.
+pub use cli::image_file as cli_image;
 pub use serial::cli as cli_serial;
 pub use serial::host as serial_host;
+pub use serial::sim_rc;
 pub use sim::cluster;
+pub use sim::cost;
 pub use sim::single as frame;
 pub use studies::{ablation, ablation_doc, accuracy, chart};
 

@@ -29,6 +29,7 @@ pub mod check_image;
 pub mod compare;
 pub mod error;
 pub mod gen_assets;
+pub mod image_file;
 pub mod info;
 pub mod readback;
 pub mod render;

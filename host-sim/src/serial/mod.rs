@@ -6,13 +6,15 @@
 //! - [`readback`](mod@readback): reading a rendered frame back, assembled by
 //!   [`assembly`];
 //! - [`error`]: why either failed;
-//! - [`cli`]: the `links upload` / `links readback` commands around them.
+//! - [`cli`]: the `links upload` / `links readback` commands around them;
+//! - [`sim_rc`]: a simulated RC (the firmware's own session) for the tests.
 
 pub mod assembly;
 pub mod cli;
 pub mod error;
 pub mod port;
 pub mod readback;
+pub mod sim_rc;
 pub mod upload;
 
 pub use assembly::FrameAssembly;

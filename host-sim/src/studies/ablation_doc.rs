@@ -17,7 +17,7 @@ pub fn render(r: &AblationReport, scene: &str, command: &str) -> String {
     s.push_str(&format!(
         "Values are **modelled node seconds** for {} node computers at {:.0} MHz: every sub-screen (a run \
          of pixels on one scanline) is rendered by a fresh node-side tracer, its exact operation \
-         counts become cycles through the cycle model `{}` (`host-sim/src/cost.rs`), and the runs are \
+         counts become cycles through the cycle model `{}` (`host-sim/src/sim/cost.rs`), and the runs are \
          handed out in order to the first free node (dynamic division). RC-NC communication is \
          left out here (the cluster simulator models it). Ratios are to type 1 in the same row.\n\n",
         c.nodes,
@@ -105,7 +105,7 @@ pub fn render(r: &AblationReport, scene: &str, command: &str) -> String {
          misses. Used by every ray kind.\n\
          - **Y clipping** (4.4): the DM projects every node's box (triangles: their corners) to a \
          screen rectangle. When a node starts a run on row y it walks the tree once with integer \
-         compares and keeps only the shapes whose rectangle covers the row (`shared/src/clip.rs`).\n\
+         compares and keeps only the shapes whose rectangle covers the row (`shared/src/trace/clip.rs`).\n\
          - **X clipping** (4.4): those shapes are ordered by their rectangles' left edges and swept \
          along the run; each pixel's primary ray tests only the active list (shapes whose rectangle \
          covers the pixel), kept in tree order so ties between equal distances resolve exactly as in \

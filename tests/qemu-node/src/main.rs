@@ -6,7 +6,7 @@
 //! of SPI + DMA banks, [`SemihostLink`] carries the IMSU's transfers through two FIFOs that
 //! QEMU's semihosting opens on the host (`nc-down`: RC -> NC, `nc-up`: NC -> RC, relative
 //! to QEMU's working directory). On the other end the host runs the real RC logic
-//! (`links_core::root::run_bus`, `host-sim/src/qemu_node.rs`).
+//! (`links_core::root::run_bus`, `host-sim/src/qemu_node/`).
 //!
 //! Records on the FIFOs: a kind byte, a little-endian u32 length, then that many bytes.
 //! - NC -> RC: `P` a frame posted to the TX bank (the ready line goes up); `W` the node waits
