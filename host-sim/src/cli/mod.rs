@@ -22,7 +22,7 @@ macro_rules! outln {
 }
 
 pub mod args;
-pub mod backend;
+pub use crate::studies::backend;
 pub mod calibrate;
 pub mod chart;
 pub mod check_image;

@@ -10,6 +10,7 @@
 //! copy.
 
 use crate::studies::accuracy::{compare_to, reference, Accuracy, AccuracyError};
+use crate::studies::backend::Backend;
 use crate::studies::report::{replace_between, table_head, write_file};
 use links_core::num::{FastF32, Fx};
 use plotters::prelude::*;
@@ -17,7 +18,7 @@ use std::fmt::{self, Write as _};
 use std::path::Path;
 
 /// The backends the chart compares (f64 is the reference).
-pub const BACKENDS: [&str; 3] = ["f32", "f32-fast", "q16.16"];
+pub const BACKENDS: [&str; 3] = Backend::NAMES;
 
 /// Cortex-M targets of the benchmark, with the label the chart uses.
 pub const TARGETS: [(&str, &str); 3] = [
@@ -94,11 +95,11 @@ pub fn measure(scenes: &[(String, Vec<u8>)]) -> Result<Vec<SceneAccuracy>, Chart
     let mut out = Vec::new();
     for (name, image) in scenes {
         let f64_render = reference(image).map_err(|e| ChartError::Accuracy(name.clone(), e))?;
-        for backend in BACKENDS {
+        for backend in Backend::ALL {
             let r = match backend {
-                "f32" => compare_to::<f32>(image, &f64_render),
-                "f32-fast" => compare_to::<FastF32>(image, &f64_render),
-                _ => compare_to::<Fx>(image, &f64_render),
+                Backend::F32 => compare_to::<f32>(image, &f64_render),
+                Backend::F32Fast => compare_to::<FastF32>(image, &f64_render),
+                Backend::Fixed => compare_to::<Fx>(image, &f64_render),
             };
             let accuracy = match r {
                 Ok(a) => Ok(a),
@@ -108,7 +109,7 @@ pub fn measure(scenes: &[(String, Vec<u8>)]) -> Result<Vec<SceneAccuracy>, Chart
             };
             out.push(SceneAccuracy {
                 scene: name.clone(),
-                backend,
+                backend: backend.name(),
                 accuracy,
             });
         }

@@ -8,6 +8,7 @@
 pub mod ablation;
 pub mod ablation_doc;
 pub mod accuracy;
+pub mod backend;
 pub mod chart;
 pub mod cluster_sweep;
 pub mod faults;

@@ -14,7 +14,7 @@ const PROFILE_INTRO: &str = include_str!("bench_profile_intro.md");
 const TAIL: &str = include_str!("bench_tail.md");
 
 /// The backends, in the tables' order.
-const BACKENDS: [&str; 3] = ["f32", "f32-fast", "q16.16"];
+const BACKENDS: [&str; 3] = links_host::studies::backend::Backend::NAMES;
 const M4: &str = "thumbv7em-none-eabihf";
 const M3: &str = "thumbv7m-none-eabi";
 

@@ -1,5 +1,5 @@
 //! The number backends a render can be measured in against f64: one enum for the names the
-//! command line takes and the reports print.
+//! command line takes, the accuracy chart measures and the QEMU bench report prints.
 
 use std::fmt;
 use std::str::FromStr;
@@ -19,8 +19,15 @@ impl Backend {
     /// Every backend, in report order.
     pub const ALL: [Backend; 3] = [Backend::F32, Backend::F32Fast, Backend::Fixed];
 
+    /// Every backend's name, in report order.
+    pub const NAMES: [&'static str; 3] = [
+        Backend::F32.name(),
+        Backend::F32Fast.name(),
+        Backend::Fixed.name(),
+    ];
+
     /// The name reports print (`f32`, `f32-fast`, `q16.16`).
-    pub fn name(self) -> &'static str {
+    pub const fn name(self) -> &'static str {
         match self {
             Backend::F32 => "f32",
             Backend::F32Fast => "f32-fast",
