@@ -45,9 +45,9 @@ struct Args {
     work: Option<PathBuf>,
     #[arg(long, default_value = "qemu-system-arm")]
     qemu: String,
-    /// Flip one bit in these RC -> NC frames (0-based delivery numbers, comma-separated), on
+    /// Flip one bit in these RC -> NC messages (0-based delivery numbers, comma-separated), on
     /// the way into both the host node and the QEMU node: each must count exactly these as
-    /// bad frames, recover, and still return the simulator's pixels
+    /// bad messages, recover, and still return the simulator's pixels
     #[arg(long, value_delimiter = ',')]
     corrupt_down: Vec<usize>,
 }
@@ -241,11 +241,11 @@ fn run(a: Args) -> Result<(), String> {
     for &i in &a.corrupt_down {
         let e = downs.get(i).ok_or_else(|| {
             format!(
-                "--corrupt-down {i}: the run has only {} RC -> NC frames",
+                "--corrupt-down {i}: the run has only {} RC -> NC messages",
                 downs.len()
             )
         })?;
-        println!("  damaging RC -> NC frame {i} (one bit): {e}");
+        println!("  damaging RC -> NC message {i} (one bit): {e}");
     }
     let corrupted = a.corrupt_down.len() as u32;
     check_outcome(&host, &want, corrupted).map_err(|e| format!("host node: {e}"))?;
@@ -310,7 +310,7 @@ fn qemu_runs(
             pixels
         );
         println!(
-            "  RC: {} exchanges, {} broadcasts, {} jobs, {} frames accepted, {} polls, {} scene chunks repaired, {} duplicates dropped; node: {} damaged frames counted",
+            "  RC: {} exchanges, {} broadcasts, {} jobs, {} messages accepted, {} polls, {} scene chunks repaired, {} duplicates dropped; node: {} damaged messages counted",
             r.exchanges, r.broadcasts, r.jobs, r.accepted, r.polls, r.repairs, r.out_of_order, corrupted
         );
         println!(

@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use links_core::image::SceneView;
+use links_core::render::Stats;
 
 use super::args::{image_to_render, PrecisionArg, SceneArgs};
 use super::error::write_file;
@@ -163,27 +164,21 @@ fn host(a: &RenderArgs) -> Result<(), CliError> {
     if !a.quiet {
         let s = &frame.stats;
         let secs = frame.elapsed.as_secs_f64();
+        // Every counter, by its name in `Stats` (the one list of them).
+        let counts: Vec<String> = Stats::NAMES
+            .iter()
+            .zip(s.values())
+            .map(|(name, v)| format!("{name} {v}"))
+            .collect();
         eprintln!(
-            "{}: {}x{} {} in {:.3} s, {:.3} Mrays/s | rays: primary {}, shadow {}, reflect {}, refract {}, straight {} | tests: box {}, triangle {}, ellipsoid {}, box-shape {}, blob {} (field evals {}) | shadings {} | clip compares {} | scene image {} B",
+            "{}: {}x{} {} in {:.3} s, {:.3} Mrays/s | {} | scene image {} B",
             a.output.display(),
             frame.width,
             frame.height,
             precision.name(),
             secs,
             s.rays() as f64 / secs.max(1e-9) / 1e6,
-            s.primary_rays,
-            s.shadow_rays,
-            s.reflect_rays,
-            s.refract_rays,
-            s.straight_rays,
-            s.box_tests,
-            s.triangle_tests,
-            s.ellipsoid_tests,
-            s.box_shape_tests,
-            s.blob_tests,
-            s.blob_field_evals,
-            s.shadings,
-            s.clip_compares,
+            counts.join(", "),
             image.len()
         );
     }

@@ -23,7 +23,7 @@ pub fn simulated_frame(image: &[u8]) -> Result<Vec<u8>, String> {
 }
 
 /// Every check of one run against the expected frame; the first failure, or Ok.
-/// `corrupted`: RC -> NC frames damaged on purpose ([`Corrupt`]): the node must count
+/// `corrupted`: RC -> NC messages damaged on purpose ([`Corrupt`]): the node must count
 /// exactly these as bad, and the RC may then see re-sent duplicates (a lost acknowledgement),
 /// nothing else.
 pub fn check_outcome(o: &RcOutcome, want: &[u8], corrupted: u32) -> Result<(), String> {

@@ -14,7 +14,7 @@
 //!
 //! By concept: [`record`] (the link's records, what a node side reports, the transcript's
 //! events), [`bus`] (the lock-step bus the root logic drives, and [`run_rc`]), [`checks`]
-//! (the simulator's frame, the outcome and transcript checks, damaged frames), [`local`]
+//! (the simulator's frame, the outcome and transcript checks, damaged messages), [`local`]
 //! (the host's node) and [`stream`] (the QEMU node over its FIFOs).
 
 pub mod bus;
