@@ -27,7 +27,7 @@
 use embassy_futures::block_on;
 use links_core::dm::{compile, CompileOptions, MeshHierarchy};
 use links_core::fixed_image::to_fixed;
-use links_core::image::{SceneView, Section, HEADER_SIZE, NONE, SECTION_COUNT};
+use links_core::image::{SceneView, Section, Word, HEADER_SIZE, NONE, SECTION_COUNT};
 use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
 use links_core::num::{FastF32, Fx, Real, Storage};
@@ -526,21 +526,16 @@ fn some_record(rng: &mut Rng, img: &[u8]) -> Option<(Section, usize)> {
     Some((s, off as usize + r * size))
 }
 
-/// Words of a record that hold integers (indices, counts, sizes, kinds, flags), by section.
-fn integer_words(s: Section) -> &'static [usize] {
-    match s {
-        Section::Camera => &[0, 1, 12, 13],
-        Section::Materials => &[12, 13],
-        Section::Lights => &[0, 13],
-        Section::Textures => &[0, 1, 2],
-        Section::Nodes => &[6, 7],
-        Section::Triangles => &[9, 10, 11],
-        Section::Ellipsoids => &[21, 22],
-        Section::Boxes => &[21],
-        Section::BlobGroups => &[0, 1, 3, 4],
-        Section::Rects => &[0, 1],
-        Section::Texels | Section::Normals | Section::Uvs | Section::Balls => &[],
-    }
+/// Words of a record that hold integers (indices, counts, sizes, kinds, flags), by section:
+/// the `Word::U` words of the one record layout (`links_core::image::layout`).
+fn integer_words(s: Section) -> Vec<usize> {
+    s.words()
+        .unwrap_or(&[])
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| **w == Word::U)
+        .map(|(i, _)| i)
+        .collect()
 }
 
 /// One structure-aware change to an image.
@@ -552,13 +547,17 @@ fn mutate_image_once(rng: &mut Rng, img: &mut Vec<u8>, corpus: &[Vec<u8>]) {
                 let ints = integer_words(s);
                 let words = s.record_size() / 4;
                 let w = if !ints.is_empty() && rng.chance(80) {
-                    *rng.pick(ints)
+                    *rng.pick(&ints)
                 } else {
                     rng.below(words.max(1))
                 };
                 // Sometimes the whole record's integers at once (a texture's w and h).
                 let all = rng.chance(25);
-                for &k in if all { ints } else { std::slice::from_ref(&w) } {
+                for &k in if all {
+                    &ints[..]
+                } else {
+                    std::slice::from_ref(&w)
+                } {
                     let old = rd(img, at + 4 * k).unwrap_or(0);
                     let t = table(img);
                     let v = match rng.below(6) {
