@@ -564,6 +564,28 @@ fn a_compiled_image_checks_and_renders_like_its_scene() {
     }
 }
 
+/// A scene too large for any node: 12,000 triangles with their own vertices (36,000, all
+/// distinct), written to the test's directory; returns the scene file.
+fn big_scene() -> PathBuf {
+    let mut obj = String::new();
+    for i in 0..12_000u32 {
+        let (x, y) = ((i % 120) as f32 * 0.1, (i / 120) as f32 * 0.1);
+        for (dx, dy) in [(0.0, 0.0), (0.05, 0.0), (0.0, 0.05)] {
+            obj += &format!("v {} {} {}\n", x + dx, y + dy, (i % 7) as f32 * 0.01);
+        }
+    }
+    for i in 0..12_000u32 {
+        obj += &format!("f {} {} {}\n", 3 * i + 1, 3 * i + 2, 3 * i + 3);
+    }
+    std::fs::write(tmp("big.obj"), obj).unwrap();
+    let ron = "Scene(camera: (eye: (6, 6, -20), look_at: (6, 6, 0), fov_y: 40), \
+               image: (width: 64, height: 48), materials: { \"m\": (diffuse: (1, 1, 1)) }, \
+               root: (name: \"world\", children: [ Mesh(file: \"big.obj\", material: \"m\") ]))";
+    let path = tmp("big.ron");
+    std::fs::write(&path, ron).unwrap();
+    path
+}
+
 #[test]
 fn a_bad_image_file_is_refused_naming_what_is_wrong() {
     use links_core::image::Section;
@@ -572,12 +594,13 @@ fn a_bad_image_file_is_refused_naming_what_is_wrong() {
     let out = tmp("never-image.png");
     let o = out.to_str().unwrap();
     // (bytes, the error after "FILE: ")
-    let mut bad_material = good.clone();
-    let at = record_at(&good, Section::Triangles, 3) + 36;
-    bad_material[at..at + 4].copy_from_slice(&99u32.to_le_bytes());
+    // Triangle 3's first vertex index (a u16 at the record's start) past the vertices.
+    let mut bad_vertex = good.clone();
+    let at = record_at(&good, Section::Triangles, 3);
+    bad_vertex[at..at + 2].copy_from_slice(&65000u16.to_le_bytes());
     let cases: Vec<(Vec<u8>, String)> = vec![
         (
-            bad_material,
+            bad_vertex,
             "not a valid SceneImage: triangles record 3 refers to a missing record".into(),
         ),
         (
@@ -751,22 +774,18 @@ fn cluster_render_with_faults_gives_the_host_render_and_bad_fault_options_say_wh
         "node 8 does not exist (8 nodes: 0 to 7)",
     );
     fails(&["--nodes", "8", "--kill", "2@soon"], "NODE@SECONDS");
-    // photo2's scene image (187 KB) does not fit a node's 120 KB bank.
+    // A scene of 12,000 separate triangles (a 596,564-byte image) does not fit a node's
+    // 120 KB bank.
+    let big = big_scene();
     let o = links()
-        .args([
-            "render",
-            scene("photo2.ron").to_str().unwrap(),
-            "--nodes",
-            "4",
-            "-o",
-        ])
-        .arg(tmp("photo2.png"))
+        .args(["render", big.to_str().unwrap(), "--nodes", "4", "-o"])
+        .arg(tmp("big.png"))
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(1));
     assert!(
-        err.contains("187136 bytes") && err.contains("122880 bytes"),
+        err.contains("596564 bytes") && err.contains("122880 bytes"),
         "{err}"
     );
 }

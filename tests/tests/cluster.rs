@@ -145,7 +145,7 @@ fn corrupted_frames_are_caught_and_resent() {
             faults: Faults {
                 up_every: 5,
                 down_every: 7,
-                broadcast_every: 11,
+                broadcast_every: 3,
                 random: None,
             },
             ..SimConfig::default()
@@ -762,7 +762,14 @@ fn a_slow_dm_sets_the_frame_interval_and_a_fast_one_changes_nothing() {
         ..cfg.clone()
     };
     let interval = steady_state_interval(&img, &fast, 8).expect("simulates");
-    assert!((interval - render).abs() < 1e-9, "{interval} vs {render}");
+    // Not slower, and within 2%: the DM's delivery times move when the RC broadcasts the
+    // next frame among this frame's exchanges. With a 116 KB image the broadcast filled the
+    // bus and the two intervals were equal; photo1's 18 KB image at 64x60 leaves gaps, and a
+    // fast DM's later broadcast lands in them (measured: 1.4% shorter).
+    assert!(
+        interval <= render + 1e-9 && interval >= 0.98 * render,
+        "{interval} vs {render}"
+    );
     let t = simulate_frame(&img, &fast).expect("simulates").time_s;
     assert!((t - single - render / 10.0).abs() < 1e-9, "{t} vs {single}");
 }
@@ -820,7 +827,19 @@ fn work_of_a_node_that_dies_is_reissued() {
     assert_eq!((r.root.timeouts, r.root.revived), (1, 0));
     assert!(r.root.reissued >= 1, "{:?}", r.root);
     // All but one, at staggered times, on three buses.
-    let deaths: Vec<(u16, f64)> = (1..6).map(|n| (n, t0 * (0.1 + 0.1 * n as f64))).collect();
+    // Node 1 dies 1 µs in, during the scene broadcast; the others at staggered times.
+    let deaths: Vec<(u16, f64)> = (1..6)
+        .map(|n| {
+            (
+                n,
+                if n == 1 {
+                    1e-6
+                } else {
+                    t0 * (0.1 + 0.1 * n as f64)
+                },
+            )
+        })
+        .collect();
     let r = with_deaths(&img, 6, 3, &deaths, timeout);
     assert!(r.frames[0] == want);
     // Node 1 died during the scene broadcast, before it held a job: nothing to re-issue,

@@ -480,6 +480,7 @@ fn seed_images() -> Vec<Vec<u8>> {
                     MeshHierarchy::Median,
                 ][(j + k) % 3],
                 no_shadows: j == 2,
+                leaf_size: Some([4, 1, 31][(j + 2 * k) % 3]),
             };
             let img = compile(&desc, &opts)
                 .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -538,12 +539,36 @@ fn integer_words(s: Section) -> Vec<usize> {
         .collect()
 }
 
+/// One u16 field of a record of integers: another section's count (or one past it), the
+/// absent marker, a leaf info byte pair, or an interesting value.
+fn mutate_u16_field(rng: &mut Rng, img: &mut [u8], s: Section, at: usize) {
+    let k = 2 * rng.below((s.record_size() / 2).max(1));
+    let t = table(img);
+    let v: u16 = match rng.below(5) {
+        0 => (t[rng.below(SECTION_COUNT)].1 as u16).wrapping_add(rng.below(2) as u16),
+        1 => u16::MAX,
+        // A node's info and material bytes: kind 0..7, count 0..31.
+        2 => ((rng.below(8) as u16) << 5) | rng.below(32) as u16 | (rng.below(4) as u16) << 8,
+        3 => interesting_u32(rng, 0) as u16,
+        _ => rng.next() as u16,
+    };
+    if let Some(b) = img.get_mut(at + k..at + k + 2) {
+        b.copy_from_slice(&v.to_le_bytes());
+    }
+}
+
 /// One structure-aware change to an image.
 fn mutate_image_once(rng: &mut Rng, img: &mut Vec<u8>, corpus: &[Vec<u8>]) {
     match rng.below(100) {
         // An integer field of a record: an index, count, size, kind or flag.
         0..=29 => {
             if let Some((s, at)) = some_record(rng, img) {
+                if s.words().is_none() && s != Section::Texels {
+                    // Records of u16 indices and bytes (nodes, triangles, corners, normals,
+                    // rectangles): one u16 field.
+                    mutate_u16_field(rng, img, s, at);
+                    return;
+                }
                 let ints = integer_words(s);
                 let words = s.record_size() / 4;
                 let w = if !ints.is_empty() && rng.chance(80) {
@@ -565,10 +590,6 @@ fn mutate_image_once(rng: &mut Rng, img: &mut Vec<u8>, corpus: &[Vec<u8>]) {
                         0 => {
                             let c = t[rng.below(SECTION_COUNT)].1;
                             c.wrapping_add(rng.below(2) as u32)
-                        }
-                        // A shape word of another kind with a small index.
-                        1 if s == Section::Nodes && k == 7 => {
-                            ((rng.below(5) as u32) << 28) | rng.below(4) as u32
                         }
                         _ => interesting_u32(rng, old),
                     };

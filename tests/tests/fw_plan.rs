@@ -22,8 +22,6 @@ fn photo1_fits_the_node_and_root_scene_banks() {
     let n = image_len("photo1.ron", 512, 480);
     assert!(n <= nc_fw::plan::SCENE_EVEN, "{n} bytes");
     assert!(n <= rc_fw::plan::SCENE, "{n} bytes");
-    // ... and is why the node has only one large bank: two would not fit the SRAM next to
-    // the link's DMA banks (docs/hardware.md, memory plan).
-    assert!(2 * n + nc_fw::plan::LINK_BANKS > nc_fw::plan::SRAM);
-    assert!(n > nc_fw::plan::SCENE_ODD);
+    // ... and, compact, fits the odd frames' bank too: two banks on the node.
+    assert!(n <= nc_fw::plan::SCENE_ODD, "{n} bytes");
 }

@@ -117,7 +117,26 @@ fn false_alarms_do_not_stretch_the_recovery_from_a_real_death() {
 /// names the image size and the bank (the board's, `nc_fw::plan::SCENE_EVEN`).
 #[test]
 fn a_scene_larger_than_a_node_bank_is_refused_naming_both_sizes() {
-    let img = image("photo2.ron", 64, 60);
+    // photo2 at 64x60 with one triangle per leaf and a 256x256 texture of 65,536 colours
+    // (RGB8: 196,608 bytes).
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo2.ron");
+    let mut desc = links_host::scene_file::load_scene(&path).expect("photo2 loads");
+    let t = &mut desc.textures[0];
+    (t.width, t.height) = (256, 256);
+    t.rgb = (0..256 * 256u32)
+        .flat_map(|i| [(i & 0xff) as u8, (i >> 8) as u8, 7])
+        .collect();
+    let img = links_core::dm::compile(
+        &desc,
+        &links_core::dm::CompileOptions {
+            width: Some(64),
+            height: Some(60),
+            leaf_size: Some(1),
+            ..Default::default()
+        },
+    )
+    .expect("compiles")
+    .bytes;
     assert!(img.len() > nc_fw::plan::SCENE_EVEN);
     let e = simulate_frame(
         &img,
@@ -401,7 +420,8 @@ fn lost_broadcasts_are_repaired_under_every_policy() {
         let r = run(&img, &cfg);
         assert!(r.frames[0] == want, "{policy:?}");
         let dropped: u64 = r.bus.iter().map(|b| b.dropped_broadcast).sum();
-        assert!(dropped > 100, "{policy:?}: {dropped}");
-        assert!(r.root.repairs > 50, "{policy:?}: {:?}", r.root);
+        // photo1's image at 64x60 is 19 chunks, to 6 nodes: about 34 drops at 0.3.
+        assert!(dropped > 20, "{policy:?}: {dropped}");
+        assert!(r.root.repairs > 10, "{policy:?}: {:?}", r.root);
     }
 }

@@ -69,6 +69,10 @@ pub struct SceneArgs {
     /// Render without shadows (no shadow rays)
     #[arg(long)]
     pub no_shadows: bool,
+    /// Most triangles in one leaf of the tree, 1..=31 (default 4): larger leaves make a
+    /// smaller SceneImage and test more triangles per ray
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=31))]
+    pub leaf_size: Option<u8>,
 }
 
 impl SceneArgs {
@@ -81,6 +85,7 @@ impl SceneArgs {
             max_depth: None,
             transparency: None,
             no_shadows: false,
+            leaf_size: None,
         }
     }
 
@@ -102,6 +107,7 @@ impl SceneArgs {
             transparency: self.transparency.map(TransparencyMode::from),
             mesh_hierarchy: Default::default(),
             no_shadows: self.no_shadows,
+            leaf_size: self.leaf_size.map(usize::from),
         };
         let compiled = compile(&desc, &opts)
             .map_err(|e| CliError::Scene(format!("{}: {e}", path.display())))?;

@@ -5,9 +5,9 @@
 
 #[cfg(feature = "std")]
 use crate::desc::{Camera, Cluster, Material, Node, SceneDesc, Transform, TransparencyMode};
-use crate::image::layout::{camera, material, node, texture, triangle, STORAGE_AT};
+use crate::image::layout::{camera, material, node, texture, triangle, vertex, STORAGE_AT};
 use crate::image::writer::ImageWriter;
-use crate::image::{MapTarget, Section, NONE};
+use crate::image::{Leaf, MapTarget, Section, ShapeKind, NONE, NONE16};
 use crate::num::Storage;
 use std::vec::Vec;
 
@@ -16,6 +16,10 @@ pub const GREY: [f32; 12] = [0.5; 12];
 /// A material lit by ambient light only, so a pixel is its diffuse colour: diffuse 1, no
 /// specular (shininess 1), no reflection or transmission, ior 1.
 pub const MATTE_WHITE: [f32; 12] = [1.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0];
+
+/// The node grid of builder images: origin 0, step 2^-8 on every axis (boxes within
+/// ±128 units; exact in f32 and Q16.16).
+pub const GRID_STEP: f32 = 1.0 / 256.0;
 
 /// Builds an image record by record.
 pub struct SceneBuilder {
@@ -46,7 +50,8 @@ impl SceneBuilder {
     }
 
     /// The camera: `width` x `height` pixels, `window` = (x0, y0, dx, dy), a black
-    /// background, grey `ambient` light, depth 2, no flags, dz 1.
+    /// background, grey `ambient` light, depth 2, no flags, dz 1, the [`GRID_STEP`] node
+    /// grid, one-pixel rectangles.
     pub fn camera(&mut self, width: u32, height: u32, window: [f32; 4], ambient: f32) -> &mut Self {
         let v: Vec<u32> = window
             .iter()
@@ -73,6 +78,13 @@ impl SceneBuilder {
             .u(camera::MAX_DEPTH, 2)
             .u(camera::FLAGS, 0)
             .u(camera::DZ, v[7]);
+        let step = self.stored(GRID_STEP);
+        for k in 0..3 {
+            self.w
+                .patch_u32(Section::Camera, 0, camera::GRID_ORIGIN + 4 * k, zero);
+            self.w
+                .patch_u32(Section::Camera, 0, camera::GRID_STEP + 4 * k, step);
+        }
         self
     }
 
@@ -98,40 +110,68 @@ impl SceneBuilder {
         self.material(GREY, NONE)
     }
 
-    /// A texture header and its texels (appended to the texel section).
+    /// A texture header (RGB8 texels, no palette) and its texels (appended to the texel
+    /// section).
     pub fn texture(&mut self, width: u32, height: u32, offset: u32, texels: &[u8]) -> &mut Self {
         self.w
             .push(Section::Textures)
             .1
             .u(texture::WIDTH, width)
             .u(texture::HEIGHT, height)
-            .u(texture::TEXELS, offset);
+            .u(texture::TEXELS, offset)
+            .u(texture::PALETTE, 0);
         self.w.push_texels(texels);
         self
     }
 
-    /// A triangle of material 0 with vertices `p` (x, y, z each), no normals or uvs.
+    /// A triangle with vertices `p` (x, y, z each; three new vertex records), no normals
+    /// or uvs (its material is its leaf's).
     pub fn triangle(&mut self, p: [f32; 9]) -> &mut Self {
         let v = self.stored_all(&p);
-        let mut r = self.w.push(Section::Triangles).1;
-        for (k, x) in v.into_iter().enumerate() {
-            r = r.u(triangle::P + 4 * k, x);
+        let first = self.w.count(Section::Vertices) as u16;
+        for c in v.chunks_exact(3) {
+            self.w
+                .push(Section::Vertices)
+                .1
+                .u(vertex::P, c[0])
+                .u(vertex::P + 4, c[1])
+                .u(vertex::P + 8, c[2]);
         }
-        r.u(triangle::MATERIAL, 0)
-            .u(triangle::NORMALS, NONE)
-            .u(triangle::UVS, NONE);
+        self.w
+            .push(Section::Triangles)
+            .1
+            .hs(triangle::V, &[first, first + 1, first + 2])
+            .h(triangle::NORMALS, NONE16);
         self
     }
 
-    /// A node with box `min`..`max`, `skip` and shape word `shape` ([`NONE`] for a
-    /// cluster).
+    /// A node with box `min`..`max` (rounded outward to the [`GRID_STEP`] grid): a
+    /// cluster whose subtree ends before `skip` when `shape` is [`NONE`], else a leaf of
+    /// one shape, `shape` = kind << 28 | index (a triangle leaf of material 0).
     pub fn node(&mut self, min: [f32; 3], max: [f32; 3], skip: u32, shape: u32) -> &mut Self {
-        let v = self.stored_all(&[min, max].concat());
-        let mut r = self.w.push(Section::Nodes).1;
-        for (k, x) in v.into_iter().enumerate() {
-            r = r.u(node::MIN + 4 * k, x);
-        }
-        r.u(node::SKIP, skip).u(node::SHAPE, shape);
+        let q = |v: f32, up: bool| {
+            let t = v / GRID_STEP;
+            (if up { t.ceil() } else { t.floor() }) as i16 as u16
+        };
+        let (index, info) = if shape == NONE {
+            (skip as u16, 0)
+        } else {
+            let leaf = Leaf {
+                kind: ShapeKind::from_u8((shape >> 28) as u8).unwrap_or(ShapeKind::Triangle),
+                first: shape & 0x0fff_ffff,
+                count: 1,
+                material: 0,
+            };
+            (leaf.first as u16, leaf.info())
+        };
+        self.w
+            .push(Section::Nodes)
+            .1
+            .hs(node::LO, &min.map(|v| q(v, false)))
+            .hs(node::HI, &max.map(|v| q(v, true)))
+            .h(node::INDEX, index)
+            .b(node::INFO, info)
+            .b(node::MATERIAL, 0);
         self
     }
 
@@ -144,7 +184,8 @@ impl SceneBuilder {
 }
 
 /// A minimal f32 image: an 8-pixel-high camera `width` wide, one grey material, one
-/// triangle and the given nodes as (skip, shape word), each with the box [-1, 1]^3.
+/// triangle and the given nodes as (skip, shape word: [`NONE`] for a cluster, else a leaf,
+/// see [`SceneBuilder::node`]), each with the box [-1, 1]^3.
 pub fn tiny_image(width: u32, nodes: &[(u32, u32)]) -> Vec<u8> {
     let mut b = SceneBuilder::new(Storage::F32);
     b.camera(width, 8, [-1.0, 1.0, 0.1, 0.1], 0.0)

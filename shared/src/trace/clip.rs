@@ -252,7 +252,12 @@ mod tests {
                 let ray = t.primary_ray(x, y);
                 if let Some((_, s)) = t.first_surface(&ray) {
                     let leaf = (0..v.node_count())
-                        .find(|&i| v.node::<f64>(i).shape == Some(s.shape))
+                        .find(|&i| {
+                            v.node_leaf(i).is_some_and(|l| {
+                                l.kind == s.shape.kind
+                                    && (l.first..l.first + l.count).contains(&s.shape.index)
+                            })
+                        })
                         .unwrap();
                     let r = v.rect(leaf);
                     assert!(

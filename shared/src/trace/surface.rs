@@ -44,7 +44,7 @@ impl<T: Real> Tracer<'_, T> {
         let s = &self.scene;
         let shape = hit.shape;
         match hit.detail {
-            HitDetail::Triangle(b) => {
+            HitDetail::Triangle { b, material } => {
                 let rec = s.triangle::<T>(shape.index);
                 let (p, p_error) = rec.tri.point(b);
                 let mut ng = rec.tri.face_normal().normalize();
@@ -59,14 +59,12 @@ impl<T: Real> Tracer<'_, T> {
                 } else {
                     ng
                 };
-                let uv = if rec.uvs != NONE {
-                    let t = s.uvs::<T>(rec.uvs);
-                    [
+                let uv = match s.uvs::<T>(rec.uvs) {
+                    Some(t) if rec.uvs != NONE => [
                         t[0][0] * b[0] + t[1][0] * b[1] + t[2][0] * b[2],
                         t[0][1] * b[0] + t[1][1] * b[1] + t[2][1] * b[2],
-                    ]
-                } else {
-                    [b[1], b[2]]
+                    ],
+                    _ => [b[1], b[2]],
                 };
                 Surface {
                     p,
@@ -74,7 +72,7 @@ impl<T: Real> Tracer<'_, T> {
                     ng,
                     ns,
                     uv,
-                    material: rec.material,
+                    material,
                     shape,
                 }
             }

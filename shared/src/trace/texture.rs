@@ -60,7 +60,7 @@ impl<T: Real> Tracer<'_, T> {
     pub(super) fn texture_lookup(&self, index: u32, u: T, v: T) -> Vec3<T> {
         let tex = self.scene.texture(index);
         // A validated image's textures are 1 .. 2^31 texels wide and high and hold exactly
-        // w * h * 3 bytes (`SceneView::texture`); anything else reads black, never panics.
+        // w * h texels (`SceneView::texture`); anything else reads black, never panics.
         let (Ok(w), Ok(h)) = (i32::try_from(tex.width), i32::try_from(tex.height)) else {
             return Vec3::zero();
         };
@@ -78,14 +78,7 @@ impl<T: Real> Tracer<'_, T> {
         let xi = xf.to_f32() as i32;
         let yi = yf.to_f32() as i32;
         let texel = |xx: i32, yy: i32| -> Vec3<T> {
-            let xx = xx.rem_euclid(w) as usize;
-            let yy = yy.rem_euclid(h) as usize;
-            let rgb = yy
-                .checked_mul(w as usize)
-                .and_then(|i| i.checked_add(xx)?.checked_mul(3))
-                .and_then(|at| tex.rgb.get(at..)?.first_chunk::<3>())
-                .copied()
-                .unwrap_or([0; 3]);
+            let rgb = tex.texel(xx.rem_euclid(w) as u32, yy.rem_euclid(h) as u32);
             let c = |k: usize| T::from_i32(rgb[k] as i32) / T::from_i32(255);
             Vec3::new(c(0), c(1), c(2))
         };

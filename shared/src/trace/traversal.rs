@@ -5,7 +5,7 @@
 
 use super::tracer::Tracer;
 use crate::geom::{Ray, RayInv};
-use crate::image::{BlobGroupRec, MapTarget, SceneView, ShapeKind, ShapeRef, NONE};
+use crate::image::{BlobGroupRec, Leaf, MapTarget, SceneView, ShapeKind, ShapeRef, NONE};
 use crate::num::Real;
 use crate::shape::blob::{Ball, BlobGroup, BlobStats};
 use crate::shape::boxshape::BoxHit;
@@ -14,10 +14,16 @@ use crate::shape::ellipsoid::EllipsoidHit;
 /// Which shape a ray hit, with what each kind needs to finish the hit.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum HitDetail<T> {
-    Triangle([T; 3]),
+    /// Barycentric coordinates, and the material of the triangle's leaf.
+    Triangle {
+        b: [T; 3],
+        material: u32,
+    },
     Ellipsoid(EllipsoidHit<T>),
     Box(BoxHit<T>),
-    Blob { t_error: T },
+    Blob {
+        t_error: T,
+    },
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -32,12 +38,19 @@ pub(super) const TRAVERSAL_STACK: usize = 48;
 /// Most children of one node visited nearest-first; further hit children are walked in place.
 pub(super) const ORDERED_FANOUT: usize = 8;
 
-/// The nearest hit so far. Equal distances go to the lower node index, so the answer does
-/// not depend on the order shapes are tested in (ordered traversal, clipping, plain).
+/// The nearest hit so far. Equal distances go to the lower shape key (node index, then
+/// position in the leaf), so the answer does not depend on the order shapes are tested in
+/// (ordered traversal, clipping, plain).
 pub(super) struct Nearest<T> {
     pub(super) hit: Option<Hit<T>>,
     pub(super) node: u32,
     pub(super) t_max: T,
+}
+
+/// The tie-break key of the `k`-th shape of leaf `node` (a leaf holds at most 31).
+#[inline(always)]
+fn shape_key(node: u32, k: u32) -> u32 {
+    (node << 5) | k
 }
 
 impl<T: Real> Nearest<T> {
@@ -108,8 +121,8 @@ impl<T: Real> Tracer<'_, T> {
             if !node.bounds.hit(ray, &inv, near.limit()) {
                 continue;
             }
-            if let Some(shape) = node.shape {
-                self.offer(&mut near, shape, leaf, ray);
+            if let Some(l) = node.leaf {
+                self.offer(&mut near, l, leaf, ray);
             }
         }
         near.hit
@@ -136,8 +149,8 @@ impl<T: Real> Tracer<'_, T> {
                 continue;
             }
             let node = self.scene.node::<T>(i);
-            if let Some(shape) = node.shape {
-                self.offer(&mut near, shape, i, ray);
+            if let Some(l) = node.leaf {
+                self.offer(&mut near, l, i, ray);
                 continue;
             }
             // Test the children's boxes; visit the nearest first so later ones can be pruned.
@@ -153,7 +166,7 @@ impl<T: Real> Tracer<'_, T> {
                         nk += 1;
                     } else {
                         // No room to order it: walk its subtree in place.
-                        self.walk_hit_subtree(c, child.shape, child.skip, ray, &inv, &mut near);
+                        self.walk_hit_subtree(c, child.leaf, child.skip, ray, &inv, &mut near);
                     }
                 }
                 c = child.skip;
@@ -178,14 +191,14 @@ impl<T: Real> Tracer<'_, T> {
     pub(super) fn walk_hit_subtree(
         &mut self,
         root: u32,
-        root_shape: Option<ShapeRef>,
+        root_leaf: Option<Leaf>,
         end: u32,
         ray: &Ray<T>,
         inv: &RayInv<T>,
         near: &mut Nearest<T>,
     ) {
-        if let Some(shape) = root_shape {
-            self.offer(near, shape, root, ray);
+        if let Some(l) = root_leaf {
+            self.offer(near, l, root, ray);
             return;
         }
         let mut i = root + 1;
@@ -196,24 +209,20 @@ impl<T: Real> Tracer<'_, T> {
                 i = node.skip;
                 continue;
             }
-            if let Some(shape) = node.shape {
-                self.offer(near, shape, i, ray);
+            if let Some(l) = node.leaf {
+                self.offer(near, l, i, ray);
             }
             i += 1;
         }
     }
 
-    /// Test a shape and keep it if it is the nearest so far.
+    /// Test a leaf's shapes and keep each that is the nearest so far.
     #[inline]
-    pub(super) fn offer(
-        &mut self,
-        near: &mut Nearest<T>,
-        shape: ShapeRef,
-        node: u32,
-        ray: &Ray<T>,
-    ) {
-        if let Some(h) = self.intersect_shape(shape, ray, near.limit()) {
-            near.offer(h, node);
+    pub(super) fn offer(&mut self, near: &mut Nearest<T>, leaf: Leaf, node: u32, ray: &Ray<T>) {
+        for k in 0..leaf.count {
+            if let Some(h) = self.intersect_shape(leaf, k, ray, near.limit()) {
+                near.offer(h, shape_key(node, k));
+            }
         }
     }
 
@@ -221,8 +230,8 @@ impl<T: Real> Tracer<'_, T> {
     pub(super) fn closest_hit_plain(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
         let mut near = Nearest::new(t_max);
         for i in 0..self.scene.node_count() {
-            if let Some(shape) = self.scene.node::<T>(i).shape {
-                self.offer(&mut near, shape, i, ray);
+            if let Some(l) = self.scene.node_leaf(i) {
+                self.offer(&mut near, l, i, ray);
             }
         }
         near.hit
@@ -244,14 +253,16 @@ impl<T: Real> Tracer<'_, T> {
                     continue;
                 }
             }
-            if let Some(shape) = node.shape {
-                if let Some(h) = self.intersect_shape(shape, ray, t_max) {
-                    let m = self.scene.material::<T>(self.material_of(&h));
-                    let mapped = m.texture != NONE && m.target == MapTarget::Transmit;
-                    if m.transmit.max_component() <= T::ZERO && !mapped {
-                        return (true, transparent);
+            if let Some(l) = node.leaf {
+                for k in 0..l.count {
+                    if let Some(h) = self.intersect_shape(l, k, ray, t_max) {
+                        let m = self.scene.material::<T>(self.material_of(&h));
+                        let mapped = m.texture != NONE && m.target == MapTarget::Transmit;
+                        if m.transmit.max_component() <= T::ZERO && !mapped {
+                            return (true, transparent);
+                        }
+                        transparent = true;
                     }
-                    transparent = true;
                 }
             }
             i += 1;
@@ -261,21 +272,27 @@ impl<T: Real> Tracer<'_, T> {
 
     pub(super) fn material_of(&self, hit: &Hit<T>) -> u32 {
         let s = &self.scene;
+        if let HitDetail::Triangle { material, .. } = hit.detail {
+            return material;
+        }
         match hit.shape.kind {
-            ShapeKind::Triangle => s.triangle::<T>(hit.shape.index).material,
+            ShapeKind::Triangle => 0,
             ShapeKind::Ellipsoid => s.ellipsoid::<T>(hit.shape.index).material,
             ShapeKind::Box => s.boxshape::<T>(hit.shape.index).material,
             ShapeKind::Blob => s.blob_group::<T>(hit.shape.index).material,
         }
     }
 
+    /// Test the `k`-th shape of `leaf`.
     pub(super) fn intersect_shape(
         &mut self,
-        shape: ShapeRef,
+        leaf: Leaf,
+        k: u32,
         ray: &Ray<T>,
         t_max: T,
     ) -> Option<Hit<T>> {
         let s = &self.scene;
+        let shape = leaf.shape(k);
         match shape.kind {
             ShapeKind::Triangle => {
                 self.stats.triangle_tests += 1;
@@ -283,7 +300,10 @@ impl<T: Real> Tracer<'_, T> {
                 rec.tri.intersect(ray, t_max).map(|h| Hit {
                     t: h.t,
                     shape,
-                    detail: HitDetail::Triangle(h.b),
+                    detail: HitDetail::Triangle {
+                        b: h.b,
+                        material: leaf.material,
+                    },
                 })
             }
             ShapeKind::Ellipsoid => {

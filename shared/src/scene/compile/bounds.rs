@@ -106,11 +106,15 @@ pub(super) fn sah_best_on_axis(
 /// Binned SAH split. Costs in units of one box test: a triangle leaf costs its box test
 /// plus about two more for the triangle test; a cluster node one box test. Returns the
 /// split point after reordering, or `None` to make a leaf run (only when the set is small
-/// enough, <= [`MESH_LEAF_SIZE`], and splitting would not pay).
-pub(super) fn sah_split(tris: &mut [TriData]) -> Option<usize> {
+/// enough, <= `leaf_size`, and splitting would not pay).
+pub(super) fn sah_split(tris: &mut [TriData], leaf_size: usize) -> Option<usize> {
     pub(super) const COST_NODE: f64 = 1.0;
     pub(super) const COST_TRI: f64 = 3.0;
     let n = tris.len();
+    if n <= leaf_size {
+        // A leaf holds the range (a node record costs more bytes than the tests it saves).
+        return None;
+    }
     let all = tris
         .iter()
         .fold(Bounds::empty(), |b, t| b.union(t.bounds()));
@@ -124,10 +128,10 @@ pub(super) fn sah_split(tris: &mut [TriData]) -> Option<usize> {
         .min_by(|x, y| x.0.total_cmp(&y.0));
     let Some((area_cost, axis, edge)) = best else {
         // All centroids coincide: fall back to a median split for large sets.
-        return (n > MESH_LEAF_SIZE).then(|| median_split(tris));
+        return (n > leaf_size).then(|| median_split(tris));
     };
     let cost = 2.0 * COST_NODE + area_cost * COST_TRI / half_area(&all).max(f64::MIN_POSITIVE);
-    if n <= MESH_LEAF_SIZE && cost >= n as f64 * COST_TRI {
+    if n <= leaf_size && cost >= n as f64 * COST_TRI {
         return None;
     }
     let (lo, hi) = (cent.min[axis], cent.max[axis]);

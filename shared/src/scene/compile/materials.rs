@@ -14,13 +14,36 @@ impl Dm<'_> {
                     what: format!("texture {i} ('{}') has a bad size", t.name),
                 });
             }
-            let off = self.w.push_texels(&t.rgb);
+            // A palette and one byte per texel when the texture has at most 256 colours
+            // (lossless); RGB8 texels otherwise.
+            let (off, palette) = match palette_of(&t.rgb) {
+                Some((colours, indices)) => {
+                    let off = self.w.push_texels(&colours);
+                    self.w.push_texels(&indices);
+                    (off, (colours.len() / 3) as u32)
+                }
+                None => (self.w.push_texels(&t.rgb), 0),
+            };
             self.w
                 .push(Section::Textures)
                 .1
                 .u(texture::WIDTH, t.width)
                 .u(texture::HEIGHT, t.height)
-                .u(texture::TEXELS, off);
+                .u(texture::TEXELS, off)
+                .u(texture::PALETTE, palette);
+        }
+        Ok(())
+    }
+
+    /// Materials are named by a byte in triangle leaves.
+    pub(super) fn check_material_count(&self) -> Result<(), DmError> {
+        if self.desc.materials.len() > 256 {
+            return Err(DmError::TooLarge {
+                what: format!(
+                    "{} materials (a SceneImage holds at most 256)",
+                    self.desc.materials.len()
+                ),
+            });
         }
         Ok(())
     }
@@ -53,4 +76,28 @@ impl Dm<'_> {
             .fs(material::SCALE, &scale);
         Ok(())
     }
+}
+
+/// The texture as (palette RGB8 bytes in first-use order, one palette index per texel) when it
+/// has at most [`texture::MAX_PALETTE`] colours.
+pub(super) fn palette_of(rgb: &[u8]) -> Option<(Vec<u8>, Vec<u8>)> {
+    let mut colours: Vec<[u8; 3]> = Vec::new();
+    let mut index = std::collections::HashMap::new();
+    let mut indices = Vec::with_capacity(rgb.len() / 3);
+    for c in rgb.chunks_exact(3) {
+        let c = [c[0], c[1], c[2]];
+        let k = match index.get(&c) {
+            Some(&k) => k,
+            None => {
+                if colours.len() == texture::MAX_PALETTE as usize {
+                    return None;
+                }
+                colours.push(c);
+                index.insert(c, (colours.len() - 1) as u8);
+                (colours.len() - 1) as u8
+            }
+        };
+        indices.push(k);
+    }
+    Some((colours.concat(), indices))
 }

@@ -160,67 +160,170 @@ impl Dm<'_> {
         Ok(out)
     }
 
-    /// Write triangles as leaves, splitting into sub-clusters per [`MeshHierarchy`].
-    pub(super) fn triangles(&mut self, mut tris: Vec<TriData>) -> Bounds {
+    /// Write triangles as leaves of up to [`CompileOptions::leaf_size`] triangles (one
+    /// material each), splitting into sub-clusters per [`MeshHierarchy`].
+    pub(super) fn triangles(&mut self, mut tris: Vec<TriData>) -> Result<Bounds, DmError> {
+        let leaf_size = self.leaf_size();
         let split = match self.opts.mesh_hierarchy {
             _ if tris.len() <= 1 => None,
+            _ if tris.iter().any(|t| t.material != tris[0].material) => {
+                Some(material_split(&mut tris))
+            }
             MeshHierarchy::Flat => None,
-            MeshHierarchy::Median if tris.len() <= MESH_LEAF_SIZE => None,
+            MeshHierarchy::Median if tris.len() <= leaf_size => None,
             MeshHierarchy::Median => Some(median_split(&mut tris)),
-            MeshHierarchy::Sah => sah_split(&mut tris),
+            MeshHierarchy::Sah => sah_split(&mut tris, leaf_size),
         };
         let Some(mid) = split else {
+            // One leaf per run of at most `leaf_size` triangles (a flat hierarchy may give
+            // more than one).
             let mut b = Bounds::empty();
-            for t in tris {
-                let tb = t.bounds();
-                // Triangles are projected directly (LINKS-1 4.4): tighter than their box.
-                let rect = self.proj.rect_of(&t.p.map(|p| p.map(f64::from)));
-                let idx = self.write_triangle(t);
-                self.leaf_with_rect(
-                    ShapeRef {
-                        kind: ShapeKind::Triangle,
-                        index: idx,
-                    },
-                    tb,
-                    rect,
-                );
-                b = b.union(tb);
+            let mut rest = tris;
+            while !rest.is_empty() {
+                let tail = rest.split_off(rest.len().min(leaf_size));
+                b = b.union(self.triangle_leaf(rest)?);
+                rest = tail;
             }
-            return b;
+            return Ok(b);
         };
         let right = tris.split_off(mid);
         let mut b = Bounds::empty();
         for half in [tris, right] {
             let node = self.open_node();
-            let hb = self.triangles(half);
+            let hb = self.triangles(half)?;
             self.close_node(node, hb);
             b = b.union(hb);
         }
-        b
+        Ok(b)
     }
 
-    pub(super) fn write_triangle(&mut self, t: TriData) -> u32 {
-        let ni = match t.n {
-            Some(n) => {
-                let (i, r) = self.w.push(Section::Normals);
-                r.per_vertex(normals::N, normals::STRIDE, &n);
-                i
-            }
-            None => NONE,
-        };
-        let ui = match t.uv {
-            Some(uv) => {
-                let (i, r) = self.w.push(Section::Uvs);
-                r.per_vertex(uvs::UV, uvs::STRIDE, &uv);
-                i
-            }
-            None => NONE,
-        };
-        let (i, r) = self.w.push(Section::Triangles);
-        r.per_vertex(triangle::P, triangle::VERTEX_STRIDE, &t.p)
-            .u(triangle::MATERIAL, t.material)
-            .u(triangle::NORMALS, ni)
-            .u(triangle::UVS, ui);
-        i
+    /// Triangles per leaf: the option, within what a leaf can hold.
+    pub(super) fn leaf_size(&self) -> usize {
+        self.opts
+            .leaf_size
+            .unwrap_or(MESH_LEAF_SIZE)
+            .clamp(1, node::MAX_LEAF as usize)
     }
+
+    /// One leaf holding `tris` (1..=31 of one material), written consecutively.
+    fn triangle_leaf(&mut self, tris: Vec<TriData>) -> Result<Bounds, DmError> {
+        let mut b = Bounds::empty();
+        let mut rect = Rect::EMPTY;
+        let first = self.w.count(Section::Triangles);
+        let (count, material) = (tris.len() as u32, tris[0].material);
+        for t in tris {
+            b = b.union(t.bounds());
+            // Triangles are projected directly (LINKS-1 4.4): tighter than their box.
+            rect = rect.union(self.proj.rect_of(&t.p.map(|p| p.map(f64::from))));
+            self.write_triangle(t)?;
+        }
+        self.leaf_with_rect(
+            Leaf {
+                kind: ShapeKind::Triangle,
+                first,
+                count,
+                material,
+            },
+            b,
+            rect,
+        );
+        Ok(b)
+    }
+
+    /// The triangle's record, its vertices, normals and uvs shared with the triangles
+    /// written before it.
+    pub(super) fn write_triangle(&mut self, t: TriData) -> Result<u32, DmError> {
+        let mut v = [0u16; 3];
+        for (i, p) in v.iter_mut().zip(t.p) {
+            *i = self.shared.vertex(&mut self.w, p)?;
+        }
+        let normals = match t.n {
+            Some(n) => {
+                let mut c = [0u16; 3];
+                for (i, n) in c.iter_mut().zip(n) {
+                    *i = self.shared.normal(&mut self.w, n)?;
+                }
+                let (i, r) = self.w.push(Section::TriNormals);
+                r.hs(corners::I, &c);
+                index16(i, "triangle normal triples")?
+            }
+            None => NONE16,
+        };
+        let uvs = match t.uv {
+            Some(uv) => {
+                let mut c = [0u16; 3];
+                for (i, uv) in c.iter_mut().zip(uv) {
+                    *i = self.shared.uv(&mut self.w, uv)?;
+                }
+                Some(c)
+            }
+            None => None,
+        };
+        self.tri_uvs.push(uvs);
+        let (i, r) = self.w.push(Section::Triangles);
+        r.hs(triangle::V, &v).h(triangle::NORMALS, normals);
+        index16(i, "triangles")?;
+        Ok(i)
+    }
+}
+
+/// A record index as u16, or the error naming what overflowed.
+pub(super) fn index16(i: u32, what: &str) -> Result<u16, DmError> {
+    if i < NONE16 as u32 {
+        Ok(i as u16)
+    } else {
+        Err(DmError::TooLarge {
+            what: format!("more than {} {what} (indices are u16)", NONE16),
+        })
+    }
+}
+
+/// Vertex positions, normals and uvs written so far, by their bits: each is stored once.
+#[derive(Default)]
+pub(super) struct SharedVertices {
+    positions: std::collections::HashMap<[u32; 3], u16>,
+    normals: std::collections::HashMap<[i16; 3], u16>,
+    uvs: std::collections::HashMap<[u32; 2], u16>,
+}
+
+impl SharedVertices {
+    fn vertex(&mut self, w: &mut ImageWriter, p: [f32; 3]) -> Result<u16, DmError> {
+        if let Some(&i) = self.positions.get(&p.map(f32::to_bits)) {
+            return Ok(i);
+        }
+        let (i, r) = w.push(Section::Vertices);
+        r.fs(vertex::P, &p);
+        let i = index16(i, "vertices")?;
+        self.positions.insert(p.map(f32::to_bits), i);
+        Ok(i)
+    }
+    /// A unit normal, compressed to i16 components (see [`normal`]).
+    fn normal(&mut self, w: &mut ImageWriter, n: [f32; 3]) -> Result<u16, DmError> {
+        let q = n.map(|c| (f64::from(c).clamp(-1.0, 1.0) * normal::SCALE).round() as i16);
+        if let Some(&i) = self.normals.get(&q) {
+            return Ok(i);
+        }
+        let (i, r) = w.push(Section::Normals);
+        r.hs(normal::N, &q.map(|c| c as u16));
+        let i = index16(i, "normals")?;
+        self.normals.insert(q, i);
+        Ok(i)
+    }
+    fn uv(&mut self, w: &mut ImageWriter, uv: [f32; 2]) -> Result<u16, DmError> {
+        if let Some(&i) = self.uvs.get(&uv.map(f32::to_bits)) {
+            return Ok(i);
+        }
+        let (i, r) = w.push(Section::Uvs);
+        r.fs(uv::UV, &uv);
+        let i = index16(i, "uvs")?;
+        self.uvs.insert(uv.map(f32::to_bits), i);
+        Ok(i)
+    }
+}
+
+/// Put the triangles of the first triangle's material first (stable); returns how many.
+fn material_split(tris: &mut [TriData]) -> usize {
+    let m = tris[0].material;
+    tris.sort_by_key(|t| t.material != m);
+    tris.iter().take_while(|t| t.material == m).count()
 }

@@ -6,18 +6,21 @@
 //! host in f64; the image stores f32, with every bounding box rounded outward so it still
 //! contains its shape after rounding.
 //!
-//! Large meshes are split by the DM into sub-clusters of at most [`MESH_LEAF_SIZE`]
-//! triangles (a binned-SAH BVH by default, see [`MeshHierarchy`]), so a ray that touches a
-//! mesh's box only tests the triangles near it. Each node also gets its screen rectangle
-//! (LINKS-1 4.4) for the renderer's Y/X clipping of primary rays.
+//! Large meshes are split by the DM into sub-clusters down to leaves of at most
+//! [`CompileOptions::leaf_size`] triangles (a binned-SAH BVH by default, see
+//! [`MeshHierarchy`]), so a ray that touches a mesh's box only tests the triangles near it.
+//! Each node also gets its screen rectangle (LINKS-1 4.4) for the renderer's Y/X clipping of
+//! primary rays. Vertices, normals and uvs shared by triangles are written once; clusters
+//! with a single child are dropped; boxes go on the image's node grid (see
+//! [`crate::image::layout`]).
 
 use crate::desc::{self, Cluster, Light, Node, SceneDesc, Shape, TransparencyMode};
 use crate::image::layout::{
-    ball, blob_group, boxshape, camera, ellipsoid, light, material, node, normals, rect, texture,
-    triangle, uvs,
+    ball, blob_group, boxshape, camera, corners, ellipsoid, light, material, node, normal, rect,
+    texture, triangle, uv, vertex,
 };
 use crate::image::writer::ImageWriter;
-use crate::image::{Rect, Section, ShapeKind, ShapeRef, MAX_DEPTH_LIMIT, NONE};
+use crate::image::{Leaf, Rect, Section, ShapeKind, MAX_DEPTH_LIMIT, NONE, NONE16};
 use core::fmt;
 use std::string::{String, ToString};
 use std::vec::Vec;
@@ -37,7 +40,10 @@ use transform::*;
 use view::*;
 
 /// Largest number of triangles the DM leaves in one mesh sub-cluster.
-pub const MESH_LEAF_SIZE: usize = 4;
+/// Default triangles per leaf: the smallest that fits photo2 (the paper's Table 5.2 scene)
+/// in 40,000 bytes; smaller leaves trade bytes for speed (`links info --leaf-size`, table in
+/// docs/renderer.md).
+pub const MESH_LEAF_SIZE: usize = 8;
 
 /// Settings that are not part of the scene file.
 #[derive(Clone, Debug, Default)]
@@ -52,14 +58,16 @@ pub struct CompileOptions {
     /// Render without shadows (no shadow rays; lights always reach a lit surface), as the
     /// paper's load-balancing measurements did.
     pub no_shadows: bool,
+    /// Most triangles in one leaf (1..=31; `None`: [`MESH_LEAF_SIZE`]).
+    pub leaf_size: Option<usize>,
 }
 
 /// The hierarchy the DM builds inside each mesh cluster.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum MeshHierarchy {
-    /// LINKS-1's: the mesh is one cluster, every triangle a shape with its own box.
+    /// LINKS-1's: the mesh is one cluster of leaves, in file order.
     Flat,
-    /// Median split on the longest axis down to [`MESH_LEAF_SIZE`] triangles.
+    /// Median split on the longest axis down to leaves of [`CompileOptions::leaf_size`].
     Median,
     /// Binned surface-area-heuristic BVH (beyond the paper).
     #[default]
@@ -144,8 +152,11 @@ struct Dm<'a> {
     w: ImageWriter,
     opts: &'a CompileOptions,
     proj: Projection,
-    /// Screen rectangle per node, in node order.
-    rects: Vec<Rect>,
+    /// The tree as built, written by [`Dm::write_tree`] at the end.
+    nodes: Vec<tree::BuildNode>,
+    shared: mesh::SharedVertices,
+    /// Each triangle's uv indices, written as TriUvs when any triangle has them.
+    tri_uvs: Vec<Option<[u16; 3]>>,
 }
 
 /// Compile a scene for one frame.
@@ -155,7 +166,9 @@ pub fn compile(desc: &SceneDesc, opts: &CompileOptions) -> Result<Compiled, DmEr
         w: ImageWriter::new(),
         opts,
         proj: Projection::default(),
-        rects: Vec::new(),
+        nodes: Vec::new(),
+        shared: mesh::SharedVertices::default(),
+        tri_uvs: Vec::new(),
     };
     dm.run()?;
     let bytes = dm.w.finish();
@@ -191,6 +204,7 @@ impl Dm<'_> {
         let mode = self.opts.transparency.unwrap_or(d.transparency);
 
         let view = self.camera(width, height, max_depth, mode)?;
+        self.check_material_count()?;
 
         self.textures()?;
         // The texel section must keep later sections aligned: the writer pads.
@@ -201,20 +215,13 @@ impl Dm<'_> {
             self.light(l, &view)?;
         }
         self.cluster(&d.root, &view, d.root.name.as_str())?;
-        for r in std::mem::take(&mut self.rects) {
-            self.w
-                .push(Section::Rects)
-                .1
-                .h(rect::X_LO, r.x_lo)
-                .h(rect::X_HI, r.x_hi)
-                .h(rect::Y_LO, r.y_lo)
-                .h(rect::Y_HI, r.y_hi);
+        if self.tri_uvs.iter().any(Option::is_some) {
+            for c in std::mem::take(&mut self.tri_uvs) {
+                let (_, r) = self.w.push(Section::TriUvs);
+                r.hs(corners::I, &c.unwrap_or([NONE16; 3]));
+            }
         }
-        if self.w.count(Section::Nodes) >= (1 << ShapeRef::INDEX_BITS) {
-            return Err(DmError::TooLarge {
-                what: "too many nodes".into(),
-            });
-        }
+        self.write_tree(width, height)?;
         Ok(())
     }
 }

@@ -93,7 +93,7 @@ impl Dm<'_> {
         tri.keep_winding(full);
         tri.drop_flat_normals();
         self.check_triangle(&tri, path)?;
-        Ok(self.triangles(vec![tri]))
+        self.triangles(vec![tri])
     }
     /// A mesh: a cluster of its triangles, one sub-cluster per group when it has several.
     fn mesh(
@@ -108,7 +108,7 @@ impl Dm<'_> {
         let mut tris = self.mesh_triangles(mesh, *smooth, material, full, normal_m, path)?;
         let node = self.open_node();
         let b = if mesh.groups.len() <= 1 {
-            self.triangles(tris)
+            self.triangles(tris)?
         } else {
             // One sub-cluster per group (the model's parts), last group first so the
             // tail of `tris` can be split off; then written in file order.
@@ -124,7 +124,7 @@ impl Dm<'_> {
             let mut b = Bounds::empty();
             for part in parts.into_iter().rev().filter(|p| !p.is_empty()) {
                 let sub = self.open_node();
-                let pb = self.triangles(part);
+                let pb = self.triangles(part)?;
                 self.close_node(sub, pb);
                 b = b.union(pb);
             }
@@ -184,13 +184,7 @@ impl Dm<'_> {
         // Half-extent of a transformed unit sphere along axis i: |row i of L|.
         let half = [0, 1, 2].map(|k| dot(m.a[k], m.a[k]).sqrt());
         let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
-        self.leaf(
-            ShapeRef {
-                kind: ShapeKind::Ellipsoid,
-                index: i,
-            },
-            b,
-        );
+        self.leaf(ShapeKind::Ellipsoid, i, b);
         Ok(b)
     }
     /// A box: the cube [-1, 1]^3 under the shape and cluster transforms.
@@ -217,13 +211,7 @@ impl Dm<'_> {
             .u(boxshape::MATERIAL, material);
         let half = [0, 1, 2].map(|k| m.a[k].iter().map(|v| v.abs()).sum::<f64>());
         let b = Bounds::from_f64(sub(m.t, half), add(m.t, half));
-        self.leaf(
-            ShapeRef {
-                kind: ShapeKind::Box,
-                index: i,
-            },
-            b,
-        );
+        self.leaf(ShapeKind::Box, i, b);
         Ok(b)
     }
     /// A blob group: its balls (a uniform scale only) and the group record.
@@ -291,13 +279,7 @@ impl Dm<'_> {
         } else {
             Bounds::from_f64(sub(lo, pad), add(hi, pad))
         };
-        self.leaf(
-            ShapeRef {
-                kind: ShapeKind::Blob,
-                index: i,
-            },
-            b,
-        );
+        self.leaf(ShapeKind::Blob, i, b);
         Ok(b)
     }
 }

@@ -52,7 +52,7 @@ fn flat_vertex_normals_are_dropped_and_smooth_ones_kept() {
     let v = SceneView::new(&img).unwrap();
     assert_eq!(v.count(Section::Triangles), 2);
     assert_eq!(
-        v.count(Section::Normals),
+        v.count(Section::TriNormals),
         1,
         "the face whose corners all carry the face normal needs none"
     );
@@ -63,7 +63,7 @@ fn flat_vertex_normals_are_dropped_and_smooth_ones_kept() {
         smooth: false,
     })]);
     let img = compile(&s, &CompileOptions::default()).unwrap().bytes;
-    assert_eq!(SceneView::new(&img).unwrap().count(Section::Normals), 2);
+    assert_eq!(SceneView::new(&img).unwrap().count(Section::TriNormals), 2);
 }
 
 #[test]
@@ -153,8 +153,11 @@ fn every_shape_is_reachable_exactly_once_in_every_hierarchy() {
         let v = SceneView::new(&img).unwrap();
         let mut seen = std::collections::HashMap::new();
         for i in 0..v.node_count() {
-            if let Some(r) = v.node::<f64>(i).shape {
-                *seen.entry((r.kind as u8, r.index)).or_insert(0) += 1;
+            if let Some(l) = v.node::<f64>(i).leaf {
+                for k in 0..l.count {
+                    let r = l.shape(k);
+                    *seen.entry((r.kind as u8, r.index)).or_insert(0) += 1;
+                }
             }
             // Subtrees nest: a child's subtree ends no later than its parent's.
             let skip = v.node_skip(i);
@@ -206,11 +209,13 @@ fn mesh_groups_become_sub_clusters() {
     };
     let img = compile(&s, &opts).unwrap().bytes;
     let v = SceneView::new(&img).unwrap();
-    // root, mesh, group a, its triangle, group b, its triangle.
+    // Built: root, mesh, group a, its triangle, group b, its triangle. Clusters with one
+    // child are dropped (the root holds only the mesh, each group one leaf): the mesh
+    // cluster is the root, with one leaf per group.
     let skips: Vec<u32> = (0..v.node_count()).map(|i| v.node_skip(i)).collect();
     let leaves: Vec<bool> = (0..v.node_count()).map(|i| v.node_is_leaf(i)).collect();
-    assert_eq!(skips, [6, 6, 4, 4, 6, 6]);
-    assert_eq!(leaves, [false, false, false, true, false, true]);
+    assert_eq!(skips, [3, 2, 3]);
+    assert_eq!(leaves, [false, true, true]);
 }
 
 #[test]
@@ -264,9 +269,10 @@ fn boxes_contain_their_shapes_after_transforms() {
         }
     };
     for leaf in 0..v.node_count() {
-        let Some(r) = v.node::<f64>(leaf).shape else {
+        let Some(l) = v.node::<f64>(leaf).leaf else {
             continue;
         };
+        let r = l.shape(0);
         let mut pts = Vec::new();
         for a in 0..24 {
             for b in 0..12 {

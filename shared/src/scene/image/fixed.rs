@@ -96,7 +96,7 @@ fn factor(kind: Word, falloff_light: bool, scale: f64, dir_scale: f64) -> Option
     match kind {
         U => None,
         P => Some(1.0),
-        L | Lo | Hi => Some(scale),
+        L | Lo | Hi | G => Some(scale),
         I => Some(1.0 / scale),
         C if falloff_light => Some(scale * scale),
         C => Some(1.0),
@@ -302,6 +302,90 @@ pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
     Ok(out)
 }
 
+/// Put the node boxes on a grid the format holds exactly: per axis the finest power-of-two
+/// step of at least one Q16.16 step (in view units: 2^-16 / scale) on which the root box
+/// fits i16 coordinates; every box is decoded exactly from the f32 grid and rounded outward
+/// onto the new one, so it still contains what it contained.
+fn regrid(out: &mut [u8], view: &SceneView<'_>, scale: f64) -> Result<(), FixedError> {
+    use crate::image::layout::{camera, node};
+    let cam = view
+        .record_range(Section::Camera, 0)
+        .ok_or(FixedError::Image(ImageError::MissingCamera))?;
+    let f32_at = |at: usize| f32_of(view.bytes().get(cam.start + at..).unwrap_or(&[]));
+    let old_origin = [0, 4, 8].map(|k| f32_at(camera::GRID_ORIGIN + k));
+    let old_step = [0, 4, 8].map(|k| f32_at(camera::GRID_STEP + k));
+    let corner = |i: u32, at: usize| -> [f64; 3] {
+        let r = view.record_range(Section::Nodes, i).unwrap_or(0..0);
+        [0, 2, 4].map(|k| {
+            let b = view.bytes().get(r.start + at + k..r.start + at + k + 2);
+            b.map_or(0, |b| i16::from_le_bytes([b[0], b[1]])) as f64
+        })
+    };
+    let (lo_q, hi_q) = (corner(0, node::LO), corner(0, node::HI));
+    let lsb = 1.0 / ((1u64 << FRAC_BITS) as f64 * scale);
+    let mut origin = [0f64; 3];
+    let mut step = [0f64; 3];
+    for k in 0..3 {
+        let lo = old_origin[k] + lo_q[k] * old_step[k];
+        let hi = old_origin[k] + hi_q[k] * old_step[k];
+        let mut s = lsb.max(old_step[k]);
+        loop {
+            let o = (0.5 * (lo + hi) / s).round() * s;
+            if lo > hi || ((lo - o) / s >= i16::MIN as f64 && (hi - o) / s <= i16::MAX as f64) {
+                origin[k] = if lo > hi { 0.0 } else { o };
+                step[k] = s;
+                break;
+            }
+            s *= 2.0;
+            if !s.is_finite() {
+                return Err(FixedError::NoExtent);
+            }
+        }
+    }
+    for i in 0..view.count(Section::Nodes) {
+        let (lq, hq) = (corner(i, node::LO), corner(i, node::HI));
+        let Some(r) = view.record_range(Section::Nodes, i) else {
+            continue;
+        };
+        for k in 0..3 {
+            let (lo, hi) = if lq[k] > hq[k] {
+                (i16::MAX, i16::MIN)
+            } else {
+                let v = |q: f64| old_origin[k] + q * old_step[k];
+                let t = |x: f64| (x - origin[k]) / step[k];
+                let c = |x: f64| x.clamp(i16::MIN as f64, i16::MAX as f64) as i16;
+                (c(t(v(lq[k])).floor()), c(t(v(hq[k])).ceil()))
+            };
+            for (at, q) in [(node::LO + 2 * k, lo), (node::HI + 2 * k, hi)] {
+                if let Some(b) = out.get_mut(r.start + at..r.start + at + 2) {
+                    b.copy_from_slice(&q.to_le_bytes());
+                }
+            }
+        }
+    }
+    let one = (1u64 << FRAC_BITS) as f64;
+    for k in 0..3 {
+        for (at, v) in [
+            (camera::GRID_ORIGIN + 4 * k, origin[k]),
+            (camera::GRID_STEP + 4 * k, step[k]),
+        ] {
+            let raw = v * scale * one;
+            if raw.abs() > (i32::MAX - 1) as f64 {
+                return Err(FixedError::OutOfRange {
+                    section: Section::Camera,
+                    record: 0,
+                    word: (at / 4) as u32,
+                    value: v * scale,
+                });
+            }
+            if let Some(b) = out.get_mut(cam.start + at..cam.start + at + 4) {
+                b.copy_from_slice(&(raw as i32).to_le_bytes());
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A point light whose colour falls off with distance squared.
 fn is_falloff_light(
     image: &[u8],
@@ -332,6 +416,7 @@ fn convert(
     }
     let one = (1u64 << FRAC_BITS) as f64;
     let mut min_detail = f64::INFINITY;
+    let mut regrid_needed = false;
     for (s, r, range, words) in records(view) {
         let falloff_light = is_falloff_light(image, s, range.clone())?;
         // The f32 words of the record, read before they are rewritten.
@@ -351,6 +436,11 @@ fn convert(
                 Hi => steps.ceil(),
                 _ => steps.round(),
             };
+            // The node grid's step must stay exact (then so does every grid point); a step
+            // below the format's resolution is replaced below by a coarser grid.
+            if *kind == G && (raw != steps || raw < 1.0) {
+                regrid_needed = true;
+            }
             if !raw.is_finite() || raw.abs() > (i32::MAX - 1) as f64 {
                 return Err(FixedError::OutOfRange {
                     section: s,
@@ -387,6 +477,9 @@ fn convert(
                 });
             }
         }
+    }
+    if regrid_needed {
+        regrid(&mut out, view, scale)?;
     }
     // Only a valid image leaves the DM.
     SceneView::new(&out).map_err(FixedError::Rewritten)?;

@@ -2,30 +2,49 @@
 //! record's fields. The view reads through these offsets, the writer writes through them and
 //! the Q16.16 rewrite converts each word by the [`Word`] kind given here.
 //!
-//! ## Header (version 3, all little-endian, every section 4-byte aligned)
+//! ## Header (version 4, all little-endian, every section 4-byte aligned)
 //! ```text
 //! offset size
 //!  0     4    magic "LNK1"
-//!  4     2    version (3)
+//!  4     2    version (4)
 //!  6     1    number format of stored scalars ([`Storage`]: 0 = f32, 1 = Q16.16)
 //!  7     1    scale exponent k (i8; 0 for f32): stored lengths are view lengths * 2^k
 //!  8     4    total length in bytes
 //! 12     4    reserved (0)
-//! 16   8*14   section table: (offset u32, record count u32) for each [`Section`]
-//! 128   ...   sections, in table order
+//! 16   8*17   section table: (offset u32, record count u32) for each [`Section`]
+//! 152   ...   sections, in table order
 //! ```
 //! ## Records
 //! Each record has a module below (one per [`Section`]) with the byte offset of each field
-//! within the record, its `SIZE` and its `WORDS` (the kind of each 4-byte word). `f` = stored
-//! scalar (f32 or Q16.16), `u` = u32; `[3]` marks consecutive words (a vector). Indices that
-//! may be absent hold [`NONE`].
+//! within the record, its `SIZE` and, for records holding stored scalars, its `WORDS` (the
+//! kind of each 4-byte word). `f` = stored scalar (f32 or Q16.16), `u` = u32, `h` = u16,
+//! `b` = u8; `[3]` marks consecutive fields (a vector). Indices that may be absent hold
+//! [`NONE`] (u32) or [`NONE16`] (u16).
+//!
+//! ## What makes it compact
+//! - Meshes are indexed: a vertex position or normal shared by many triangles is stored
+//!   once, and a triangle is three u16 vertex indices plus one u16 index of its normal
+//!   triple ([`NONE16`] for a flat triangle, which needs none). Normals are three i16.
+//! - A leaf of the tree holds a range of up to [`node::MAX_LEAF`] primitives of one kind;
+//!   no node has a single child.
+//! - Node boxes are i16 grid coordinates on a power-of-two grid over the root box
+//!   ([`camera::GRID_ORIGIN`], [`camera::GRID_STEP`]), rounded outward: `origin + q * step`
+//!   is exact in f32, f64 and Q16.16 alike, so every backend decodes the same box and no
+//!   hit is lost.
+//! - Screen rectangles are u8 in units of 2^[`camera::RECT_SHIFT`] pixels, rounded outward.
+//! - A texture of at most 256 colours stores a palette and one byte per texel.
+//!
+//! Indices are u16, so an image holds at most 65,535 records of a kind: a node bank
+//! (at most [`crate::wire::MAX_SCENE`] bytes) could never hold that many vertices anyway.
 //!
 //! [`Storage`]: crate::num::Storage
 
 pub const MAGIC: [u8; 4] = *b"LNK1";
-pub const VERSION: u16 = 3;
+pub const VERSION: u16 = 4;
 /// "No index" marker.
 pub const NONE: u32 = u32::MAX;
+/// "No index" marker of a u16 index.
+pub const NONE16: u16 = u16::MAX;
 pub const HEADER_SIZE: usize = TABLE_AT + TABLE_ENTRY_SIZE * SECTION_COUNT;
 /// Deepest recursion an image may ask for (each level is a call-stack frame on a node).
 pub const MAX_DEPTH_LIMIT: u32 = 16;
@@ -49,8 +68,11 @@ pub enum Section {
     Textures,
     Texels,
     Nodes,
-    Triangles,
+    Vertices,
     Normals,
+    Triangles,
+    TriNormals,
+    TriUvs,
     Uvs,
     Ellipsoids,
     Boxes,
@@ -58,7 +80,7 @@ pub enum Section {
     Balls,
     Rects,
 }
-pub const SECTION_COUNT: usize = 14;
+pub const SECTION_COUNT: usize = 17;
 
 impl Section {
     pub const ALL: [Section; SECTION_COUNT] = [
@@ -68,8 +90,11 @@ impl Section {
         Section::Textures,
         Section::Texels,
         Section::Nodes,
-        Section::Triangles,
+        Section::Vertices,
         Section::Normals,
+        Section::Triangles,
+        Section::TriNormals,
+        Section::TriUvs,
         Section::Uvs,
         Section::Ellipsoids,
         Section::Boxes,
@@ -86,9 +111,11 @@ impl Section {
             Section::Textures => texture::SIZE,
             Section::Texels => 1,
             Section::Nodes => node::SIZE,
+            Section::Vertices => vertex::SIZE,
+            Section::Normals => normal::SIZE,
             Section::Triangles => triangle::SIZE,
-            Section::Normals => normals::SIZE,
-            Section::Uvs => uvs::SIZE,
+            Section::TriNormals | Section::TriUvs => corners::SIZE,
+            Section::Uvs => uv::SIZE,
             Section::Ellipsoids => ellipsoid::SIZE,
             Section::Boxes => boxshape::SIZE,
             Section::BlobGroups => blob_group::SIZE,
@@ -96,23 +123,27 @@ impl Section {
             Section::Rects => rect::SIZE,
         }
     }
-    /// The kind of each 4-byte word of a record (`None` for raw bytes: texels).
+    /// The kind of each 4-byte word of a record holding stored scalars (`None` for records
+    /// of integers and raw bytes: texels, nodes, normals, triangles, corners, rectangles).
     pub const fn words(self) -> Option<&'static [Word]> {
         Some(match self {
             Section::Camera => &camera::WORDS,
             Section::Materials => &material::WORDS,
             Section::Lights => &light::WORDS,
             Section::Textures => &texture::WORDS,
-            Section::Texels => return None,
-            Section::Nodes => &node::WORDS,
-            Section::Triangles => &triangle::WORDS,
-            Section::Normals => &normals::WORDS,
-            Section::Uvs => &uvs::WORDS,
+            Section::Vertices => &vertex::WORDS,
+            Section::Uvs => &uv::WORDS,
             Section::Ellipsoids => &ellipsoid::WORDS,
             Section::Boxes => &boxshape::WORDS,
             Section::BlobGroups => &blob_group::WORDS,
             Section::Balls => &ball::WORDS,
-            Section::Rects => &rect::WORDS,
+            Section::Texels
+            | Section::Nodes
+            | Section::Normals
+            | Section::Triangles
+            | Section::TriNormals
+            | Section::TriUvs
+            | Section::Rects => return None,
         })
     }
     pub const fn name(self) -> &'static str {
@@ -123,8 +154,11 @@ impl Section {
             Section::Textures => "textures",
             Section::Texels => "texels",
             Section::Nodes => "nodes",
-            Section::Triangles => "triangles",
+            Section::Vertices => "vertices",
             Section::Normals => "normals",
+            Section::Triangles => "triangles",
+            Section::TriNormals => "triangle normals",
+            Section::TriUvs => "triangle uvs",
             Section::Uvs => "uvs",
             Section::Ellipsoids => "ellipsoids",
             Section::Boxes => "boxes",
@@ -154,6 +188,8 @@ pub enum Word {
     C,
     /// A component of the primary directions (x0, y0, dx, dy, dz).
     D,
+    /// The node grid's step: a power-of-two length that must stay exact.
+    G,
 }
 
 /// The camera: screen and global settings (record 0 of [`Section::Camera`]).
@@ -177,10 +213,20 @@ pub mod camera {
     /// dz f: the z of every primary direction (1 in f32 images; the fixed-point rewrite
     /// scales x0, y0, dx, dy and dz by one power of two so a pixel step keeps its precision).
     pub const DZ: usize = 56;
-    pub const SIZE: usize = 4 * 15;
+    /// grid origin f[3], grid step f[3] (powers of two; origin a multiple of step): node
+    /// box corner q (i16) lies at origin + q * step on each axis.
+    pub const GRID_ORIGIN: usize = 60;
+    pub const GRID_STEP: usize = 72;
+    /// rect shift u: screen rectangles are stored in units of 2^shift pixels (0..=8).
+    pub const RECT_SHIFT: usize = 84;
+    pub const SIZE: usize = 4 * 22;
     pub const NON_REFRACTIVE: u32 = 1;
     pub const NO_SHADOWS: u32 = 2;
-    pub const WORDS: [Word; SIZE / 4] = [U, U, D, D, D, D, P, P, P, P, P, P, U, U, D];
+    pub const MAX_RECT_SHIFT: u32 = 8;
+    #[rustfmt::skip]
+    pub const WORDS: [Word; SIZE / 4] = [
+        U, U, D, D, D, D, P, P, P, P, P, P, U, U, D, Lo, Lo, Lo, G, G, G, U,
+    ];
 }
 
 /// A material.
@@ -222,64 +268,83 @@ pub mod light {
     pub const WORDS: [Word; SIZE / 4] = [U, C, C, C, L, L, L, P, P, P, P, P, P, U];
 }
 
-/// A texture's header; its texels are RGB8 rows in [`super::Section::Texels`].
+/// A texture's header; its texels are rows in [`super::Section::Texels`]: RGB8, or (with a
+/// palette) the palette's RGB8 colours followed by one palette index per texel.
 pub mod texture {
     use super::Word::{self, *};
-    /// width u, height u, texel offset u (byte offset into the texel section).
+    /// width u, height u, texel offset u (byte offset into the texel section), palette u
+    /// (number of palette colours, 1..=256; 0 = RGB8 texels).
     pub const WIDTH: usize = 0;
     pub const HEIGHT: usize = 4;
     pub const TEXELS: usize = 8;
-    pub const SIZE: usize = 4 * 3;
-    pub const WORDS: [Word; SIZE / 4] = [U, U, U];
+    pub const PALETTE: usize = 12;
+    pub const SIZE: usize = 4 * 4;
+    pub const MAX_PALETTE: u32 = 256;
+    pub const WORDS: [Word; SIZE / 4] = [U, U, U, U];
 }
 
-/// A node of the flat tree: a cluster (its subtree follows it) or a leaf holding one shape.
+/// A node of the flat tree: a cluster (its subtree follows it) or a leaf holding a range of
+/// primitives of one kind.
 pub mod node {
-    use super::Word::{self, *};
-    /// aabb min f[3], max f[3].
-    pub const MIN: usize = 0;
-    pub const MAX: usize = 12;
-    /// skip u: the index of the first node after this node's subtree.
-    pub const SKIP: usize = 24;
-    /// shape u: [`super::NONE`] for a cluster, else a [`super::ShapeRef`] (kind in the top
-    /// 4 bits, index below).
-    pub const SHAPE: usize = 28;
-    pub const SIZE: usize = 4 * 8;
-    pub const WORDS: [Word; SIZE / 4] = [Lo, Lo, Lo, Hi, Hi, Hi, U, U];
+    /// box lo h[3], hi h[3]: i16 grid coordinates (see [`super::camera::GRID_ORIGIN`]).
+    pub const LO: usize = 0;
+    pub const HI: usize = 6;
+    /// index h: a cluster's skip (the first node after its subtree); a leaf's first
+    /// primitive (a record of the section of its kind).
+    pub const INDEX: usize = 12;
+    /// info b: 0 for a cluster; for a leaf (1 + [`super::ShapeKind`]) << 5 | count (1..=31).
+    pub const INFO: usize = 14;
+    /// material b: the material of a triangle leaf's triangles (0 for other nodes).
+    pub const MATERIAL: usize = 15;
+    pub const SIZE: usize = 16;
+    pub const MAX_LEAF: u32 = 31;
+    pub const KIND_SHIFT: u32 = 5;
+    pub const COUNT_MASK: u8 = 31;
 }
 
-/// A triangle.
-pub mod triangle {
+/// A mesh vertex position (view coordinates).
+pub mod vertex {
     use super::Word::{self, *};
-    /// p0 f[3], p1 f[3], p2 f[3] (the vertices, [`VERTEX_STRIDE`] apart).
+    /// p f[3].
     pub const P: usize = 0;
-    pub const VERTEX_STRIDE: usize = 12;
-    /// material u, normals u (record in Normals or NONE), uvs u (record in Uvs or NONE).
-    pub const MATERIAL: usize = 36;
-    pub const NORMALS: usize = 40;
-    pub const UVS: usize = 44;
-    pub const SIZE: usize = 4 * 12;
-    pub const WORDS: [Word; SIZE / 4] = [L, L, L, L, L, L, L, L, L, U, U, U];
+    pub const SIZE: usize = 12;
+    pub const WORDS: [Word; SIZE / 4] = [L, L, L];
 }
 
-/// A triangle's vertex normals.
-pub mod normals {
-    use super::Word::{self, *};
-    /// n0 f[3], n1 f[3], n2 f[3] (unit, view coordinates), [`STRIDE`] apart.
+/// A unit vertex normal (view coordinates), compressed: each component an i16, the unit
+/// vector times [`SCALE`] rounded (an angle error below 0.003 degrees; the tracer normalises
+/// the interpolated normal, so the common scale drops out).
+pub mod normal {
+    /// n h[3] (i16).
     pub const N: usize = 0;
-    pub const STRIDE: usize = 12;
-    pub const SIZE: usize = 4 * 9;
-    pub const WORDS: [Word; SIZE / 4] = [P; SIZE / 4];
+    pub const SIZE: usize = 6;
+    pub const SCALE: f64 = 32767.0;
 }
 
-/// A triangle's vertex texture coordinates.
-pub mod uvs {
+/// A triangle: its vertices, and its normals when it is not flat (its material is its
+/// leaf's).
+pub mod triangle {
+    /// v h[3] (records of Vertices), normals h (record of TriNormals or [`super::NONE16`]).
+    pub const V: usize = 0;
+    pub const NORMALS: usize = 6;
+    pub const SIZE: usize = 8;
+}
+
+/// Three u16 indices, one per corner of a triangle: a TriNormals record indexes Normals; a
+/// TriUvs record (parallel to Triangles, [`super::NONE16`] for a triangle without uvs)
+/// indexes Uvs.
+pub mod corners {
+    pub const I: usize = 0;
+    pub const SIZE: usize = 6;
+}
+
+/// A texture coordinate pair.
+pub mod uv {
     use super::Word::{self, *};
-    /// uv0 f[2], uv1 f[2], uv2 f[2], [`STRIDE`] apart.
+    /// uv f[2].
     pub const UV: usize = 0;
-    pub const STRIDE: usize = 8;
-    pub const SIZE: usize = 4 * 6;
-    pub const WORDS: [Word; SIZE / 4] = [P; SIZE / 4];
+    pub const SIZE: usize = 8;
+    pub const WORDS: [Word; SIZE / 4] = [P, P];
 }
 
 /// An ellipsoid: the unit sphere under an affine map, optionally cut by a plane.
@@ -344,18 +409,17 @@ pub mod ball {
     pub const WORDS: [Word; SIZE / 4] = [L, L, L, L, P];
 }
 
-/// Screen rectangle of a node (LINKS-1 4.4), parallel to the node list: inclusive pixel
-/// ranges, empty when lo > hi. The primary ray of pixel (x, y) can only hit shapes below a
-/// node if the node's rectangle contains (x, y).
+/// Screen rectangle of a node (LINKS-1 4.4), parallel to the node list: inclusive ranges in
+/// units of 2^shift pixels ([`super::camera::RECT_SHIFT`]), rounded outward; empty when
+/// lo > hi. The primary ray of pixel (x, y) can only hit shapes below a node if the node's
+/// rectangle contains (x, y).
 pub mod rect {
-    use super::Word::{self, *};
-    /// x_lo u16, x_hi u16, y_lo u16, y_hi u16.
+    /// x_lo b, x_hi b, y_lo b, y_hi b.
     pub const X_LO: usize = 0;
-    pub const X_HI: usize = 2;
-    pub const Y_LO: usize = 4;
-    pub const Y_HI: usize = 6;
-    pub const SIZE: usize = 8;
-    pub const WORDS: [Word; SIZE / 4] = [U, U];
+    pub const X_HI: usize = 1;
+    pub const Y_LO: usize = 2;
+    pub const Y_HI: usize = 3;
+    pub const SIZE: usize = 4;
 }
 
 pub const CAMERA_SIZE: usize = camera::SIZE;
@@ -363,9 +427,11 @@ pub const MATERIAL_SIZE: usize = material::SIZE;
 pub const LIGHT_SIZE: usize = light::SIZE;
 pub const TEXTURE_SIZE: usize = texture::SIZE;
 pub const NODE_SIZE: usize = node::SIZE;
+pub const VERTEX_SIZE: usize = vertex::SIZE;
+pub const NORMAL_SIZE: usize = normal::SIZE;
 pub const TRIANGLE_SIZE: usize = triangle::SIZE;
-pub const NORMALS_SIZE: usize = normals::SIZE;
-pub const UVS_SIZE: usize = uvs::SIZE;
+pub const CORNERS_SIZE: usize = corners::SIZE;
+pub const UV_SIZE: usize = uv::SIZE;
 pub const ELLIPSOID_SIZE: usize = ellipsoid::SIZE;
 pub const BOX_SIZE: usize = boxshape::SIZE;
 pub const BLOB_GROUP_SIZE: usize = blob_group::SIZE;
@@ -416,13 +482,34 @@ impl Rect {
     }
 }
 
-/// Shape kinds as stored in a node's shape word.
+/// Shape kinds, as a leaf stores them (see [`node::INFO`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ShapeKind {
     Triangle = 0,
     Ellipsoid = 1,
     Box = 2,
     Blob = 3,
+}
+
+impl ShapeKind {
+    pub const fn from_u8(k: u8) -> Option<Self> {
+        Some(match k {
+            0 => ShapeKind::Triangle,
+            1 => ShapeKind::Ellipsoid,
+            2 => ShapeKind::Box,
+            3 => ShapeKind::Blob,
+            _ => return None,
+        })
+    }
+    /// The section holding this kind's records.
+    pub const fn section(self) -> Section {
+        match self {
+            ShapeKind::Triangle => Section::Triangles,
+            ShapeKind::Ellipsoid => Section::Ellipsoids,
+            ShapeKind::Box => Section::Boxes,
+            ShapeKind::Blob => Section::BlobGroups,
+        }
+    }
 }
 
 /// A reference to one shape: kind and index into that kind's section.
@@ -432,22 +519,44 @@ pub struct ShapeRef {
     pub index: u32,
 }
 
-impl ShapeRef {
-    pub const INDEX_BITS: u32 = 28;
-    pub fn encode(self) -> u32 {
-        ((self.kind as u32) << Self::INDEX_BITS) | self.index
+/// A leaf's range of primitives: `count` records of `kind` from `first`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Leaf {
+    pub kind: ShapeKind,
+    pub first: u32,
+    pub count: u32,
+    /// The triangles' material (triangle leaves; 0 otherwise).
+    pub material: u32,
+}
+
+impl Leaf {
+    /// The info byte of [`node::INFO`].
+    pub const fn info(&self) -> u8 {
+        ((self.kind as u8 + 1) << node::KIND_SHIFT) | self.count as u8
     }
-    pub fn decode(w: u32) -> Option<Self> {
-        let kind = match w >> Self::INDEX_BITS {
-            0 => ShapeKind::Triangle,
-            1 => ShapeKind::Ellipsoid,
-            2 => ShapeKind::Box,
-            3 => ShapeKind::Blob,
-            _ => return None,
-        };
-        Some(Self {
-            kind,
-            index: w & ((1 << Self::INDEX_BITS) - 1),
-        })
+    /// The leaf an info byte describes (`None` for a cluster or an unknown kind).
+    #[inline]
+    pub const fn decode(info: u8, first: u16, material: u8) -> Option<Self> {
+        let kind = info >> node::KIND_SHIFT;
+        if kind == 0 {
+            return None;
+        }
+        match ShapeKind::from_u8(kind - 1) {
+            Some(kind) => Some(Leaf {
+                kind,
+                first: first as u32,
+                count: (info & node::COUNT_MASK) as u32,
+                material: material as u32,
+            }),
+            None => None,
+        }
+    }
+    /// The `k`-th shape of the range.
+    #[inline]
+    pub const fn shape(&self, k: u32) -> ShapeRef {
+        ShapeRef {
+            kind: self.kind,
+            index: self.first + k,
+        }
     }
 }

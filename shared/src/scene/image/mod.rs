@@ -185,21 +185,52 @@ pub struct Light<T> {
 pub struct TextureView<'a> {
     pub width: u32,
     pub height: u32,
-    pub rgb: &'a [u8],
+    /// RGB8 rows, or with a palette one index per texel.
+    pub texels: &'a [u8],
+    /// The palette's RGB8 colours (empty for RGB8 texels).
+    pub palette: &'a [u8],
+}
+
+impl TextureView<'_> {
+    /// Texel (x, y) as RGB8 (inside the texture: x < width, y < height; black outside).
+    #[inline]
+    pub fn texel(&self, x: u32, y: u32) -> [u8; 3] {
+        let i = (y as usize)
+            .saturating_mul(self.width as usize)
+            .saturating_add(x as usize);
+        let at = if self.palette.is_empty() {
+            Some(i.saturating_mul(3))
+        } else {
+            self.texels.get(i).map(|&p| p as usize * 3)
+        };
+        let src = if self.palette.is_empty() {
+            self.texels
+        } else {
+            self.palette
+        };
+        match at
+            .and_then(|a| src.get(a..))
+            .and_then(|r| r.first_chunk::<3>())
+        {
+            Some(c) => *c,
+            None => [0; 3],
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
 pub struct Node<T> {
     pub bounds: Aabb<T>,
     pub skip: u32,
-    pub shape: Option<ShapeRef>,
+    pub leaf: Option<Leaf>,
 }
 
 #[derive(Clone, Copy, Debug)]
 pub struct TriangleRec<T> {
     pub tri: Triangle<T>,
-    pub material: u32,
+    /// Record of TriNormals, or [`NONE`] for a flat triangle.
     pub normals: u32,
+    /// Record of TriUvs (the triangle's own), or [`NONE`] when the image has no uvs.
     pub uvs: u32,
 }
 

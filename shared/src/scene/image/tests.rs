@@ -110,13 +110,16 @@ fn records_out_of_range_read_as_zeros_not_other_bytes() {
     let e = v.ellipsoid::<f32>(0);
     assert_eq!(e.material, 0);
     assert_eq!(e.shape.center, Vec3::zero());
-    assert_eq!(v.triangle::<f32>(u32::MAX).material, 0);
+    // A triangle that is not there reads as a zero record: vertex 0 three times.
+    let t = v.triangle::<f32>(u32::MAX).tri.p;
+    assert_eq!(t, [v.triangle::<f32>(0).tri.p[0]; 3]);
     // No textures: one black texel, not an empty one (sampling divides by its size).
     let t = v.texture(0);
-    assert_eq!((t.width, t.height, t.rgb), (1, 1, &[0u8, 0, 0][..]));
+    assert_eq!((t.width, t.height, t.texels), (1, 1, &[0u8, 0, 0][..]));
+    assert_eq!(t.texel(0, 0), [0, 0, 0]);
     assert_eq!(v.record_range(Section::Ellipsoids, 0), None);
     assert_eq!(
         v.record_range(Section::Camera, 0),
-        Some(128..128 + CAMERA_SIZE)
+        Some(HEADER_SIZE..HEADER_SIZE + CAMERA_SIZE)
     );
 }

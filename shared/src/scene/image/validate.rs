@@ -3,7 +3,7 @@
 //! of range and a walk of the node tree always ends.
 
 use super::layout::*;
-use super::view::{rd_u32, texel_range, Sections};
+use super::view::{rd_u32, texel_range, Grid, Sections};
 use super::{ImageError, SceneView};
 use crate::num::Storage;
 
@@ -19,6 +19,7 @@ impl<'a> SceneView<'a> {
         let view = Self {
             bytes,
             table,
+            grid: read_grid(sections[Section::Camera as usize]),
             sections: Sections(sections),
             storage,
         };
@@ -90,6 +91,18 @@ fn check_table(bytes: &[u8]) -> Result<Table<'_>, ImageError> {
     Ok((table, sections))
 }
 
+/// The node grid and rectangle unit from the camera record (zeros without one; the camera
+/// check then fails).
+fn read_grid(camera_bytes: &[u8]) -> Grid {
+    use camera::*;
+    let w = |at: usize| rd_u32(camera_bytes, at);
+    Grid {
+        origin: [0, 4, 8].map(|k| w(GRID_ORIGIN + k)),
+        step: [0, 4, 8].map(|k| w(GRID_STEP + k)),
+        rect_shift: w(RECT_SHIFT),
+    }
+}
+
 /// A record that refers to something that is not there.
 fn bad(s: Section, i: u32) -> ImageError {
     ImageError::BadReference {
@@ -131,6 +144,7 @@ impl SceneView<'_> {
         if camera.max_depth > MAX_DEPTH_LIMIT
             || !side.contains(&camera.width)
             || !side.contains(&camera.height)
+            || self.grid.rect_shift > camera::MAX_RECT_SHIFT
         {
             return Err(bad_value(Section::Camera, 0));
         }
@@ -165,6 +179,7 @@ impl SceneView<'_> {
                 r.u(texture::WIDTH),
                 r.u(texture::HEIGHT),
                 r.u(texture::TEXELS),
+                r.u(texture::PALETTE),
             ) {
                 Some((_, end)) if end <= ntexels => {}
                 _ => return Err(bad(Section::Textures, i)),
@@ -180,24 +195,25 @@ impl SceneView<'_> {
         if nnodes == 0 || self.node_skip(0) != nnodes {
             return Err(bad(Section::Nodes, 0));
         }
+        let nmat = self.count(Section::Materials);
         for i in 0..nnodes {
-            let at = self.rec(Section::Nodes, i);
-            let skip = self.u(at + node::SKIP);
-            let shape = self.u(at + node::SHAPE);
-            if skip <= i || skip > nnodes {
-                return Err(bad(Section::Nodes, i));
-            }
-            if shape != NONE {
-                let r = ShapeRef::decode(shape).ok_or(bad(Section::Nodes, i))?;
-                let n = match r.kind {
-                    ShapeKind::Triangle => self.count(Section::Triangles),
-                    ShapeKind::Ellipsoid => self.count(Section::Ellipsoids),
-                    ShapeKind::Box => self.count(Section::Boxes),
-                    ShapeKind::Blob => self.count(Section::BlobGroups),
-                };
-                if r.index >= n || skip != i + 1 {
+            let r = self.record::<NODE_SIZE>(Section::Nodes, i);
+            let info = r.0[node::INFO];
+            if info == 0 {
+                let skip = r.h(node::INDEX) as u32;
+                if skip <= i || skip > nnodes {
                     return Err(bad(Section::Nodes, i));
                 }
+                continue;
+            }
+            let leaf = Leaf::decode(info, r.h(node::INDEX), r.0[node::MATERIAL])
+                .ok_or(bad(Section::Nodes, i))?;
+            let triangle_material_ok = leaf.kind != ShapeKind::Triangle || leaf.material < nmat;
+            if leaf.count == 0
+                || leaf.first + leaf.count > self.count(leaf.kind.section())
+                || !triangle_material_ok
+            {
+                return Err(bad(Section::Nodes, i));
             }
         }
         Ok(())
@@ -231,16 +247,25 @@ impl SceneView<'_> {
             return Err(bad(Section::Rects, nrects));
         }
         let nmat = self.count(Section::Materials);
-        let (nn, nuv) = (self.count(Section::Normals), self.count(Section::Uvs));
-        for i in 0..self.count(Section::Triangles) {
-            let at = self.rec(Section::Triangles, i);
-            let m = self.u(at + triangle::MATERIAL);
-            let n = self.u(at + triangle::NORMALS);
-            let uv = self.u(at + triangle::UVS);
-            if m >= nmat || (n != NONE && n >= nn) || (uv != NONE && uv >= nuv) {
+        let (ntri, nverts) = (
+            self.count(Section::Triangles),
+            self.count(Section::Vertices),
+        );
+        let ntn = self.count(Section::TriNormals);
+        for i in 0..ntri {
+            let r = self.record::<TRIANGLE_SIZE>(Section::Triangles, i);
+            let v = [0, 2, 4].map(|k| r.h(triangle::V + k) as u32);
+            let n = r.h(triangle::NORMALS);
+            if v.iter().any(|&v| v >= nverts) || (n != NONE16 && n as u32 >= ntn) {
                 return Err(bad(Section::Triangles, i));
             }
         }
+        self.check_corners(Section::TriNormals, Section::Normals, false)?;
+        let ntu = self.count(Section::TriUvs);
+        if ntu != 0 && ntu != ntri {
+            return Err(bad(Section::TriUvs, ntu));
+        }
+        self.check_corners(Section::TriUvs, Section::Uvs, true)?;
         for i in 0..self.count(Section::Ellipsoids) {
             if self.u(self.rec(Section::Ellipsoids, i) + ellipsoid::MATERIAL) >= nmat {
                 return Err(bad(Section::Ellipsoids, i));
@@ -261,6 +286,26 @@ impl SceneView<'_> {
             let end = first.checked_add(count);
             if m >= nmat || k > 1 || count == 0 || end.is_none_or(|e| e > nballs) {
                 return Err(bad(Section::BlobGroups, i));
+            }
+        }
+        Ok(())
+    }
+
+    /// Every index of a corners section names a record of `target` (or is [`NONE16`] on
+    /// all three corners, where `absent_ok`).
+    fn check_corners(
+        &self,
+        s: Section,
+        target: Section,
+        absent_ok: bool,
+    ) -> Result<(), ImageError> {
+        let n = self.count(target);
+        for i in 0..self.count(s) {
+            let r = self.record::<CORNERS_SIZE>(s, i);
+            let c = [0, 2, 4].map(|k| r.h(corners::I + k));
+            let absent = absent_ok && c == [NONE16; 3];
+            if !absent && c.iter().any(|&k| k as u32 >= n) {
+                return Err(bad(s, i));
             }
         }
         Ok(())

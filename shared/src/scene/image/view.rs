@@ -21,6 +21,16 @@ pub struct SceneView<'a> {
     /// `i` is one compare of `i` against the count.
     pub(super) sections: Sections<'a>,
     pub(super) storage: Storage,
+    /// The node grid's origin and step per axis, as stored (read once from the camera).
+    pub(super) grid: Grid,
+}
+
+/// The node grid (see [`camera::GRID_ORIGIN`]) and the rectangles' unit, as stored.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Grid {
+    pub(super) origin: [u32; 3],
+    pub(super) step: [u32; 3],
+    pub(super) rect_shift: u32,
 }
 
 #[derive(Clone, Copy)]
@@ -45,13 +55,19 @@ pub(super) fn rd_u32(b: &[u8], at: usize) -> u32 {
 }
 
 /// The texel bytes `start..end` (within the texel section) of a `w` x `h` texture at
-/// offset `off`: `None` for an empty texture or when any step of `off + w * h * 3` leaves
-/// u32 (so a 32-bit usize holds every bound and `w`, `h` < 2^31).
-pub(super) fn texel_range(w: u32, h: u32, off: u32) -> Option<(u32, u32)> {
-    if w == 0 || h == 0 {
+/// offset `off` with `palette` colours (0: RGB8 texels): `None` for an empty texture, a
+/// palette over [`texture::MAX_PALETTE`] colours, or when any step of the size leaves u32
+/// (so a 32-bit usize holds every bound and `w`, `h` < 2^31).
+pub(super) fn texel_range(w: u32, h: u32, off: u32, palette: u32) -> Option<(u32, u32)> {
+    if w == 0 || h == 0 || palette > texture::MAX_PALETTE {
         return None;
     }
-    let end = w.checked_mul(h)?.checked_mul(3)?.checked_add(off)?;
+    let per_texel = if palette == 0 { 3 } else { 1 };
+    let end = w
+        .checked_mul(h)?
+        .checked_mul(per_texel)?
+        .checked_add(palette * 3)?
+        .checked_add(off)?;
     Some((off, end))
 }
 
@@ -69,6 +85,11 @@ impl<const N: usize> Record<'_, N> {
     pub(super) fn u(&self, o: usize) -> u32 {
         let r = &self.0;
         u32::from_le_bytes([r[o], r[o + 1], r[o + 2], r[o + 3]])
+    }
+    #[inline(always)]
+    pub(super) fn h(&self, o: usize) -> u16 {
+        let r = &self.0;
+        u16::from_le_bytes([r[o], r[o + 1]])
     }
     #[inline(always)]
     fn f<T: Real>(&self, o: usize) -> T {
@@ -249,25 +270,34 @@ impl<'a> SceneView<'a> {
         }
     }
 
-    /// Texture `i`: its size and exactly its `width * height * 3` texel bytes. A texture
-    /// a validated image does not hold (never the case for indices from its records) reads
-    /// as one black texel.
+    /// Texture `i`: its size, exactly its texel bytes and its palette. A texture a
+    /// validated image does not hold (never the case for indices from its records) reads as
+    /// one black texel.
     pub fn texture(&self, i: u32) -> TextureView<'a> {
         let r = self.record::<TEXTURE_SIZE>(Section::Textures, i);
-        let (w, h) = (r.u(texture::WIDTH), r.u(texture::HEIGHT));
+        let (w, h, p) = (
+            r.u(texture::WIDTH),
+            r.u(texture::HEIGHT),
+            r.u(texture::PALETTE),
+        );
         let texels = self.sections.0[Section::Texels as usize];
-        let rgb = texel_range(w, h, r.u(texture::TEXELS))
+        let bytes = texel_range(w, h, r.u(texture::TEXELS), p)
             .and_then(|(start, end)| texels.get(start as usize..end as usize));
-        match rgb {
-            Some(rgb) => TextureView {
-                width: w,
-                height: h,
-                rgb,
-            },
+        match bytes {
+            Some(b) => {
+                let (palette, texels) = b.split_at((p * 3) as usize);
+                TextureView {
+                    width: w,
+                    height: h,
+                    texels,
+                    palette,
+                }
+            }
             None => TextureView {
                 width: 1,
                 height: 1,
-                rgb: &ZERO_RECORD[..3],
+                texels: &ZERO_RECORD[..3],
+                palette: &[],
             },
         }
     }
@@ -276,34 +306,57 @@ impl<'a> SceneView<'a> {
         self.count(Section::Nodes)
     }
 
+    /// The box of grid corners `q` (exact in every number type: see
+    /// [`camera::GRID_ORIGIN`]).
+    #[inline(always)]
+    fn grid_point<T: Real>(&self, q: [u16; 3]) -> Vec3<T> {
+        // Grid coordinates are i16 (so Q16.16 holds them as integers).
+        let g = &self.grid;
+        let c = |k: usize| {
+            T::from_stored(g.origin[k])
+                + T::from_i32(q[k] as i16 as i32) * T::from_stored(g.step[k])
+        };
+        Vec3::new(c(0), c(1), c(2))
+    }
+
     #[inline]
     pub fn node<T: Real>(&self, i: u32) -> Node<T> {
+        use node::*;
         let r = self.record::<NODE_SIZE>(Section::Nodes, i);
-        let shape = r.u(node::SHAPE);
+        let index = r.h(INDEX);
+        let leaf = Leaf::decode(r.0[INFO], index, r.0[MATERIAL]);
         Node {
             bounds: Aabb {
-                min: r.v3(node::MIN),
-                max: r.v3(node::MAX),
+                min: self.grid_point([r.h(LO), r.h(LO + 2), r.h(LO + 4)]),
+                max: self.grid_point([r.h(HI), r.h(HI + 2), r.h(HI + 4)]),
             },
-            skip: r.u(node::SKIP),
-            shape: if shape == NONE {
-                None
-            } else {
-                ShapeRef::decode(shape)
-            },
+            skip: if leaf.is_some() { i + 1 } else { index as u32 },
+            leaf,
         }
     }
 
     /// The skip index of node `i` (first node after its subtree), without decoding its box.
     #[inline]
     pub fn node_skip(&self, i: u32) -> u32 {
-        self.record::<NODE_SIZE>(Section::Nodes, i).u(node::SKIP)
+        let r = self.record::<NODE_SIZE>(Section::Nodes, i);
+        if r.0[node::INFO] != 0 {
+            i + 1
+        } else {
+            r.h(node::INDEX) as u32
+        }
     }
 
-    /// Whether node `i` is a leaf (holds a shape).
+    /// Whether node `i` is a leaf (holds primitives).
     #[inline]
     pub fn node_is_leaf(&self, i: u32) -> bool {
-        self.record::<NODE_SIZE>(Section::Nodes, i).u(node::SHAPE) != NONE
+        self.record::<NODE_SIZE>(Section::Nodes, i).0[node::INFO] != 0
+    }
+
+    /// The primitives of leaf `i` (`None` for a cluster), without decoding its box.
+    #[inline]
+    pub fn node_leaf(&self, i: u32) -> Option<Leaf> {
+        let r = self.record::<NODE_SIZE>(Section::Nodes, i);
+        Leaf::decode(r.0[node::INFO], r.h(node::INDEX), r.0[node::MATERIAL])
     }
 
     /// Whether the DM wrote screen rectangles (needed for Y/X clipping).
@@ -311,51 +364,72 @@ impl<'a> SceneView<'a> {
         self.count(Section::Rects) != 0
     }
 
-    /// Screen rectangle of node `i` (requires [`Self::has_rects`]).
+    /// Screen rectangle of node `i` in pixels (requires [`Self::has_rects`]).
     #[inline]
     pub fn rect(&self, i: u32) -> Rect {
         let r = self.record::<RECT_SIZE>(Section::Rects, i).0;
-        let h = |o: usize| u16::from_le_bytes([r[o], r[o + 1]]);
+        let s = self.grid.rect_shift;
+        let lo = |o: usize| (r[o] as u16) << s;
+        let hi = |o: usize| ((r[o] as u16) << s) | ((1u16 << s) - 1);
         Rect {
-            x_lo: h(rect::X_LO),
-            x_hi: h(rect::X_HI),
-            y_lo: h(rect::Y_LO),
-            y_hi: h(rect::Y_HI),
+            x_lo: lo(rect::X_LO),
+            x_hi: hi(rect::X_HI),
+            y_lo: lo(rect::Y_LO),
+            y_hi: hi(rect::Y_HI),
         }
     }
 
+    /// Triangle `i`: its vertices read through their indices.
     #[inline]
     pub fn triangle<T: Real>(&self, i: u32) -> TriangleRec<T> {
         use triangle::*;
-        let r = self.record::<SIZE>(Section::Triangles, i);
+        let r = self.record::<TRIANGLE_SIZE>(Section::Triangles, i);
+        let v = |k: usize| {
+            let p = self.record::<VERTEX_SIZE>(Section::Vertices, r.h(V + 2 * k) as u32);
+            p.v3(vertex::P)
+        };
+        let n = r.h(NORMALS);
         TriangleRec {
             tri: Triangle {
-                p: [
-                    r.v3(P),
-                    r.v3(P + VERTEX_STRIDE),
-                    r.v3(P + 2 * VERTEX_STRIDE),
-                ],
+                p: [v(0), v(1), v(2)],
             },
-            material: r.u(MATERIAL),
-            normals: r.u(NORMALS),
-            uvs: r.u(UVS),
+            normals: if n == NONE16 { NONE } else { n as u32 },
+            uvs: if self.count(Section::TriUvs) != 0 {
+                i
+            } else {
+                NONE
+            },
         }
     }
 
-    pub fn normals<T: Real>(&self, i: u32) -> [Vec3<T>; 3] {
-        use normals::*;
-        let r = self.record::<SIZE>(Section::Normals, i);
-        [r.v3(N), r.v3(N + STRIDE), r.v3(N + 2 * STRIDE)]
+    /// The three indices of record `i` of a corners section ([`NONE16`] when absent).
+    #[inline]
+    fn corners(&self, s: Section, i: u32) -> [u16; 3] {
+        let r = self.record::<CORNERS_SIZE>(s, i);
+        [r.h(corners::I), r.h(corners::I + 2), r.h(corners::I + 4)]
     }
 
-    pub fn uvs<T: Real>(&self, i: u32) -> [[T; 2]; 3] {
-        use uvs::*;
-        let at = self.rec(Section::Uvs, i) + UV;
-        [
-            [self.f(at), self.f(at + 4)],
-            [self.f(at + STRIDE), self.f(at + STRIDE + 4)],
-            [self.f(at + 2 * STRIDE), self.f(at + 2 * STRIDE + 4)],
-        ]
+    /// The vertex normals of TriNormals record `i`.
+    pub fn normals<T: Real>(&self, i: u32) -> [Vec3<T>; 3] {
+        // 2^-15 is exact in every number type; the interpolated normal is normalised.
+        let scale = T::from_f32(1.0 / 32768.0);
+        self.corners(Section::TriNormals, i).map(|n| {
+            let r = self.record::<NORMAL_SIZE>(Section::Normals, n as u32);
+            let c = |k: usize| T::from_i32(r.h(normal::N + 2 * k) as i16 as i32) * scale;
+            Vec3::new(c(0), c(1), c(2))
+        })
+    }
+
+    /// The vertex texture coordinates of TriUvs record `i` (`None` for a triangle without).
+    pub fn uvs<T: Real>(&self, i: u32) -> Option<[[T; 2]; 3]> {
+        let c = self.corners(Section::TriUvs, i);
+        if c.contains(&NONE16) {
+            return None;
+        }
+        Some(c.map(|k| {
+            let r = self.record::<UV_SIZE>(Section::Uvs, k as u32);
+            [r.f(uv::UV), r.f(uv::UV + 4)]
+        }))
     }
 
     #[inline]

@@ -33,15 +33,21 @@ impl Rec<'_> {
         self.0[at..at + 4].copy_from_slice(&v.to_le_bytes());
         self
     }
-    /// A triangle's three per-vertex vectors from offset `at`, `stride` bytes apart.
-    pub fn per_vertex<const N: usize>(self, at: usize, stride: usize, v: &[[f32; N]; 3]) -> Self {
-        self.fs(at, &v[0])
-            .fs(at + stride, &v[1])
-            .fs(at + 2 * stride, &v[2])
-    }
-    /// A u16 at offset `at` (screen rectangles).
+    /// A u16 at offset `at` (indices, grid coordinates).
     pub fn h(self, at: usize, v: u16) -> Self {
         self.0[at..at + 2].copy_from_slice(&v.to_le_bytes());
+        self
+    }
+    /// Consecutive u16s from offset `at`.
+    pub fn hs(mut self, at: usize, v: &[u16]) -> Self {
+        for (k, x) in v.iter().enumerate() {
+            self = self.h(at + 2 * k, *x);
+        }
+        self
+    }
+    /// A byte at offset `at` (node info, screen rectangles).
+    pub fn b(self, at: usize, v: u8) -> Self {
+        self.0[at] = v;
         self
     }
 }
