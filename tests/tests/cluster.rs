@@ -1102,3 +1102,22 @@ fn a_node_that_missed_a_wake_broadcast_is_woken_again() {
     assert_eq!(r.node_reports[0].pixels, 64 * 60);
     assert!(r.time_s < 5.0 * t0, "{} vs {t0}", r.time_s);
 }
+
+/// photo2 (the paper's Table 5.2 scene) runs on the cluster since its SceneImage fits a node
+/// bank: on 1, 16 and 64 nodes every frame equals the host render bit for bit.
+#[test]
+fn photo2_renders_on_16_and_64_nodes_as_on_one() {
+    let img = image("photo2.ron", 96, 90);
+    assert!(img.len() <= nc_fw::plan::SCENE_EVEN, "{} bytes", img.len());
+    let want = reference(&img);
+    for nodes in [1, 16, 64] {
+        let r = run(
+            &img,
+            SimConfig {
+                nodes,
+                ..SimConfig::default()
+            },
+        );
+        assert!(r.frames[0] == want, "{nodes} nodes");
+    }
+}

@@ -243,6 +243,15 @@ pub fn to_fixed(image: &[u8]) -> Result<FixedImage, FixedError> {
             }
         }
     }
+    // The node boxes (grid coordinates, not words): the root's corners bound them all.
+    let root = view.node::<f64>(0).bounds;
+    for v in [root.min, root.max] {
+        for c in [v.x, v.y, v.z] {
+            if c.is_finite() && view.node_count() > 0 {
+                extent = extent.max(c.abs());
+            }
+        }
+    }
     let k = scale_exponent_for(extent).ok_or(FixedError::NoExtent)?;
     convert(image, &view, k, extent)
 }
