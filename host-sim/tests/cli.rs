@@ -751,22 +751,129 @@ fn cluster_render_with_faults_gives_the_host_render_and_bad_fault_options_say_wh
         "node 8 does not exist (8 nodes: 0 to 7)",
     );
     fails(&["--nodes", "8", "--kill", "2@soon"], "NODE@SECONDS");
-    // photo2's scene image (187 KB) does not fit a node's 120 KB bank.
+}
+
+/// A scene of `k` small spheres in a grid (a SceneImage as large as `k` asks).
+fn spheres_scene(name: &str, k: usize) -> PathBuf {
+    let spheres: Vec<String> = (0..k)
+        .map(|i| {
+            format!(
+                "Sphere(center: ({}, {}, 5), radius: 0.2, material: \"m\")",
+                (i % 50) as f32 * 0.5,
+                (i / 50) as f32 * 0.5
+            )
+        })
+        .collect();
+    let path = tmp(name);
+    std::fs::write(
+        &path,
+        format!(
+            "Scene(camera: (eye: (12, 10, -20), look_at: (12, 10, 5), fov_y: 60), \
+             image: (width: 64, height: 48), background: (0, 0, 0), ambient: (0.1, 0.1, 0.1), \
+             max_depth: 1, materials: {{ \"m\": (diffuse: (0.8, 0.2, 0.2)) }}, \
+             lights: [Directional(dir: (0, -1, 1), color: (1, 1, 1))], \
+             root: (name: \"w\", children: [{}]))",
+            spheres.join(", ")
+        ),
+    )
+    .unwrap();
+    path
+}
+
+/// The size `links info` prints on its first line (`<file>: SceneImage <N> bytes (<W>x<H>)`).
+fn info_size(scene: &Path) -> usize {
+    let o = links().arg("info").arg(scene).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let first = text.lines().next().unwrap();
+    let rest = first.split(": SceneImage ").nth(1).unwrap();
+    rest.split(' ').next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn info_with_a_node_gives_section_shares_and_the_fit_of_both_banks() {
+    use links_core::board::NodeBoard;
+    use links_host::cli::node::grouped;
+    let b = NodeBoard::F407;
+    let path = scene("reflections.ron");
+    let n = info_size(&path);
     let o = links()
-        .args([
-            "render",
-            scene("photo2.ron").to_str().unwrap(),
-            "--nodes",
-            "4",
-            "-o",
-        ])
-        .arg(tmp("photo2.png"))
+        .arg("info")
+        .arg(&path)
+        .args(["--node", "f407"])
         .output()
         .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines[0],
+        format!("{}: SceneImage {n} bytes (512x480)", path.display())
+    );
+    assert!(lines[2].ends_with("share"), "{text}");
+    assert!(text.contains("  header "), "{text}");
+    for (which, bank) in ["even frames", "odd frames"].iter().zip(b.scene_banks) {
+        let line = format!(
+            "    {which:<12} {:>10} bytes: {} bytes free",
+            grouped(bank),
+            grouped(bank - n)
+        );
+        assert!(lines.contains(&line.as_str()), "no '{line}' in {text}");
+    }
+    assert_eq!(lines.last(), Some(&"  f407: fits two banks"), "{text}");
+
+    // Without --node: no share column, no fit.
+    let o = links().arg("info").arg(&path).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!text.contains("share") && !text.contains("f407"), "{text}");
+
+    let (code, err) = run(&["info", path.to_str().unwrap(), "--node", "f999"]);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("187136 bytes") && err.contains("122880 bytes"),
+        err.contains("unknown node board 'f999'; known: f407"),
         "{err}"
     );
+}
+
+#[test]
+fn a_scene_no_bank_holds_is_refused_before_anything_is_sent() {
+    use links_core::board::NodeBoard;
+    use links_host::cli::node::grouped;
+    let big = spheres_scene("spheres.ron", 4000);
+    let n = info_size(&big);
+    let bank = NodeBoard::F407.bank(0);
+    assert!(
+        n > NodeBoard::F407.largest_bank(),
+        "{n} bytes: the test needs a larger scene"
+    );
+    let want = format!(
+        "error: {}: SceneImage {} bytes does not fit the f407 node's scene bank ({} bytes)",
+        big.display(),
+        grouped(n),
+        grouped(bank)
+    );
+    let o = links()
+        .arg("info")
+        .arg(&big)
+        .args(["--node", "F407"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success());
+    assert_eq!(text.lines().last(), Some("  f407: does not fit"), "{text}");
+
+    let out = tmp("spheres.png");
+    let (code, err) = run(&[
+        "render",
+        big.to_str().unwrap(),
+        "--nodes",
+        "4",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!((code, err.trim_end()), (Some(1), want.as_str()));
+    assert!(!out.exists());
+    // The serial upload refuses it before it opens the port.
+    let (code, err) = run(&["upload", big.to_str().unwrap(), "--port", "/no/such/port"]);
+    assert_eq!((code, err.trim_end()), (Some(1), want.as_str()));
 }

@@ -12,26 +12,33 @@
 #[cfg(target_os = "none")]
 pub mod port;
 
-/// Where every large buffer lives (bytes). See `docs/hardware.md`.
+/// Where every large buffer lives (bytes): the board's data,
+/// [`links_core::board::NodeBoard::F407`], which the host checks SceneImages against. See
+/// `docs/hardware.md`.
 pub mod plan {
+    use links_core::board::NodeBoard;
     use links_core::spi::BANK;
 
+    /// The board this firmware runs on: its RAM and the scene banks of this plan.
+    pub const BOARD: NodeBoard = NodeBoard::F407;
     /// SRAM1 + SRAM2 (DMA-reachable) and CCM data RAM (CPU only): the board's.
     pub use links_board::{CCM, SRAM};
     /// The link's DMA banks: two TX, two RX, one scratch (in SRAM).
-    pub const LINK_BANKS: usize = 5 * BANK;
+    pub const LINK_BANKS: usize = BOARD.link_banks;
     /// Scene bank of even frames (in SRAM): what the DMA banks leave, in whole KB.
-    pub const SCENE_EVEN: usize = (SRAM - LINK_BANKS) / 1024 * 1024;
+    pub const SCENE_EVEN: usize = BOARD.scene_banks[0];
     /// Scene bank of odd frames (in CCM; the CPU reads scenes in place, DMA never touches
     /// them). Animations whose odd frames need more must alternate on two boards' worth of
     /// SRAM; single frames (what the RC firmware renders) use the even bank only.
-    pub const SCENE_ODD: usize = 24 * 1024;
+    pub const SCENE_ODD: usize = BOARD.scene_banks[1];
     /// CCM left for .data, .bss (the executor's task futures, the link's shared state,
     /// RTT buffers) and the stack.
     pub const CCM_REST: usize = CCM - SCENE_ODD;
 
+    const _: () = assert!(LINK_BANKS == 5 * BANK);
     const _: () = assert!(LINK_BANKS + SCENE_EVEN <= SRAM);
     const _: () = assert!(SCENE_EVEN <= links_core::wire::MAX_SCENE);
+    const _: () = assert!(SCENE_ODD <= links_core::wire::MAX_SCENE);
     const _: () = assert!(CCM_REST >= 32 * 1024);
 }
 
