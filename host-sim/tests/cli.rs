@@ -830,7 +830,7 @@ fn info_with_a_node_gives_section_shares_and_the_fit_of_both_banks() {
     let (code, err) = run(&["info", path.to_str().unwrap(), "--node", "f999"]);
     assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("unknown node board 'f999'; known: f407"),
+        err.contains("unknown node board 'f999'; known: f407, f407-dual"),
         "{err}"
     );
 }

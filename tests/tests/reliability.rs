@@ -2,6 +2,7 @@
 //! recovery bound, time-outs that false alarms cannot stretch, errors that name their cause.
 //! Every number is virtual time; every frame is compared with the single-node render.
 
+use links_core::board::NodeBoard;
 use links_core::image::SceneView;
 use links_core::render::{render_run, Tracer};
 use links_core::sched::{Policy, Split};
@@ -117,23 +118,34 @@ fn false_alarms_do_not_stretch_the_recovery_from_a_real_death() {
 /// names the image size and the bank (the board's, `nc_fw::plan::SCENE_EVEN`).
 #[test]
 fn a_scene_larger_than_a_node_bank_is_refused_naming_both_sizes() {
-    let img = image("photo2.ron", 64, 60);
-    assert!(img.len() > nc_fw::plan::SCENE_EVEN);
+    // A board whose banks are smaller than reflections' small image (the bundled scenes all
+    // fit one bank of the F407 once compact, so none of them is too big for long).
+    let board = NodeBoard {
+        name: "tiny",
+        scene_banks: [1024, 512],
+        ..NodeBoard::F407
+    };
+    let img = image("reflections.ron", 64, 60);
+    assert!(img.len() > board.largest_bank());
     let e = simulate_frame(
         &img,
         &SimConfig {
             nodes: 4,
+            board,
             ..SimConfig::default()
         },
     )
     .expect_err("too big")
     .to_string();
-    println!("{e}");
-    assert!(
-        e.contains(&format!("{} bytes", img.len()))
-            && e.contains(&format!("{} bytes", nc_fw::plan::SCENE_EVEN)),
-        "{e}"
+    assert_eq!(
+        e,
+        format!(
+            "frame 0's scene image is {} bytes; the tiny node's scene bank holds 1024 bytes: \
+             make the scene smaller (fewer triangles, a smaller texture)",
+            img.len()
+        )
     );
+    assert_eq!(SimConfig::default().board, nc_fw::plan::BOARD);
 }
 
 /// A cluster that cannot finish said only "passed its time limit". The

@@ -74,7 +74,7 @@ pub enum Cmd {
         #[arg(long)]
         image: Option<PathBuf>,
         /// Also give each section's share and the fit against this node board's two scene
-        /// banks (known: f407)
+        /// banks (known: f407, f407-dual)
         #[arg(long, value_parser = node::parse_node)]
         node: Option<NodeBoard>,
     },

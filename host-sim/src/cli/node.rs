@@ -71,6 +71,7 @@ pub fn fit_lines(bytes: usize, node: &NodeBoard) -> Vec<String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use links_core::board::Memory;
 
     fn board() -> NodeBoard {
         NodeBoard {
@@ -79,6 +80,7 @@ mod tests {
             ccm: 0,
             link_banks: 0,
             scene_banks: [61_440, 24_576],
+            odd_bank_in: Memory::Ccm,
         }
     }
 
@@ -96,7 +98,7 @@ mod tests {
         assert_eq!(parse_node("F407"), Ok(NodeBoard::F407));
         assert_eq!(
             parse_node("f429").unwrap_err(),
-            "unknown node board 'f429'; known: f407"
+            "unknown node board 'f429'; known: f407, f407-dual"
         );
     }
 

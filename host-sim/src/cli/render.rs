@@ -47,7 +47,7 @@ pub struct RenderArgs {
 /// The options of a cluster render (`--nodes`).
 #[derive(clap::Args)]
 pub struct ClusterArgs {
-    /// The node computers' board (cluster only; known: f407): a SceneImage larger than its
+    /// The node computers' board (cluster only; known: f407, f407-dual): a SceneImage larger than its
     /// scene bank is refused before the run
     #[arg(long, default_value = nc_fw::plan::BOARD.name, value_parser = node::parse_node)]
     pub node: NodeBoard,

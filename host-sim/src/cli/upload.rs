@@ -12,7 +12,7 @@ use crate::cli_serial;
 pub struct UploadArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
-    /// The node computers' board (known: f407): a SceneImage larger than its scene bank is
+    /// The node computers' board (known: f407, f407-dual): a SceneImage larger than its scene bank is
     /// refused before anything is sent
     #[arg(long, default_value = nc_fw::plan::BOARD.name, value_parser = node::parse_node)]
     pub node: NodeBoard,

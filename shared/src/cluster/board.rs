@@ -22,6 +22,18 @@ pub struct NodeBoard {
     pub link_banks: usize,
     /// The scene banks: even frames', odd frames'.
     pub scene_banks: [usize; 2],
+    /// Where the odd frames' bank lives (the even frames' is in SRAM).
+    pub odd_bank_in: Memory,
+}
+
+/// A node board's RAM regions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Memory {
+    /// DMA-reachable SRAM.
+    Sram,
+    /// RAM the CPU alone reaches (CCM).
+    Ccm,
 }
 
 /// How a SceneImage fits a board's scene banks ([`NodeBoard::fit`]).
@@ -62,10 +74,25 @@ impl NodeBoard {
         ccm: F407_CCM,
         link_banks: F407_LINK_BANKS,
         scene_banks: [(F407_SRAM - F407_LINK_BANKS) / 1024 * 1024, 24 * 1024],
+        odd_bank_in: Memory::Ccm,
+    };
+
+    /// The same board with the double-bank plan chosen for compact SceneImages: two equal
+    /// scene banks in SRAM, each half of what the link's DMA banks leave (in whole KB), and
+    /// all of the CCM for `.data`, `.bss` and the stack. `nc-fw` switches to it (by making it
+    /// [`NodeBoard::F407`]) once every bundled scene's SceneImage fits it; until then the
+    /// host can check a scene against it (`--node f407-dual`). See docs/hardware.md.
+    pub const F407_DUAL: NodeBoard = NodeBoard {
+        name: "f407-dual",
+        sram: F407_SRAM,
+        ccm: F407_CCM,
+        link_banks: F407_LINK_BANKS,
+        scene_banks: [(F407_SRAM - F407_LINK_BANKS) / 2 / 1024 * 1024; 2],
+        odd_bank_in: Memory::Sram,
     };
 
     /// Every board the host knows, by name.
-    pub const ALL: [NodeBoard; 1] = [Self::F407];
+    pub const ALL: [NodeBoard; 2] = [Self::F407, Self::F407_DUAL];
 
     /// The board called `name` (ASCII case ignored), if known.
     pub fn named(name: &str) -> Option<NodeBoard> {
@@ -86,6 +113,15 @@ impl NodeBoard {
             a
         } else {
             b
+        }
+    }
+
+    /// Bytes of the odd frames' bank placed in `memory` (its size, or 0 elsewhere): what
+    /// the firmware allocates there.
+    pub const fn odd_bank_bytes_in(&self, memory: Memory) -> usize {
+        match (self.odd_bank_in, memory) {
+            (Memory::Sram, Memory::Sram) | (Memory::Ccm, Memory::Ccm) => self.scene_banks[1],
+            _ => 0,
         }
     }
 
@@ -114,6 +150,18 @@ mod tests {
         assert!(b.link_banks + b.scene_banks[0] <= b.sram);
         assert!(b.sram - b.link_banks - b.scene_banks[0] < 1024);
         assert_eq!(b.scene_banks, [122_880, 24_576]);
+        assert_eq!(b.odd_bank_bytes_in(Memory::Ccm), 24_576);
+        assert_eq!(b.odd_bank_bytes_in(Memory::Sram), 0);
+    }
+
+    #[test]
+    fn the_dual_plan_splits_that_sram_into_two_equal_banks() {
+        let b = NodeBoard::F407_DUAL;
+        assert_eq!(b.scene_banks, [61_440, 61_440]);
+        assert!(b.link_banks + 2 * b.scene_banks[0] <= b.sram);
+        assert!(b.sram - b.link_banks - 2 * b.scene_banks[0] < 2048);
+        assert_eq!(b.odd_bank_bytes_in(Memory::Ccm), 0);
+        assert_eq!(b.fit(40_000), Fit::TwoBanks);
     }
 
     #[test]
@@ -124,6 +172,7 @@ mod tests {
             ccm: 0,
             link_banks: 0,
             scene_banks: [100, 40],
+            odd_bank_in: Memory::Sram,
         };
         assert_eq!(b.fit(0), Fit::TwoBanks);
         assert_eq!(b.fit(40), Fit::TwoBanks);
@@ -138,6 +187,7 @@ mod tests {
     fn boards_are_found_by_name_in_any_case() {
         assert_eq!(NodeBoard::named("f407"), Some(NodeBoard::F407));
         assert_eq!(NodeBoard::named("F407"), Some(NodeBoard::F407));
+        assert_eq!(NodeBoard::named("f407-dual"), Some(NodeBoard::F407_DUAL));
         assert_eq!(NodeBoard::named("f429"), None);
     }
 }
