@@ -2,16 +2,33 @@
 //! against the board's scene banks (`links info --node`, [`fit_lines`]) and the refusal of an
 //! image no bank holds before anything is sent ([`check_fits`]).
 
+use std::fmt;
+
 use links_core::board::{Fit, NodeBoard};
 
 use super::CliError;
 
-/// `--node NAME`: a known board (ASCII case ignored), or an error naming the known ones.
-pub fn parse_node(name: &str) -> Result<NodeBoard, String> {
-    NodeBoard::named(name).ok_or_else(|| {
+/// A `--node` name no board has.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownNode(pub String);
+
+impl fmt::Display for UnknownNode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let known: Vec<&str> = NodeBoard::ALL.iter().map(|b| b.name).collect();
-        format!("unknown node board '{name}'; known: {}", known.join(", "))
-    })
+        write!(
+            f,
+            "unknown node board '{}'; known: {}",
+            self.0,
+            known.join(", ")
+        )
+    }
+}
+
+impl std::error::Error for UnknownNode {}
+
+/// `--node NAME`: a known board (ASCII case ignored), or an error naming the known ones.
+pub fn parse_node(name: &str) -> Result<NodeBoard, UnknownNode> {
+    NodeBoard::named(name).ok_or_else(|| UnknownNode(name.to_string()))
 }
 
 /// `n` with a comma between groups of three digits (`187,136`).
@@ -97,7 +114,7 @@ mod tests {
     fn unknown_boards_are_refused_with_the_known_ones() {
         assert_eq!(parse_node("F407"), Ok(NodeBoard::F407));
         assert_eq!(
-            parse_node("f429").unwrap_err(),
+            parse_node("f429").unwrap_err().to_string(),
             "unknown node board 'f429'; known: f407, f407-dual"
         );
     }

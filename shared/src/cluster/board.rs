@@ -11,6 +11,7 @@ use crate::cluster::spi::BANK;
 
 /// A node computer board: its RAM and the scene banks of its memory plan (bytes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct NodeBoard {
     /// The name the command line knows it by (`--node f407`).
     pub name: &'static str,
