@@ -564,28 +564,6 @@ fn a_compiled_image_checks_and_renders_like_its_scene() {
     }
 }
 
-/// A scene too large for any node: 12,000 triangles with their own vertices (36,000, all
-/// distinct), written to the test's directory; returns the scene file.
-fn big_scene() -> PathBuf {
-    let mut obj = String::new();
-    for i in 0..12_000u32 {
-        let (x, y) = ((i % 120) as f32 * 0.1, (i / 120) as f32 * 0.1);
-        for (dx, dy) in [(0.0, 0.0), (0.05, 0.0), (0.0, 0.05)] {
-            obj += &format!("v {} {} {}\n", x + dx, y + dy, (i % 7) as f32 * 0.01);
-        }
-    }
-    for i in 0..12_000u32 {
-        obj += &format!("f {} {} {}\n", 3 * i + 1, 3 * i + 2, 3 * i + 3);
-    }
-    std::fs::write(tmp("big.obj"), obj).unwrap();
-    let ron = "Scene(camera: (eye: (6, 6, -20), look_at: (6, 6, 0), fov_y: 40), \
-               image: (width: 64, height: 48), materials: { \"m\": (diffuse: (1, 1, 1)) }, \
-               root: (name: \"world\", children: [ Mesh(file: \"big.obj\", material: \"m\") ]))";
-    let path = tmp("big.ron");
-    std::fs::write(&path, ron).unwrap();
-    path
-}
-
 #[test]
 fn a_bad_image_file_is_refused_naming_what_is_wrong() {
     use links_core::image::Section;
@@ -774,18 +752,129 @@ fn cluster_render_with_faults_gives_the_host_render_and_bad_fault_options_say_wh
         "node 8 does not exist (8 nodes: 0 to 7)",
     );
     fails(&["--nodes", "8", "--kill", "2@soon"], "NODE@SECONDS");
-    // A scene of 12,000 separate triangles (a 596,564-byte image) does not fit a node's
-    // 120 KB bank.
-    let big = big_scene();
+}
+
+/// A scene of `k` small spheres in a grid (a SceneImage as large as `k` asks).
+fn spheres_scene(name: &str, k: usize) -> PathBuf {
+    let spheres: Vec<String> = (0..k)
+        .map(|i| {
+            format!(
+                "Sphere(center: ({}, {}, 5), radius: 0.2, material: \"m\")",
+                (i % 50) as f32 * 0.5,
+                (i / 50) as f32 * 0.5
+            )
+        })
+        .collect();
+    let path = tmp(name);
+    std::fs::write(
+        &path,
+        format!(
+            "Scene(camera: (eye: (12, 10, -20), look_at: (12, 10, 5), fov_y: 60), \
+             image: (width: 64, height: 48), background: (0, 0, 0), ambient: (0.1, 0.1, 0.1), \
+             max_depth: 1, materials: {{ \"m\": (diffuse: (0.8, 0.2, 0.2)) }}, \
+             lights: [Directional(dir: (0, -1, 1), color: (1, 1, 1))], \
+             root: (name: \"w\", children: [{}]))",
+            spheres.join(", ")
+        ),
+    )
+    .unwrap();
+    path
+}
+
+/// The size `links info` prints on its first line (`<file>: SceneImage <N> bytes (<W>x<H>)`).
+fn info_size(scene: &Path) -> usize {
+    let o = links().arg("info").arg(scene).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let first = text.lines().next().unwrap();
+    let rest = first.split(": SceneImage ").nth(1).unwrap();
+    rest.split(' ').next().unwrap().parse().unwrap()
+}
+
+#[test]
+fn info_with_a_node_gives_section_shares_and_the_fit_of_both_banks() {
+    use links_core::board::NodeBoard;
+    use links_host::cli::node::grouped;
+    let b = NodeBoard::F407;
+    let path = scene("reflections.ron");
+    let n = info_size(&path);
     let o = links()
-        .args(["render", big.to_str().unwrap(), "--nodes", "4", "-o"])
-        .arg(tmp("big.png"))
+        .arg("info")
+        .arg(&path)
+        .args(["--node", "f407"])
         .output()
         .unwrap();
-    let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(
+        lines[0],
+        format!("{}: SceneImage {n} bytes (512x480)", path.display())
+    );
+    assert!(lines[2].ends_with("share"), "{text}");
+    assert!(text.contains("  header "), "{text}");
+    for (which, bank) in ["even frames", "odd frames"].iter().zip(b.scene_banks) {
+        let line = format!(
+            "    {which:<12} {:>10} bytes: {} bytes free",
+            grouped(bank),
+            grouped(bank - n)
+        );
+        assert!(lines.contains(&line.as_str()), "no '{line}' in {text}");
+    }
+    assert_eq!(lines.last(), Some(&"  f407: fits two banks"), "{text}");
+
+    // Without --node: no share column, no fit.
+    let o = links().arg("info").arg(&path).output().unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!text.contains("share") && !text.contains("f407"), "{text}");
+
+    let (code, err) = run(&["info", path.to_str().unwrap(), "--node", "f999"]);
+    assert_eq!(code, Some(2), "{err}");
     assert!(
-        err.contains("596564 bytes") && err.contains("122880 bytes"),
+        err.contains("unknown node board 'f999'; known: f407"),
         "{err}"
     );
+}
+
+#[test]
+fn a_scene_no_bank_holds_is_refused_before_anything_is_sent() {
+    use links_core::board::NodeBoard;
+    use links_host::cli::node::grouped;
+    let big = spheres_scene("spheres.ron", 4000);
+    let n = info_size(&big);
+    let bank = NodeBoard::F407.bank(0);
+    assert!(
+        n > NodeBoard::F407.largest_bank(),
+        "{n} bytes: the test needs a larger scene"
+    );
+    let want = format!(
+        "error: {}: SceneImage {} bytes does not fit the f407 node's scene bank ({} bytes)",
+        big.display(),
+        grouped(n),
+        grouped(bank)
+    );
+    let o = links()
+        .arg("info")
+        .arg(&big)
+        .args(["--node", "F407"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success());
+    assert_eq!(text.lines().last(), Some("  f407: does not fit"), "{text}");
+
+    let out = tmp("spheres.png");
+    let (code, err) = run(&[
+        "render",
+        big.to_str().unwrap(),
+        "--nodes",
+        "4",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!((code, err.trim_end()), (Some(1), want.as_str()));
+    assert!(!out.exists());
+    // The serial upload refuses it before it opens the port.
+    let (code, err) = run(&["upload", big.to_str().unwrap(), "--port", "/no/such/port"]);
+    assert_eq!((code, err.trim_end()), (Some(1), want.as_str()));
 }

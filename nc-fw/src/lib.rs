@@ -12,26 +12,39 @@
 #[cfg(target_os = "none")]
 pub mod port;
 
-/// Where every large buffer lives (bytes). See `docs/hardware.md`.
+/// Where every large buffer lives (bytes): the board's data,
+/// [`links_core::board::NodeBoard::F407`], which the host checks SceneImages against. See
+/// `docs/hardware.md`.
 pub mod plan {
+    use links_core::board::{Memory, NodeBoard};
     use links_core::spi::BANK;
 
+    /// The board this firmware runs on: its RAM and the scene banks of this plan.
+    pub const BOARD: NodeBoard = NodeBoard::F407;
     /// SRAM1 + SRAM2 (DMA-reachable) and CCM data RAM (CPU only): the board's.
     pub use links_board::{CCM, SRAM};
     /// The link's DMA banks: two TX, two RX, one scratch (in SRAM).
-    pub const LINK_BANKS: usize = 5 * BANK;
-    /// Scene bank of even frames (in SRAM): what the DMA banks leave, in whole KB.
-    pub const SCENE_EVEN: usize = (SRAM - LINK_BANKS) / 1024 * 1024;
-    /// Scene bank of odd frames (in CCM; the CPU reads scenes in place, DMA never touches
-    /// them). Animations whose odd frames need more must alternate on two boards' worth of
-    /// SRAM; single frames (what the RC firmware renders) use the even bank only.
-    pub const SCENE_ODD: usize = 24 * 1024;
+    pub const LINK_BANKS: usize = BOARD.link_banks;
+    /// Scene bank of even frames (in SRAM; single frames, what the RC firmware renders, use
+    /// this one).
+    pub const SCENE_EVEN: usize = BOARD.scene_banks[0];
+    /// Scene bank of odd frames (in SRAM or CCM, [`NodeBoard::odd_bank_in`]; the CPU reads
+    /// scenes in place, DMA never touches them).
+    pub const SCENE_ODD: usize = BOARD.scene_banks[1];
+    /// The part of the odd frames' bank in SRAM: all of it or nothing.
+    pub const SCENE_ODD_SRAM: usize = BOARD.odd_bank_bytes_in(Memory::Sram);
+    /// The part of the odd frames' bank in CCM: all of it or nothing.
+    pub const SCENE_ODD_CCM: usize = BOARD.odd_bank_bytes_in(Memory::Ccm);
     /// CCM left for .data, .bss (the executor's task futures, the link's shared state,
     /// RTT buffers) and the stack.
-    pub const CCM_REST: usize = CCM - SCENE_ODD;
+    pub const CCM_REST: usize = CCM - SCENE_ODD_CCM;
 
-    const _: () = assert!(LINK_BANKS + SCENE_EVEN <= SRAM);
+    const _: () = assert!(BOARD.sram == SRAM && BOARD.ccm == CCM);
+    const _: () = assert!(LINK_BANKS == 5 * BANK);
+    const _: () = assert!(SCENE_ODD_SRAM + SCENE_ODD_CCM == SCENE_ODD);
+    const _: () = assert!(LINK_BANKS + SCENE_EVEN + SCENE_ODD_SRAM <= SRAM);
     const _: () = assert!(SCENE_EVEN <= links_core::wire::MAX_SCENE);
+    const _: () = assert!(SCENE_ODD <= links_core::wire::MAX_SCENE);
     const _: () = assert!(CCM_REST >= 32 * 1024);
 }
 

@@ -21,21 +21,26 @@ mod fw {
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
     use embassy_stm32::interrupt;
     use embassy_stm32::interrupt::{InterruptExt, Priority};
+    use links_core::board::Memory;
     use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
     use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
-    use nc_fw::plan::{SCENE_EVEN, SCENE_ODD};
+    use nc_fw::plan::{BOARD, SCENE_EVEN, SCENE_ODD_CCM, SCENE_ODD_SRAM};
     use nc_fw::port::{Irqs, NcPort};
     use static_cell::{ConstStaticCell, StaticCell};
     use {defmt_rtt as _, panic_probe as _};
 
-    /// Everything DMA touches, and the big scene bank, in SRAM (`.sram`, see memory.x).
+    /// Everything DMA touches, and the scene banks placed in SRAM (`.sram`, see memory.x).
     struct Sram {
         link: [Bank; 5],
         scene_even: [u8; SCENE_EVEN],
+        /// The odd frames' bank when the plan puts it in SRAM (else empty).
+        scene_odd: [u8; SCENE_ODD_SRAM],
     }
 
-    /// The odd frames' scene bank: CCM (`.bss`), read in place by the CPU only.
-    static SCENE_ODD_BANK: ConstStaticCell<[u8; SCENE_ODD]> = ConstStaticCell::new([0; SCENE_ODD]);
+    /// The odd frames' scene bank when the plan puts it in CCM (`.bss`; else empty), read in
+    /// place by the CPU only.
+    static SCENE_ODD_BANK: ConstStaticCell<[u8; SCENE_ODD_CCM]> =
+        ConstStaticCell::new([0; SCENE_ODD_CCM]);
     static SHARED: StaticCell<SlaveShared<'static>> = StaticCell::new();
     static EXECUTOR_LINK: InterruptExecutor = InterruptExecutor::new();
     static EXECUTOR_NODE: StaticCell<Executor> = StaticCell::new();
@@ -89,7 +94,12 @@ mod fw {
         info!("LINKS-1 NC up");
         // `main` runs once, so this expansion does: the only reference to the region.
         let sram: &'static mut Sram = links_board::take_sram!(Sram);
-        let [tx0, tx1, rx0, rx1, scratch] = &mut sram.link;
+        let Sram {
+            link,
+            scene_even,
+            scene_odd,
+        } = sram;
+        let [tx0, tx1, rx0, rx1, scratch] = link;
         let (shared, task) = SlaveShared::new(SlaveBanks {
             tx: [tx0, tx1],
             rx: [rx0, rx1],
@@ -118,7 +128,12 @@ mod fw {
         spawner.spawn(unwrap!(link_task(port, task, shared)));
 
         let executor = EXECUTOR_NODE.init(Executor::new());
-        let odd: &'static mut [u8] = SCENE_ODD_BANK.take();
-        executor.run(|s| s.spawn(unwrap!(node_task(shared, &mut sram.scene_even, odd))))
+        // The odd bank is wherever the plan put it (the other placement is empty).
+        let odd: &'static mut [u8] = if BOARD.odd_bank_in == Memory::Sram {
+            scene_odd
+        } else {
+            SCENE_ODD_BANK.take()
+        };
+        executor.run(|s| s.spawn(unwrap!(node_task(shared, scene_even, odd))))
     }
 }

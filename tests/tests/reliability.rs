@@ -2,6 +2,7 @@
 //! recovery bound, time-outs that false alarms cannot stretch, errors that name their cause.
 //! Every number is virtual time; every frame is compared with the single-node render.
 
+use links_core::board::NodeBoard;
 use links_core::image::SceneView;
 use links_core::render::{render_run, Tracer};
 use links_core::sched::{Policy, Split};
@@ -117,42 +118,34 @@ fn false_alarms_do_not_stretch_the_recovery_from_a_real_death() {
 /// names the image size and the bank (the board's, `nc_fw::plan::SCENE_EVEN`).
 #[test]
 fn a_scene_larger_than_a_node_bank_is_refused_naming_both_sizes() {
-    // photo2 at 64x60 with one triangle per leaf and a 256x256 texture of 65,536 colours
-    // (RGB8: 196,608 bytes).
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo2.ron");
-    let mut desc = links_host::scene_file::load_scene(&path).expect("photo2 loads");
-    let t = &mut desc.textures[0];
-    (t.width, t.height) = (256, 256);
-    t.rgb = (0..256 * 256u32)
-        .flat_map(|i| [(i & 0xff) as u8, (i >> 8) as u8, 7])
-        .collect();
-    let img = links_core::dm::compile(
-        &desc,
-        &links_core::dm::CompileOptions {
-            width: Some(64),
-            height: Some(60),
-            leaf_size: Some(1),
-            ..Default::default()
-        },
-    )
-    .expect("compiles")
-    .bytes;
-    assert!(img.len() > nc_fw::plan::SCENE_EVEN);
+    // A board whose banks are smaller than reflections' small image (the bundled scenes all
+    // fit one bank of the F407 once compact, so none of them is too big for long).
+    let board = NodeBoard {
+        name: "tiny",
+        scene_banks: [1024, 512],
+        ..NodeBoard::F407
+    };
+    let img = image("reflections.ron", 64, 60);
+    assert!(img.len() > board.largest_bank());
     let e = simulate_frame(
         &img,
         &SimConfig {
             nodes: 4,
+            board,
             ..SimConfig::default()
         },
     )
     .expect_err("too big")
     .to_string();
-    println!("{e}");
-    assert!(
-        e.contains(&format!("{} bytes", img.len()))
-            && e.contains(&format!("{} bytes", nc_fw::plan::SCENE_EVEN)),
-        "{e}"
+    assert_eq!(
+        e,
+        format!(
+            "frame 0's scene image is {} bytes; the tiny node's scene bank holds 1024 bytes: \
+             make the scene smaller (fewer triangles, a smaller texture)",
+            img.len()
+        )
     );
+    assert_eq!(SimConfig::default().board, nc_fw::plan::BOARD);
 }
 
 /// A cluster that cannot finish said only "passed its time limit". The

@@ -21,6 +21,14 @@ pub enum CliError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// A SceneImage (`bytes` long, of the scene or image file `what`) larger than the scene
+    /// bank (`bank` bytes) of the node board `node`: refused before anything is sent.
+    DoesNotFit {
+        what: String,
+        bytes: usize,
+        node: &'static str,
+        bank: usize,
+    },
     /// A failure reported as text by the module that did the work (simulator, serial link,
     /// renderer, chart and cost-model readers).
     Failed(String),
@@ -45,6 +53,17 @@ impl fmt::Display for CliError {
             CliError::Usage(m) | CliError::Scene(m) | CliError::Failed(m) => f.write_str(m),
             CliError::Image(e) => write!(f, "{e}"),
             CliError::Write { path, source } => write!(f, "{}: {source}", path.display()),
+            CliError::DoesNotFit {
+                what,
+                bytes,
+                node,
+                bank,
+            } => write!(
+                f,
+                "{what}: SceneImage {} bytes does not fit the {node} node's scene bank ({} bytes)",
+                super::node::grouped(*bytes),
+                super::node::grouped(*bank)
+            ),
         }
     }
 }

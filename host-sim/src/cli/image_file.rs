@@ -132,33 +132,60 @@ pub fn precision_for(
 
 /// The section table of `links info` and `links check-image`: a heading naming `name`, the
 /// size and the frame (`<name>: SceneImage <N> bytes (<W>x<H>)`), the number format, then one
-/// row per non-empty section.
-pub fn describe(name: &str, view: &SceneView<'_>) -> Vec<String> {
+/// row per non-empty section; with `shares`, each row also gives the section's share of the
+/// whole image, and a last row the bytes outside the sections (the header).
+pub fn describe(name: &str, view: &SceneView<'_>, shares: bool) -> Vec<String> {
     let f = view.camera::<f32>();
     let format = match view.storage() {
         Storage::F32 => "f32".to_string(),
         Storage::Q16_16 => format!("q16.16, lengths scaled by 2^{}", view.scale_exponent()),
     };
+    let total = view.bytes().len();
+    let share = |bytes: usize| {
+        if shares {
+            format!(" {:>6.1}%", 100.0 * bytes as f64 / total.max(1) as f64)
+        } else {
+            String::new()
+        }
+    };
     // The first line's form is an interface (scripts and checks read it): keep it as is.
     let mut lines = vec![
         format!(
-            "{name}: SceneImage {} bytes ({}x{})",
-            view.bytes().len(),
-            f.width,
-            f.height
+            "{name}: SceneImage {total} bytes ({}x{})",
+            f.width, f.height
         ),
         format!("  number format: {format}"),
-        format!("  {:<12} {:>8} {:>10}", "section", "records", "bytes"),
+        format!(
+            "  {:<16} {:>8} {:>10}{}",
+            "section",
+            "records",
+            "bytes",
+            if shares { "   share" } else { "" }
+        ),
     ];
+    let mut in_sections = 0usize;
     for s in Section::ALL {
         if view.count(s) > 0 {
+            let bytes = view.section_bytes(s);
+            in_sections = in_sections.saturating_add(bytes);
             lines.push(format!(
-                "  {:<12} {:>8} {:>10}",
+                "  {:<16} {:>8} {:>10}{}",
                 s.name(),
                 view.count(s),
-                view.section_bytes(s)
+                bytes,
+                share(bytes)
             ));
         }
+    }
+    if shares {
+        let rest = total.saturating_sub(in_sections);
+        lines.push(format!(
+            "  {:<16} {:>8} {:>10}{}",
+            "header",
+            "",
+            rest,
+            share(rest)
+        ));
     }
     lines
 }
@@ -187,7 +214,7 @@ pub fn check_image(path: &Path) -> Result<Vec<String>, ImageFileError> {
         path: path.to_path_buf(),
         source,
     })?;
-    let mut lines = describe(&path.display().to_string(), &view);
+    let mut lines = describe(&path.display().to_string(), &view, false);
     lines.push(match check_frame(path, &view) {
         Ok(()) => "valid".to_string(),
         Err(_) => format!(

@@ -31,6 +31,7 @@ pub mod error;
 pub mod gen_assets;
 pub mod image_file;
 pub mod info;
+pub mod node;
 pub mod readback;
 pub mod render;
 pub mod sweep;
@@ -40,6 +41,7 @@ pub use backend::Backend;
 pub use error::CliError;
 
 use args::SceneArgs;
+use links_core::board::NodeBoard;
 
 /// The `links` command line.
 #[derive(Parser)]
@@ -71,6 +73,10 @@ pub enum Cmd {
         /// Also write the SceneImage bytes to this file
         #[arg(long)]
         image: Option<PathBuf>,
+        /// Also give each section's share and the fit against this node board's two scene
+        /// banks (known: f407)
+        #[arg(long, value_parser = node::parse_node)]
+        node: Option<NodeBoard>,
     },
     /// Render a scene in a number format and in f64 and report how far apart they are
     Compare {
@@ -116,7 +122,7 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.cmd {
         Cmd::Render(a) => render::run(a),
         Cmd::CheckImage { image } => check_image::run(&image),
-        Cmd::Info { scene, image } => info::run(&scene, image.as_deref()),
+        Cmd::Info { scene, image, node } => info::run(&scene, image.as_deref(), node.as_ref()),
         Cmd::Compare {
             scene,
             backend,

@@ -5,12 +5,13 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use links_core::board::NodeBoard;
 use links_core::image::SceneView;
 use links_core::render::Stats;
 
 use super::args::{image_to_render, PrecisionArg, SceneArgs};
 use super::error::write_file;
-use super::CliError;
+use super::{node, CliError};
 use crate::cli_cluster;
 use crate::frame::{encode_png, render_frame};
 use crate::limits;
@@ -46,6 +47,10 @@ pub struct RenderArgs {
 /// The options of a cluster render (`--nodes`).
 #[derive(clap::Args)]
 pub struct ClusterArgs {
+    /// The node computers' board (cluster only; known: f407): a SceneImage larger than its
+    /// scene bank is refused before the run
+    #[arg(long, default_value = nc_fw::plan::BOARD.name, value_parser = node::parse_node)]
+    pub node: NodeBoard,
     /// SPI buses from the root computer (cluster only)
     #[arg(long, default_value_t = 1)]
     pub buses: u16,
@@ -91,6 +96,11 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
         )));
     }
     let (image, _) = image_to_render(&a.scene, a.image.as_deref(), a.precision, true)?;
+    let what = match &a.image {
+        Some(path) => path.display().to_string(),
+        None => a.scene.path()?.display().to_string(),
+    };
+    node::check_fits(&what, image.len(), &c.node)?;
     let mut cfg = cli_cluster::config(
         nodes,
         c.buses,
@@ -102,6 +112,7 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
             "--dm-ms must be >= 0 and --timeout-ms > 0".into(),
         ));
     }
+    cfg.board = c.node;
     cfg.dm_s_per_frame = c.dm_ms * 1e-3;
     cfg.node_timeout_s = c.timeout_ms * 1e-3;
     cfg.rc_double_buffer = !c.rc_single_buffer;

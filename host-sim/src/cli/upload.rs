@@ -1,7 +1,10 @@
-//! `links upload`: compile a scene and send its SceneImage to a real RC over a serial port.
+//! `links upload`: compile a scene and send its SceneImage to a real RC over a serial port
+//! (refused before anything is sent when no scene bank of the node board holds it).
+
+use links_core::board::NodeBoard;
 
 use super::args::SceneArgs;
-use super::CliError;
+use super::{node, CliError};
 use crate::cli_serial;
 
 /// The options of `links upload`.
@@ -9,6 +12,10 @@ use crate::cli_serial;
 pub struct UploadArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
+    /// The node computers' board (known: f407): a SceneImage larger than its scene bank is
+    /// refused before anything is sent
+    #[arg(long, default_value = nc_fw::plan::BOARD.name, value_parser = node::parse_node)]
+    pub node: NodeBoard,
     /// Serial port of the RC (e.g. /dev/ttyACM0)
     #[arg(long)]
     pub port: String,
@@ -32,6 +39,7 @@ pub struct UploadArgs {
 /// Runs `links upload`.
 pub fn run(a: &UploadArgs) -> Result<(), CliError> {
     let image = a.scene.compile()?;
+    node::check_fits(&a.scene.path()?.display().to_string(), image.len(), &a.node)?;
     let line = cli_serial::upload_command(
         &image,
         &a.port,

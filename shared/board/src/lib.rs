@@ -4,10 +4,10 @@
 //! ([`take_sram!`]). Pins and memory plans stay with each firmware (`nc-fw`, `rc-fw`).
 #![no_std]
 
-/// SRAM1 + SRAM2 (DMA-reachable).
-pub const SRAM: usize = 128 * 1024;
-/// CCM data RAM (CPU only).
-pub const CCM: usize = 64 * 1024;
+/// SRAM1 + SRAM2 (DMA-reachable): the board's data, `links_core::board::NodeBoard::F407`.
+pub const SRAM: usize = links_core::board::NodeBoard::F407.sram;
+/// CCM data RAM (CPU only): the board's data, `links_core::board::NodeBoard::F407`.
+pub const CCM: usize = links_core::board::NodeBoard::F407.ccm;
 
 /// The clock tree: 8 MHz crystal -> 168 MHz core, APB2 84 MHz (SPI1 up to 42 MHz), 48 MHz
 /// for USB.

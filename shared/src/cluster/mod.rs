@@ -1,5 +1,6 @@
 //! The cluster layer: LINKS-1's root computer (RC) and node computers (NCs) on one bus.
 //!
+//! - [`board`]: the node boards as data: RAM and the two scene banks of the memory plan.
 //! - [`wire`]: every message on the RC-NC bus (postcard, CRC-32, run-length pixels).
 //! - [`link`]: the IMSU link as traits the node and root logic are generic over.
 //! - [`sched`]: sub-screen scheduling (which region a node renders next).
@@ -7,6 +8,7 @@
 //! - [`root`]: the RC's whole behaviour (broadcast, hand out, collect, detect completion).
 //! - [`spi`]: the link driver's protocol over a real SPI star, generic over the MCU ports.
 
+pub mod board;
 pub mod link;
 pub mod node;
 pub mod root;

@@ -33,6 +33,7 @@ pub use sweep::{
 
 use crate::cost::{CycleModel, DEFAULT_CLOCK_HZ};
 use exec::ExecError;
+use links_core::board::NodeBoard;
 use links_core::node::{NodeConfig, NodeReport};
 use links_core::render::Stats;
 use links_core::root::{RootConfig, RootError, RootReport};
@@ -73,10 +74,11 @@ pub struct SimConfig {
     pub deaths: Vec<NodeDeath>,
     /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
     pub drops: Vec<BroadcastDrop>,
-    /// A node's scene bank (bytes): a larger scene is refused before the run. Default: the
-    /// NC board's even-frame bank, [`nc_fw::plan::SCENE_EVEN`] (the simulated nodes have two
-    /// banks this size).
-    pub bank_bytes: usize,
+    /// The node board: a scene larger than its larger scene bank
+    /// ([`NodeBoard::largest_bank`]) is refused before the run; the simulated nodes have two
+    /// banks that size. Default: the NC firmware's board, [`nc_fw::plan::BOARD`]
+    /// ([`NodeBoard::F407`]).
+    pub board: NodeBoard,
     /// The RC declares a node holding jobs dead after this long without an exchange (s) and
     /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
     pub node_timeout_s: f64,
@@ -111,7 +113,7 @@ impl Default for SimConfig {
             noise: Noise::default(),
             deaths: Vec::new(),
             drops: Vec::new(),
-            bank_bytes: nc_fw::plan::SCENE_EVEN,
+            board: nc_fw::plan::BOARD,
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
             collect: Collect::Snoop,
@@ -184,11 +186,12 @@ impl SimReport {
 #[derive(Debug)]
 pub enum SimError {
     Config(String),
-    /// Frame `frame`'s scene image (`bytes`) does not fit a node's scene bank (`bank`
-    /// bytes, [`SimConfig::bank_bytes`]); found before the cluster starts.
+    /// Frame `frame`'s scene image (`bytes`) does not fit the scene bank (`bank` bytes) of
+    /// the node board `node` ([`SimConfig::board`]); found before the cluster starts.
     SceneTooBig {
         frame: u16,
         bytes: usize,
+        node: &'static str,
         bank: usize,
     },
     Root(RootError),
@@ -333,9 +336,14 @@ impl fmt::Display for SimError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             SimError::Config(s) => write!(f, "{s}"),
-            SimError::SceneTooBig { frame, bytes, bank } => write!(
+            SimError::SceneTooBig {
+                frame,
+                bytes,
+                node,
+                bank,
+            } => write!(
                 f,
-                "frame {frame}'s scene image is {bytes} bytes; a node's scene bank holds {bank} bytes: make the scene smaller (fewer triangles, a smaller texture)"
+                "frame {frame}'s scene image is {bytes} bytes; the {node} node's scene bank holds {bank} bytes: make the scene smaller (fewer triangles, a smaller texture)"
             ),
             SimError::Root(e) => write!(f, "root: {e}"),
             SimError::Unfinished(u) => write!(f, "{u}"),

@@ -248,12 +248,13 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
     if let Some((frame, s)) = scenes
         .iter()
         .enumerate()
-        .find(|(_, s)| s.as_ref().len() > cfg.bank_bytes)
+        .find(|(_, s)| s.as_ref().len() > cfg.board.largest_bank())
     {
         return Err(SimError::SceneTooBig {
             frame: frame as u16,
             bytes: s.as_ref().len(),
-            bank: cfg.bank_bytes,
+            node: cfg.board.name,
+            bank: cfg.board.largest_bank(),
         });
     }
     Ok(frames)

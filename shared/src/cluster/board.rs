@@ -1,0 +1,171 @@
+//! The node boards a cluster is built of, as data: the memory a node's plan divides up and
+//! the two scene banks it gives, read both by the firmware (`nc-fw`'s memory plan allocates
+//! exactly these banks) and by the host, which checks a SceneImage against a named board
+//! before it sends one (`links info --node`, `links render --nodes`, `links upload`).
+//!
+//! A node keeps two scene banks so that the next frame's scene can be broadcast into one
+//! while the other renders (frame `f` uses bank `f % 2`); a scene that fits only the larger
+//! bank can still be rendered as single frames.
+
+use crate::cluster::spi::BANK;
+
+/// A node computer board: its RAM and the scene banks of its memory plan (bytes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct NodeBoard {
+    /// The name the command line knows it by (`--node f407`).
+    pub name: &'static str,
+    /// DMA-reachable SRAM.
+    pub sram: usize,
+    /// RAM the CPU alone reaches (CCM on the F407): `.data`, `.bss`, the stack.
+    pub ccm: usize,
+    /// The link's DMA banks in SRAM: two TX, two RX, one scratch.
+    pub link_banks: usize,
+    /// The scene banks: even frames', odd frames'.
+    pub scene_banks: [usize; 2],
+    /// Where the odd frames' bank lives (the even frames' is in SRAM).
+    pub odd_bank_in: Memory,
+}
+
+/// A node board's RAM regions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Memory {
+    /// DMA-reachable SRAM.
+    Sram,
+    /// RAM the CPU alone reaches (CCM).
+    Ccm,
+}
+
+/// How a SceneImage fits a board's scene banks ([`NodeBoard::fit`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Fit {
+    /// Both banks hold it: the next frame can be broadcast while this one renders.
+    TwoBanks,
+    /// Only the larger bank holds it: single frames only.
+    OneBank,
+    /// No bank holds it.
+    TooBig,
+}
+
+impl Fit {
+    /// The verdict in words, as `links info --node` prints it.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            Fit::TwoBanks => "fits two banks",
+            Fit::OneBank => "fits one bank (single frames only)",
+            Fit::TooBig => "does not fit",
+        }
+    }
+}
+
+/// The STM32F407VG's RAM: SRAM1 + SRAM2, and the CCM data RAM.
+const F407_SRAM: usize = 128 * 1024;
+const F407_CCM: usize = 64 * 1024;
+const F407_LINK_BANKS: usize = 5 * BANK;
+
+impl NodeBoard {
+    /// The STM32F407VG node (STM32F4DISCOVERY), `nc-fw`'s board: two equal scene banks in
+    /// SRAM, each half of what the link's DMA banks leave (in whole KB), so the next frame
+    /// can be broadcast into one while the other renders; all of the CCM is left to `.data`,
+    /// `.bss` and the stack (see docs/hardware.md).
+    pub const F407: NodeBoard = NodeBoard {
+        name: "f407",
+        sram: F407_SRAM,
+        ccm: F407_CCM,
+        link_banks: F407_LINK_BANKS,
+        scene_banks: [(F407_SRAM - F407_LINK_BANKS) / 2 / 1024 * 1024; 2],
+        odd_bank_in: Memory::Sram,
+    };
+
+    /// Every board the host knows, by name.
+    pub const ALL: [NodeBoard; 1] = [Self::F407];
+
+    /// The board called `name` (ASCII case ignored), if known.
+    pub fn named(name: &str) -> Option<NodeBoard> {
+        Self::ALL
+            .into_iter()
+            .find(|b| b.name.eq_ignore_ascii_case(name))
+    }
+
+    /// The bank frame `frame` renders from (`f % 2`).
+    pub const fn bank(&self, frame: u32) -> usize {
+        self.scene_banks[(frame % 2) as usize]
+    }
+
+    /// The larger bank: the most a single-frame scene may take.
+    pub const fn largest_bank(&self) -> usize {
+        let [a, b] = self.scene_banks;
+        if a > b {
+            a
+        } else {
+            b
+        }
+    }
+
+    /// Bytes of the odd frames' bank placed in `memory` (its size, or 0 elsewhere): what
+    /// the firmware allocates there.
+    pub const fn odd_bank_bytes_in(&self, memory: Memory) -> usize {
+        match (self.odd_bank_in, memory) {
+            (Memory::Sram, Memory::Sram) | (Memory::Ccm, Memory::Ccm) => self.scene_banks[1],
+            _ => 0,
+        }
+    }
+
+    /// How a SceneImage of `bytes` bytes fits the scene banks.
+    pub const fn fit(&self, bytes: usize) -> Fit {
+        let [a, b] = self.scene_banks;
+        let small = if a < b { a } else { b };
+        if bytes <= small {
+            Fit::TwoBanks
+        } else if bytes <= self.largest_bank() {
+            Fit::OneBank
+        } else {
+            Fit::TooBig
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_f407_plan_splits_the_sram_the_link_leaves_into_two_equal_banks() {
+        let b = NodeBoard::F407;
+        assert_eq!(b.link_banks, 5 * BANK);
+        assert_eq!(b.scene_banks, [61_440, 61_440]);
+        assert!(b.link_banks + 2 * b.scene_banks[0] <= b.sram);
+        assert!(b.sram - b.link_banks - 2 * b.scene_banks[0] < 2048);
+        assert_eq!(b.odd_bank_bytes_in(Memory::Sram), 61_440);
+        assert_eq!(b.odd_bank_bytes_in(Memory::Ccm), 0);
+        assert_eq!(b.fit(40_000), Fit::TwoBanks);
+    }
+
+    #[test]
+    fn fit_names_the_banks_a_size_fits() {
+        let b = NodeBoard {
+            name: "t",
+            sram: 0,
+            ccm: 0,
+            link_banks: 0,
+            scene_banks: [100, 40],
+            odd_bank_in: Memory::Sram,
+        };
+        assert_eq!(b.fit(0), Fit::TwoBanks);
+        assert_eq!(b.fit(40), Fit::TwoBanks);
+        assert_eq!(b.fit(41), Fit::OneBank);
+        assert_eq!(b.fit(100), Fit::OneBank);
+        assert_eq!(b.fit(101), Fit::TooBig);
+        assert_eq!((b.bank(0), b.bank(1), b.bank(2)), (100, 40, 100));
+        assert_eq!(b.largest_bank(), 100);
+    }
+
+    #[test]
+    fn boards_are_found_by_name_in_any_case() {
+        assert_eq!(NodeBoard::named("f407"), Some(NodeBoard::F407));
+        assert_eq!(NodeBoard::named("F407"), Some(NodeBoard::F407));
+        assert_eq!(NodeBoard::named("f429"), None);
+    }
+}
