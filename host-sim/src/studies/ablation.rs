@@ -7,10 +7,12 @@
 //! tracer, and its operation counts become cycles through the [`CycleModel`]. The runs are
 //! then handed out in order to `nodes` node computers, each taking the next run when it
 //! finishes (LINKS-1's dynamic division), and the modelled time is when the last one ends.
-//! RC-NC communication is not included here (the cluster simulator models it). Host wall
+//! RC-NC communication is not included in that table; beside it, every cell is run again on
+//! the simulated cluster, communication included ([`super::ablation_cluster`]). Host wall
 //! time is reported beside the model, never instead of it.
 
 use crate::cost::{CycleModel, DEFAULT_CLOCK_HZ};
+use crate::studies::ablation_cluster::{self, ClusterCell, ClusterError, Job};
 use crate::studies::report::table_head;
 use links_core::desc::{SceneDesc, TransparencyMode};
 use links_core::dm::{compile, CompileOptions, DmError, MeshHierarchy};
@@ -81,6 +83,7 @@ pub struct AblationConfig {
     pub height: u32,
     /// Sub-screen counts (table rows); each must be a multiple of the height.
     pub divisions: Vec<u32>,
+    /// Node computers, of the model and of the simulated cluster.
     pub nodes: u32,
     pub model: CycleModel,
     pub clock_hz: f64,
@@ -119,6 +122,8 @@ pub struct AblationReport {
     pub cells: Vec<Cell>,
     /// Type 1 at the first division count with refractive transparency instead.
     pub refractive: Cell,
+    /// The same cells on the simulated cluster, communication included.
+    pub cluster: Vec<ClusterCell>,
 }
 
 #[derive(Debug)]
@@ -126,6 +131,7 @@ pub enum AblationError {
     Compile(DmError),
     Image(links_core::image::ImageError),
     BadDivisions { divisions: u32, height: u32 },
+    Cluster(ClusterError),
 }
 
 impl std::fmt::Display for AblationError {
@@ -137,6 +143,7 @@ impl std::fmt::Display for AblationError {
                 f,
                 "{divisions} sub-screens can't be cut from {height} rows: use a multiple of the height"
             ),
+            AblationError::Cluster(e) => write!(f, "{e}"),
         }
     }
 }
@@ -235,7 +242,7 @@ fn merge_runs(per_run: &[Stats], k: usize) -> Vec<Stats> {
 pub fn run_ablation(
     desc: &SceneDesc,
     cfg: &AblationConfig,
-    progress: &dyn Fn(&str),
+    progress: &(dyn Fn(&str) + Sync),
 ) -> Result<AblationReport, AblationError> {
     let compile_with = |h: MeshHierarchy, t: Option<TransparencyMode>| {
         let opts = CompileOptions {
@@ -252,14 +259,16 @@ pub fn run_ablation(
     let finest = *cfg.divisions.iter().max().unwrap_or(&cfg.height);
     let fine_runs = runs(cfg.width, cfg.height, finest)?;
     let mut cells = Vec::new();
+    let mut images = Vec::new();
     for v in VARIANTS {
-        let image = compile_with(v.hierarchy, v.transparency)?;
+        images.push(compile_with(v.hierarchy, v.transparency)?);
+        let image = images.last().map_or(&[][..], |i| &i[..]);
         if v.techniques.y_clip {
             // Y clipping happens per run: each division count is its own render.
             for &d in &cfg.divisions {
                 progress(&format!("{} ({d} sub-screens)", v.name));
                 let start = Instant::now();
-                let per_run = run_costs(&image, v.techniques, &runs(cfg.width, cfg.height, d)?)?;
+                let per_run = run_costs(image, v.techniques, &runs(cfg.width, cfg.height, d)?)?;
                 cells.push(cell(
                     v.name,
                     d,
@@ -273,7 +282,7 @@ pub fn run_ablation(
             // division once and merge runs for the coarser ones.
             progress(&format!("{} (all division counts)", v.name));
             let start = Instant::now();
-            let per_run = run_costs(&image, v.techniques, &fine_runs)?;
+            let per_run = run_costs(image, v.techniques, &fine_runs)?;
             let host = start.elapsed().as_secs_f64();
             for &d in &cfg.divisions {
                 runs(cfg.width, cfg.height, d)?;
@@ -297,11 +306,60 @@ pub fn run_ablation(
         cfg,
         start.elapsed().as_secs_f64(),
     );
+    let cluster = cluster_cells(&images, &cells, cfg, progress)?;
     Ok(AblationReport {
         config: cfg.clone(),
         cells,
         refractive,
+        cluster,
     })
+}
+
+/// Every cell again on the simulated cluster (`images[i]` is `VARIANTS[i]`'s image), each
+/// frame checked against the host render of its image; the dearest cells (by modelled
+/// node time) start first. The cells come back in table order.
+fn cluster_cells(
+    images: &[Vec<u8>],
+    modelled: &[Cell],
+    cfg: &AblationConfig,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Vec<ClusterCell>, AblationError> {
+    let mut refs: Vec<(&[u8], Vec<u8>)> = Vec::new();
+    for image in images {
+        if !refs.iter().any(|(i, _)| *i == &image[..]) {
+            progress("the host reference render of an image");
+            let r = ablation_cluster::reference(image).map_err(AblationError::Cluster)?;
+            refs.push((image, r));
+        }
+    }
+    let reference = |image: &[u8]| {
+        refs.iter()
+            .find(|(i, _)| *i == image)
+            .map_or(&[][..], |(_, r)| &r[..])
+    };
+    let mut jobs: Vec<(usize, f64, Job<'_>)> = Vec::new();
+    for (v, image) in VARIANTS.iter().zip(images) {
+        for &divisions in &cfg.divisions {
+            let cost = modelled
+                .iter()
+                .find(|c| c.variant == v.name && c.divisions == divisions)
+                .map_or(0.0, |c| c.total_seconds);
+            let job = Job {
+                variant: *v,
+                divisions,
+                image,
+                reference: reference(image),
+            };
+            jobs.push((jobs.len(), cost, job));
+        }
+    }
+    jobs.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let (order, jobs): (Vec<usize>, Vec<Job<'_>>) =
+        jobs.into_iter().map(|(i, _, job)| (i, job)).unzip();
+    let cells = ablation_cluster::run_jobs(&jobs, cfg, progress).map_err(AblationError::Cluster)?;
+    let mut cells: Vec<(usize, ClusterCell)> = order.into_iter().zip(cells).collect();
+    cells.sort_by_key(|(i, _)| *i);
+    Ok(cells.into_iter().map(|(_, c)| c).collect())
 }
 
 impl AblationReport {
@@ -320,6 +378,34 @@ impl AblationReport {
             s.push_str(&format!("| {d} |"));
             for v in VARIANTS {
                 match self.cell(v.name, d) {
+                    Some(c) => {
+                        s.push_str(&format!(" {:.3} s ({:.2}x) |", c.seconds, c.seconds / base))
+                    }
+                    None => s.push_str(" - |"),
+                }
+            }
+            s.push('\n');
+        }
+        s
+    }
+
+    pub fn cluster_cell(&self, variant: &str, divisions: u32) -> Option<&ClusterCell> {
+        self.cluster
+            .iter()
+            .find(|c| c.variant == variant && c.divisions == divisions)
+    }
+
+    /// Table 5.2 on the simulated cluster as Markdown: frame seconds and ratios to type 1.
+    pub fn cluster_table(&self) -> String {
+        let mut s =
+            table_head(std::iter::once("sub-screens").chain(VARIANTS.iter().map(|v| v.name)));
+        for &d in &self.config.divisions {
+            let base = self
+                .cluster_cell("type 1", d)
+                .map_or(f64::NAN, |c| c.seconds);
+            s.push_str(&format!("| {d} |"));
+            for v in VARIANTS {
+                match self.cluster_cell(v.name, d) {
                     Some(c) => {
                         s.push_str(&format!(" {:.3} s ({:.2}x) |", c.seconds, c.seconds / base))
                     }

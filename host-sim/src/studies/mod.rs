@@ -1,11 +1,12 @@
 //! The studies the `links sweep` and `links chart` commands run over the renderers and the
 //! simulated cluster, and the documents they write: the technique ablation
-//! ([`ablation`], [`ablation_doc`]), speed against accuracy ([`accuracy`], [`chart`]), the
+//! ([`ablation`], [`ablation_cluster`] on the simulated cluster, [`ablation_doc`]), speed against accuracy ([`accuracy`], [`chart`]), the
 //! node-count and division sweeps ([`cluster_sweep`]) and the fault sweep ([`faults`]).
 //! [`report`] writes their tables and the generated sections of the docs;
 //! [`sweep_commands`] are the `links sweep` commands over the cluster.
 
 pub mod ablation;
+pub mod ablation_cluster;
 pub mod ablation_doc;
 pub mod accuracy;
 pub mod backend;

@@ -35,7 +35,7 @@ use crate::cost::{CycleModel, DEFAULT_CLOCK_HZ};
 use exec::ExecError;
 use links_core::board::NodeBoard;
 use links_core::node::{NodeConfig, NodeReport};
-use links_core::render::Stats;
+use links_core::render::{Stats, Techniques};
 use links_core::root::{RootConfig, RootError, RootReport};
 use links_core::sched::Policy;
 use links_core::wire::{self, Job};
@@ -67,6 +67,9 @@ pub struct SimConfig {
     /// Node core clock (Hz).
     pub clock_hz: f64,
     pub model: CycleModel,
+    /// The speed techniques the nodes' tracers use (default: all). None changes a pixel;
+    /// they change the operation counts and with them the nodes' compute time.
+    pub techniques: Techniques,
     pub faults: Faults,
     /// Random bit errors per direction and lost broadcasts.
     pub noise: Noise,
@@ -109,6 +112,7 @@ impl Default for SimConfig {
             timing: BusTiming::default(),
             clock_hz: DEFAULT_CLOCK_HZ,
             model: CycleModel::default(),
+            techniques: Techniques::ALL,
             faults: Faults::default(),
             noise: Noise::default(),
             deaths: Vec::new(),
@@ -357,10 +361,18 @@ impl fmt::Display for SimError {
 
 impl std::error::Error for SimError {}
 
-/// (scene CRC, y, x, length) of a run.
-type RunKey = (u32, u32, u32, u32);
+/// (scene CRC, techniques, y, x, length) of a run.
+type RunKey = (u32, u8, u32, u32, u32);
 
-/// Memo of rendered runs keyed by (scene CRC, y, x, length).
+/// The techniques as a key: one bit each (the same run costs differently under each set).
+fn techniques_key(t: Techniques) -> u8 {
+    u8::from(t.bounding_boxes)
+        | u8::from(t.y_clip) << 1
+        | u8::from(t.x_clip) << 2
+        | u8::from(t.shadow_early_exit) << 3
+}
+
+/// Memo of rendered runs keyed by (scene CRC, techniques, y, x, length).
 #[derive(Default)]
 pub struct RunCache {
     map: Mutex<HashMap<RunKey, (Vec<u8>, Stats)>>,

@@ -6,11 +6,11 @@ use super::exec::{self, Delay, ExecError, Ps, SharedClock, Task};
 use super::framemem::{self, FrameMemory, ViaRoot};
 use super::rccost::RcClock;
 use super::star::{SharedStar, SimBus, SimNodeLink, Star};
-use super::{dm, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
+use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
 use crate::cost::CycleModel;
 use links_core::image::SceneView;
-use links_core::node::{run_node, NodeReport, RunRenderer, Tracing, WorkClock};
-use links_core::render::{render_run, RenderError, Rgb8, Stats, Tracer};
+use links_core::node::{run_node, NodeReport, RunRenderer, WorkClock};
+use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Tracer};
 use links_core::root::{
     run_bus, PixelSink, RootConfig, RootError, RootReport, RootState, MAX_BUSES,
 };
@@ -19,10 +19,27 @@ use std::cell::{Cell, RefCell};
 use std::rc::Rc;
 use std::sync::Arc;
 
-/// The tracer in `f32` (the nodes' format), optionally through a [`RunCache`].
+/// The tracer in `f32` (the nodes' format) with the configured techniques, optionally
+/// through a [`RunCache`].
 struct SimRenderer {
     cache: Option<Arc<RunCache>>,
     crcs: Rc<Vec<u32>>,
+    techniques: Techniques,
+}
+
+impl SimRenderer {
+    /// What a node's [`links_core::node::Tracing`] does, with `self.techniques`.
+    fn trace(
+        &self,
+        scene: SceneView<'_>,
+        y: u32,
+        x: u32,
+        out: &mut [Rgb8],
+    ) -> Result<Stats, RenderError> {
+        let mut t = Tracer::<f32>::with_techniques(scene, self.techniques);
+        render_run(&mut t, y, x, out)?;
+        Ok(t.stats)
+    }
 }
 
 impl RunRenderer for SimRenderer {
@@ -35,10 +52,11 @@ impl RunRenderer for SimRenderer {
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError> {
         let Some(cache) = &self.cache else {
-            return Tracing::<f32>::new().render(scene, frame, y, x, out);
+            return self.trace(scene, y, x, out);
         };
         let key = (
             self.crcs.get(frame as usize).copied().unwrap_or(0),
+            techniques_key(self.techniques),
             y,
             x,
             out.len() as u32,
@@ -51,12 +69,11 @@ impl RunRenderer for SimRenderer {
                 return Ok(*stats);
             }
         }
-        let mut t = Tracer::<f32>::new(scene);
-        render_run(&mut t, y, x, out)?;
+        let stats = self.trace(scene, y, x, out)?;
         if let Ok(mut m) = cache.map.lock() {
-            m.insert(key, (out.as_flattened().to_vec(), t.stats));
+            m.insert(key, (out.as_flattened().to_vec(), stats));
         }
-        Ok(t.stats)
+        Ok(stats)
     }
 }
 
@@ -336,6 +353,7 @@ fn node_tasks<'a>(
         let mut renderer = SimRenderer {
             cache: cfg.cache.clone(),
             crcs: crcs.clone(),
+            techniques: cfg.techniques,
         };
         let node_cfg = cfg.node;
         tasks.push(Some(Box::pin(async move {
