@@ -115,9 +115,16 @@ pub fn sim_config(v: &Variant, divisions: u32, cfg: &AblationConfig) -> SimConfi
         clock_hz: cfg.clock_hz,
         techniques: v.techniques,
         keep_frames: true,
+        // A type 4 sub-screen keeps a node busy for seconds (2.98 s on average at 480
+        // divisions): with the default 0.5 s time-out the RC declares working nodes dead and
+        // hands their work out twice. Nobody dies here, so no time-out fires.
+        node_timeout_s: STUDY_NODE_TIMEOUT_S,
         ..SimConfig::default()
     }
 }
+
+/// The node time-out of the study's simulations: longer than any sub-screen takes.
+pub const STUDY_NODE_TIMEOUT_S: f64 = 600.0;
 
 /// The cell of a finished simulation.
 pub fn cell_of(

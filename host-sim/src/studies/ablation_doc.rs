@@ -81,7 +81,7 @@ pub fn render(r: &AblationReport, scene: &str, command: &str) -> String {
          technique removes (ray set-up, the shading of every hit with its light loop, secondary-ray \
          spawning, clipping) already costs **{:.0} per ray** ({:.0}% of type 1, {:.0}% of BVH+exit). \
          The rest is traversal: type 1 visits **{:.0} nodes per ray** (the camera's parts are flat \
-         clusters of up to 360 triangles, each with its own box, as in LINKS-1), BVH+exit **{:.0}**, \
+         clusters of up to 360 triangles in leaves of up to 8, each leaf with its own box), BVH+exit **{:.0}**, \
          and on the Cortex-M4F a node visit costs {:.0} instructions against {:.0} for a triangle \
          test ({:.2} of one). Reaching 150x would leave room for at most **{:.1} node visits per \
          ray**: the ratio is bounded by how cheap a triangle test is on the M4F relative to a node \
@@ -142,12 +142,14 @@ fn cluster_section(r: &AblationReport) -> String {
          pixel runs, collection by snooping). Nodes compute with the same cycle model and clock. \
          Policy: `Policy::Fixed {{ divisions, shape: Split::Span }}` with each row's division \
          count, which cuts every row into exactly the runs of the modelled table and hands them \
-         out in the same order to whichever node asks first. Every cluster frame was checked \
+         out in the same order to whichever node asks first; the node time-out is {:.0} s, \
+         longer than any sub-screen (nobody dies here). Every cluster frame was checked \
          bit-identical to the host render of the same image (the run fails otherwise). Ratios \
          are to type 1 in the same row.\n\n",
         c.nodes,
         sim.timing.bit_rate_hz / 1e6,
         sim.timing.overhead_ns,
+        crate::studies::ablation_cluster::STUDY_NODE_TIMEOUT_S,
     );
     s.push_str(&r.cluster_table());
     s.push_str(
@@ -245,12 +247,12 @@ fn cluster_comparison(r: &AblationReport) -> String {
         });
         s.push_str(&format!(
             " In {} at {} sub-screens a sub-screen takes a node {per_job:.2} s on average, longer than \
-             the RC's default node time-out ({} s, raised after each false alarm), so the RC \
+             the study's node time-out ({} s), so the RC \
              declared {} silent but working nodes dead and handed {} sub-screens out again: work \
              done twice, counted in its operation counts and its time.",
             k.variant,
             k.divisions,
-            SimConfig::default().node_timeout_s,
+            crate::studies::ablation_cluster::STUDY_NODE_TIMEOUT_S,
             k.timeouts,
             k.reissued,
         ));
