@@ -29,6 +29,10 @@ use core::marker::PhantomData;
 pub trait WorkClock {
     /// The node just did the work counted in `stats` (a delta).
     async fn worked(&mut self, stats: &Stats);
+
+    /// The node just checked a complete scene: its CRC-32 and the full validation
+    /// ([`SceneView::new`]), once per bank that becomes ready. `scene` is that scene.
+    async fn checked_scene(&mut self, _scene: &SceneView<'_>) {}
 }
 
 /// Renders one scanline run of the scene held in a bank.
@@ -135,6 +139,10 @@ pub struct NodeReport {
     pub bad_jobs: u32,
     /// Scene chunks written.
     pub chunks: u32,
+    /// Full scene validations ([`SceneView::new`], one per bank completed) and cheap
+    /// re-opens of a validated bank ([`SceneView::open_validated`], per run and `Work` reply).
+    pub validations: u32,
+    pub opens: u32,
     pub stats: Stats,
 }
 
@@ -143,7 +151,7 @@ impl defmt::Format for NodeReport {
     fn format(&self, f: defmt::Formatter<'_>) {
         defmt::write!(
             f,
-            "jobs={} pixels={} posted={} resent={} polls={} bad={} bad_jobs={} chunks={}",
+            "jobs={} pixels={} posted={} resent={} polls={} bad={} bad_jobs={} chunks={} validations={} opens={}",
             self.jobs,
             self.pixels,
             self.messages_posted,
@@ -151,7 +159,9 @@ impl defmt::Format for NodeReport {
             self.polls,
             self.bad_messages,
             self.bad_jobs,
-            self.chunks
+            self.chunks,
+            self.validations,
+            self.opens
         )
     }
 }
@@ -168,6 +178,10 @@ struct Bank {
     /// The broadcast's SceneEnd was seen (so missing chunks are really missing).
     ended: bool,
     ready: bool,
+    /// The bank's bytes passed [`SceneView::new`] and no byte was written since: only then
+    /// is the scene opened without the walk ([`Bank::view`]). Set by `check_scene`, cleared
+    /// by every write ([`Bank::write`]) and by every reset ([`Bank::expect`]).
+    validated: bool,
 }
 
 impl Bank {
@@ -179,6 +193,7 @@ impl Bank {
         pieces: [0; MAX_SCENE / SCENE_PIECE / 32],
         ended: false,
         ready: false,
+        validated: false,
     };
 
     fn chunks(&self) -> u32 {
@@ -221,6 +236,29 @@ impl Bank {
 
     fn first_missing(&self) -> Option<u32> {
         (0..self.chunks()).find(|&c| self.got[(c / 32) as usize] & (1 << (c % 32)) == 0)
+    }
+
+    /// Write `data` at `offset` of the bank's bytes `mem` (the only way bytes reach a bank):
+    /// the bytes are no longer the ones validated. False if the range is outside `mem`.
+    fn write(&mut self, mem: &mut [u8], offset: usize, data: &[u8]) -> bool {
+        self.validated = false;
+        let end = offset.checked_add(data.len());
+        match end.and_then(|end| mem.get_mut(offset..end)) {
+            Some(dst) => {
+                dst.copy_from_slice(data);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// Frame `frame`'s scene, if this bank holds it validated (`mem` = the bank's bytes):
+    /// opened without the reference walk ([`SceneView::open_validated`]).
+    fn view<'m>(&self, mem: &'m [u8], frame: u16) -> Option<SceneView<'m>> {
+        if !(self.ready && self.validated && self.frame == Some(frame)) {
+            return None;
+        }
+        SceneView::open_validated(mem.get(..self.total as usize)?).ok()
     }
 
     /// Start receiving another scene into this bank unless it is the one being received.
@@ -285,6 +323,8 @@ struct Nc {
     last_rc_seq: u16,
     /// Scene state to report (sequenced).
     status: Option<SceneState>,
+    /// The bank just checked (`check_scene`), whose time the clock has yet to hear of.
+    checked: Option<usize>,
     /// The RC broadcast [`Down::Wake`] for this frame: answer if idle.
     wake: Option<u16>,
     /// The RC's half of the last exchange was unreadable: ask again (a `Poll`) even with
@@ -300,6 +340,29 @@ struct Nc {
 }
 
 impl Nc {
+    /// A node that has received nothing yet, continuing `report`.
+    fn new(report: NodeReport) -> Self {
+        Nc {
+            banks: [Bank::EMPTY, Bank::EMPTY],
+            queue: [None; JOB_QUEUE],
+            last_taken: None,
+            cursor: None,
+            built: None,
+            slots: [None, None],
+            resend: 2,
+            next_seq: 0,
+            exchanges: 0,
+            last_rc_seq: 0,
+            status: None,
+            checked: None,
+            wake: None,
+            reask: false,
+            run_cap: MAX_RUN,
+            stopped: false,
+            report,
+        }
+    }
+
     fn unacked(&self) -> usize {
         self.slots.iter().filter(|s| s.is_some()).count()
     }
@@ -448,7 +511,10 @@ fn scene_chunk(
     if nc.banks[b].ready {
         return false;
     }
-    banks[b][offset as usize..end as usize].copy_from_slice(data);
+    if !nc.banks[b].write(banks[b], offset as usize, data) {
+        nc.report.bad_messages += 1;
+        return false;
+    }
     nc.banks[b].got_pieces(offset / piece, end.div_ceil(piece));
     nc.report.chunks += 1;
     // Broadcasts go in order: the last chunk ends it even if its SceneEnd is lost. A chunk
@@ -460,15 +526,25 @@ fn scene_chunk(
     nc.banks[b].ready || nc.banks[b].ended
 }
 
+/// A complete bank whose CRC-32 and full validation pass becomes ready and validated (and
+/// `nc.checked` names it, so the loop charges the check's time); a complete bank that fails
+/// is taken again.
 fn check_scene(nc: &mut Nc, banks: &[&mut [u8]; 2], b: usize) {
     let bank = &mut nc.banks[b];
     if bank.first_missing().is_some() {
         return;
     }
-    let bytes = &banks[b][..bank.total as usize];
-    let ok = bank.crc == wire::CRC32.checksum(bytes) && SceneView::new(bytes).is_ok();
+    let Some(bytes) = banks[b].get(..bank.total as usize) else {
+        return;
+    };
+    let ok = bank.crc == wire::CRC32.checksum(bytes) && {
+        nc.report.validations += 1;
+        SceneView::new(bytes).is_ok()
+    };
     if ok {
         bank.ready = true;
+        bank.validated = true;
+        nc.checked = Some(b);
     } else {
         // Complete but wrong: take it all again.
         bank.got = [0; MAX_CHUNKS / 32];
@@ -487,24 +563,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
     mut banks: [&mut [u8]; 2],
     report: &mut NodeReport,
 ) -> Result<(), NodeError> {
-    let mut nc = Nc {
-        banks: [Bank::EMPTY, Bank::EMPTY],
-        queue: [None; JOB_QUEUE],
-        last_taken: None,
-        cursor: None,
-        built: None,
-        slots: [None, None],
-        resend: 2,
-        next_seq: 0,
-        exchanges: 0,
-        last_rc_seq: 0,
-        status: None,
-        wake: None,
-        reask: false,
-        run_cap: MAX_RUN,
-        stopped: false,
-        report: *report,
-    };
+    let mut nc = Nc::new(*report);
     let mut pix: [Rgb8; MAX_RUN] = [[0; 3]; MAX_RUN];
     let mut rx = [0u8; MAX_MESSAGE];
     let mut coded = [0u8; 3 * MAX_RUN];
@@ -626,6 +685,12 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                 }
                 _ => nc.report.bad_messages += 1,
             }
+            if let Some(b) = nc.checked.take() {
+                let bank = &nc.banks[b];
+                if let Some(view) = bank.frame.and_then(|f| bank.view(&banks[b], f)) {
+                    clock.checked_scene(&view).await;
+                }
+            }
             *report = nc.report;
             if exchanged {
                 nc.reask = ack.is_none();
@@ -673,12 +738,8 @@ async fn render_next<C: WorkClock, R: RunRenderer>(
         return false;
     };
     let b = (cur.job.frame % 2) as usize;
-    let bank = &nc.banks[b];
-    let view = if bank.ready && bank.frame == Some(cur.job.frame) {
-        SceneView::new(&banks[b][..bank.total as usize]).ok()
-    } else {
-        None
-    };
+    let view = nc.banks[b].view(&banks[b], cur.job.frame);
+    nc.report.opens += u32::from(view.is_some());
     let Some(view) = view else {
         nc.report.bad_jobs += 1;
         nc.cursor = None;
@@ -736,11 +797,11 @@ fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>, exchanged
         Down::Work { jobs } => {
             let mut dims = [None; 2];
             for (b, d) in dims.iter_mut().enumerate() {
-                if let (Some(frame), true) = (nc.banks[b].frame, nc.banks[b].ready) {
-                    if let Ok(v) = SceneView::new(&banks[b][..nc.banks[b].total as usize]) {
-                        let f = v.camera::<f32>();
-                        *d = Some((frame, f.width, f.height));
-                    }
+                let bank = &nc.banks[b];
+                if let Some(v) = bank.frame.and_then(|f| bank.view(&banks[b], f)) {
+                    nc.report.opens += 1;
+                    let f = v.camera::<f32>();
+                    *d = bank.frame.map(|frame| (frame, f.width, f.height));
                 }
             }
             nc.take_jobs(&jobs, dims);
@@ -820,5 +881,100 @@ mod tests {
         assert_eq!(b.first_missing(), Some(2));
         b.got_pieces(2 * per, 2 * per + 1);
         assert_eq!(b.first_missing(), None);
+    }
+
+    use crate::testkit::scene::tiny_image;
+    use core::future::Future;
+    use core::task::{Context, Poll, Waker};
+
+    /// Broadcast `image` as frame 0 in whole chunks into `nc`'s bank 0 (`mem`).
+    fn broadcast(nc: &mut Nc, mem: &mut [&mut [u8]; 2], image: &[u8]) {
+        let (total, crc) = (image.len() as u32, wire::CRC32.checksum(image));
+        for (i, data) in image.chunks(SCENE_CHUNK).enumerate() {
+            let offset = (i * SCENE_CHUNK) as u32;
+            scene_chunk(nc, mem, 0, offset, total, crc, data, false);
+        }
+    }
+
+    /// Counts the runs it is asked to render (all black).
+    struct Count(u32);
+    impl RunRenderer for Count {
+        fn render(
+            &mut self,
+            _: SceneView<'_>,
+            _: u16,
+            _: u32,
+            _: u32,
+            _: &mut [Rgb8],
+        ) -> Result<Stats, RenderError> {
+            self.0 += 1;
+            Ok(Stats::default())
+        }
+    }
+
+    /// Try to render one run of an 8-pixel job on frame 0: (rendered, runs rendered).
+    fn render_job(nc: &mut Nc, mem: &[&mut [u8]; 2]) -> (bool, u32) {
+        nc.queue[0] = Some(Job {
+            id: 1,
+            frame: 0,
+            region: wire::Region::Span { start: 0, len: 8 },
+        });
+        let (mut r, mut pix, mut clock) = (Count(0), [[0; 3]; MAX_RUN], RealTime);
+        let rendered = {
+            let mut fut = core::pin::pin!(render_next(nc, mem, &mut r, &mut pix, &mut clock));
+            let mut cx = Context::from_waker(Waker::noop());
+            let Poll::Ready(rendered) = fut.as_mut().poll(&mut cx) else {
+                panic!("render_next waited on a clock that never waits");
+            };
+            rendered
+        };
+        (rendered, r.0)
+    }
+
+    #[test]
+    fn a_bank_is_validated_once_and_any_write_clears_it() {
+        let image = tiny_image(8, &[(1, 0)]);
+        assert!(SceneView::new(&image).is_ok());
+        let (mut a, mut b) = ([0u8; 2048], [0u8; 2048]);
+        let mut mem = [&mut a[..], &mut b[..]];
+        let mut nc = Nc::new(NodeReport::default());
+        broadcast(&mut nc, &mut mem, &image);
+        assert!(nc.banks[0].ready && nc.banks[0].validated);
+        assert_eq!((nc.report.validations, nc.checked), (1, Some(0)));
+        // Runs open the validated bank cheaply: no second validation.
+        assert_eq!(render_job(&mut nc, &mem), (true, 1));
+        assert_eq!(render_job(&mut nc, &mem), (true, 1));
+        assert_eq!((nc.report.validations, nc.report.opens), (1, 2));
+        // The same chunk again is ignored (the bank is ready): still validated.
+        broadcast(&mut nc, &mut mem, &image);
+        assert!(nc.banks[0].validated);
+        // A byte written into the bank: no longer validated, never opened.
+        assert!(nc.banks[0].write(mem[0], 0, &image[..4]));
+        assert!(nc.banks[0].ready && !nc.banks[0].validated);
+        assert!(nc.banks[0].view(mem[0], 0).is_none());
+        assert_eq!(render_job(&mut nc, &mem), (false, 0));
+        assert_eq!(nc.report.bad_jobs, 1);
+        // Another scene for the frame resets the bank: not validated until it completes.
+        nc.banks[0].validated = true;
+        nc.banks[0].expect(0, image.len() as u32, 1);
+        assert!(!nc.banks[0].validated && !nc.banks[0].ready);
+    }
+
+    #[test]
+    fn a_corrupt_scene_with_a_good_crc_is_never_rendered() {
+        // The leaf names triangle 5 of 1: the CRC matches, the validation fails.
+        let image = tiny_image(8, &[(1, 5)]);
+        assert!(SceneView::new(&image).is_err());
+        let (mut a, mut b) = ([0u8; 2048], [0u8; 2048]);
+        let mut mem = [&mut a[..], &mut b[..]];
+        let mut nc = Nc::new(NodeReport::default());
+        broadcast(&mut nc, &mut mem, &image);
+        assert_eq!(nc.report.validations, 1);
+        assert!(!nc.banks[0].ready && !nc.banks[0].validated);
+        assert_eq!(nc.checked, None);
+        // Taken again from scratch, and no run is rendered from it.
+        assert_eq!(nc.banks[0].first_missing(), Some(0));
+        assert_eq!(render_job(&mut nc, &mem), (false, 0));
+        assert_eq!((nc.report.bad_jobs, nc.report.opens), (1, 0));
     }
 }

@@ -26,6 +26,22 @@ impl<'a> SceneView<'a> {
         view.check_references()?;
         Ok(view)
     }
+
+    /// Open bytes that already passed [`Self::new`] and have not changed since: the header
+    /// and section table are checked again (O(sections), so every accessor stays inside
+    /// `bytes` whatever they hold) but the O(records) walk of the cross-references is
+    /// skipped. On bytes that never passed [`Self::new`] the accessors still cannot index
+    /// out of range, but a walk of the node tree may read nonsense or not end.
+    pub fn open_validated(bytes: &'a [u8]) -> Result<Self, ImageError> {
+        let storage = check_header(bytes)?;
+        let (table, sections) = check_table(bytes)?;
+        Ok(Self {
+            bytes,
+            table,
+            sections: Sections(sections),
+            storage,
+        })
+    }
 }
 
 /// Magic, version, number format and total length; returns the number format.
