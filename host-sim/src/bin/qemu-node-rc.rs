@@ -6,7 +6,6 @@
 
 use clap::Parser;
 use links_core::dm::{compile, CompileOptions};
-use links_core::wire::{self, Down};
 use links_host::qemu_node::{
     check_outcome, compare_transcripts, run_rc, simulated_frame, Corrupt, Event, LocalNode,
     QemuNode, RcOutcome,
@@ -192,28 +191,6 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
     Ok((outcome, wall))
 }
 
-/// `Work` replies the node received once its scene was complete (each makes it validate the
-/// scene to check the jobs against the screen).
-fn work_after_scene(o: &RcOutcome) -> u64 {
-    let mut complete = false;
-    let mut n = 0;
-    for e in &o.transcript {
-        if let Event::Down { exchanged, frame } = e {
-            match wire::decode::<Down>(frame).map(|env| env.msg) {
-                Ok(Down::Scene {
-                    offset,
-                    total,
-                    data,
-                    ..
-                }) if offset as usize + data.len() == total as usize => complete = true,
-                Ok(Down::Work { .. }) if *exchanged && complete => n += 1,
-                _ => {}
-            }
-        }
-    }
-    n
-}
-
 fn run(a: Args) -> Result<(), String> {
     let desc = load_scene(&a.scene).map_err(|e| e.to_string())?;
     let opts = CompileOptions {
@@ -323,17 +300,18 @@ fn qemu_runs(
         );
         // Where the protocol instructions go, from unit costs the firmware measured after the
         // loop (estimates: counts x unit costs).
-        let (validate, crc, scene_bytes) = (
+        let (validate, open, crc, scene_bytes) = (
             get("unit_validate")?,
+            get("unit_open")?,
             get("unit_scene_crc")?,
             get("scene_bytes")?.max(1),
         );
-        let validations = get("render_calls")? + work_after_scene(&q) + 1;
+        let (validations, opens) = (get("validations")?, get("opens")?);
         let crc_bytes = get("bytes_in")? + get("bytes_out")? + scene_bytes;
-        let v_est = validations * validate;
+        let v_est = validations * validate + opens * open;
         let c_est = crc_bytes * crc / scene_bytes;
         println!(
-            "  of the protocol work, about: scene validation {v_est} ({:.1}%: SceneView::new of the {scene_bytes}-byte scene, {validate} instructions, {validations} times: once per run rendered, once per Work reply, once on arrival); CRC-32 {c_est} ({:.1}%: {crc_bytes} bytes at {:.1} per byte); the rest {} ({:.1}%: postcard, RLE, chunk copies, bookkeeping)",
+            "  of the protocol work, about: scene validation {v_est} ({:.1}%: SceneView::new of the {scene_bytes}-byte scene, {validate} instructions, {validations} time(s), once per scene received; SceneView::open_validated, {open} instructions, {opens} times, once per run rendered and per Work reply); CRC-32 {c_est} ({:.1}%: {crc_bytes} bytes at {:.1} per byte); the rest {} ({:.1}%: postcard, RLE, chunk copies, bookkeeping)",
             pct(v_est),
             pct(c_est),
             crc as f64 / scene_bytes as f64,

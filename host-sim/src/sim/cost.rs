@@ -138,6 +138,49 @@ impl Default for CycleModel {
     }
 }
 
+/// What a node's check of a complete scene costs (`run_node`'s `check_scene`: the CRC-32
+/// over the bank, then [`SceneView::new`] once per bank; later runs open the checked bank
+/// with `SceneView::open_validated`, which the per-run weights cover). Instructions on the
+/// Cortex-M4F, from `scripts/qemu-node`: `unit_scene_crc` / `scene_bytes` (5.4 per byte),
+/// `unit_open` (2,080: the header and the section table) and, per record the validator
+/// walks, photo1's (39,200 - 2,080) / 1,333 records = 27.8.
+///
+/// [`SceneView::new`]: links_core::image::SceneView::new
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneCheckCost {
+    pub crc_per_byte: f64,
+    pub header_and_table: f64,
+    pub per_record: f64,
+}
+
+impl SceneCheckCost {
+    pub const CORTEX_M4F: SceneCheckCost = SceneCheckCost {
+        crc_per_byte: 5.4,
+        header_and_table: 2080.0,
+        per_record: 27.8,
+    };
+
+    /// Instructions to check `scene` (its bytes and the records the validator walks).
+    pub fn instructions(&self, scene: &links_core::image::SceneView<'_>) -> f64 {
+        use links_core::image::Section;
+        let walked: u32 = Section::ALL
+            .iter()
+            .filter(|s| !matches!(s, Section::Texels | Section::Vertices | Section::Normals))
+            .filter(|s| !matches!(s, Section::Uvs | Section::Balls | Section::Rects))
+            .map(|&s| scene.count(s))
+            .sum();
+        self.crc_per_byte * scene.bytes().len() as f64
+            + self.header_and_table
+            + self.per_record * f64::from(walked)
+    }
+}
+
+impl Default for SceneCheckCost {
+    fn default() -> Self {
+        Self::CORTEX_M4F
+    }
+}
+
 /// The reference node clock: STM32F407 at 168 MHz.
 pub const DEFAULT_CLOCK_HZ: f64 = 168e6;
 
@@ -466,6 +509,22 @@ pub fn prediction_ratios<'s>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_scene_check_costs_what_the_m4f_measured_on_photo1() {
+        // scripts/qemu-node on photo1 at 48x45 (an 18,292-byte image): one validation
+        // 39,200 instructions, the CRC-32 over the scene 98,400.
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
+        let img = crate::scene_file::compile_at(&path, 48, 45).unwrap();
+        assert_eq!(img.len(), 18_292);
+        let v = links_core::image::SceneView::new(&img).unwrap();
+        let got = SceneCheckCost::CORTEX_M4F.instructions(&v);
+        let measured = 39_200.0 + 98_400.0;
+        assert!(
+            (got - measured).abs() / measured < 0.01,
+            "{got} vs {measured}"
+        );
+    }
 
     #[test]
     fn cycles_are_the_weighted_sum_of_counts() {

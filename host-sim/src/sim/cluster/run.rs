@@ -7,7 +7,7 @@ use super::framemem::{self, FrameMemory, ViaRoot};
 use super::rccost::RcClock;
 use super::star::{SharedStar, SimBus, SimNodeLink, Star};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
-use crate::cost::CycleModel;
+use crate::cost::{CycleModel, SceneCheckCost};
 use links_core::image::SceneView;
 use links_core::node::{run_node, NodeReport, RunRenderer, WorkClock};
 use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Tracer};
@@ -87,14 +87,26 @@ struct SimWork {
     id: usize,
 }
 
-impl WorkClock for SimWork {
-    async fn worked(&mut self, stats: &Stats) {
-        let cycles = self.model.cycles(stats);
+impl SimWork {
+    /// Spend `cycles` of the node's core in virtual time.
+    async fn spend(&mut self, cycles: u64) {
         let ps = (cycles as f64 * 1e12 / self.hz).ceil() as Ps;
         self.busy += ps;
         self.report.borrow_mut()[self.id] = self.busy;
         let until = self.clock.borrow().now + ps;
         Delay::new(&self.clock, until).await;
+    }
+}
+
+impl WorkClock for SimWork {
+    async fn worked(&mut self, stats: &Stats) {
+        self.spend(self.model.cycles(stats)).await;
+    }
+
+    async fn checked_scene(&mut self, scene: &SceneView<'_>) {
+        let instr = SceneCheckCost::CORTEX_M4F.instructions(scene);
+        self.spend((instr * self.model.cycles_per_instruction).ceil() as u64)
+            .await;
     }
 }
 

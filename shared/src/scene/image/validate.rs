@@ -38,6 +38,7 @@ impl<'a> SceneView<'a> {
         Ok(Self {
             bytes,
             table,
+            grid: read_grid(sections[Section::Camera as usize]),
             sections: Sections(sections),
             storage,
         })
@@ -115,7 +116,9 @@ fn read_grid(camera_bytes: &[u8]) -> Grid {
     Grid {
         origin: [0, 4, 8].map(|k| w(GRID_ORIGIN + k)),
         step: [0, 4, 8].map(|k| w(GRID_STEP + k)),
-        rect_shift: w(RECT_SHIFT),
+        // Clamped so no shift of a rectangle can overflow, whatever the bytes hold (the
+        // camera check rejects the raw value when it is out of range).
+        rect_shift: w(RECT_SHIFT).min(MAX_RECT_SHIFT),
     }
 }
 
@@ -160,7 +163,7 @@ impl SceneView<'_> {
         if camera.max_depth > MAX_DEPTH_LIMIT
             || !side.contains(&camera.width)
             || !side.contains(&camera.height)
-            || self.grid.rect_shift > camera::MAX_RECT_SHIFT
+            || self.u(self.rec(Section::Camera, 0) + camera::RECT_SHIFT) > camera::MAX_RECT_SHIFT
         {
             return Err(bad_value(Section::Camera, 0));
         }
