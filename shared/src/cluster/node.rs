@@ -687,7 +687,7 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
             }
             if let Some(b) = nc.checked.take() {
                 let bank = &nc.banks[b];
-                if let Some(view) = bank.frame.and_then(|f| bank.view(&banks[b], f)) {
+                if let Some(view) = bank.frame.and_then(|f| bank.view(banks[b], f)) {
                     clock.checked_scene(&view).await;
                 }
             }
@@ -738,7 +738,7 @@ async fn render_next<C: WorkClock, R: RunRenderer>(
         return false;
     };
     let b = (cur.job.frame % 2) as usize;
-    let view = nc.banks[b].view(&banks[b], cur.job.frame);
+    let view = nc.banks[b].view(banks[b], cur.job.frame);
     nc.report.opens += u32::from(view.is_some());
     let Some(view) = view else {
         nc.report.bad_jobs += 1;
@@ -798,7 +798,7 @@ fn handle_down(nc: &mut Nc, banks: &mut [&mut [u8]; 2], msg: Down<'_>, exchanged
             let mut dims = [None; 2];
             for (b, d) in dims.iter_mut().enumerate() {
                 let bank = &nc.banks[b];
-                if let Some(v) = bank.frame.and_then(|f| bank.view(&banks[b], f)) {
+                if let Some(v) = bank.frame.and_then(|f| bank.view(banks[b], f)) {
                     nc.report.opens += 1;
                     let f = v.camera::<f32>();
                     *d = bank.frame.map(|frame| (frame, f.width, f.height));
