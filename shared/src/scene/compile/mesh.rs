@@ -288,37 +288,51 @@ pub(super) struct SharedVertices {
 
 impl SharedVertices {
     fn vertex(&mut self, w: &mut ImageWriter, p: [f32; 3]) -> Result<u16, DmError> {
-        if let Some(&i) = self.positions.get(&p.map(f32::to_bits)) {
-            return Ok(i);
-        }
-        let (i, r) = w.push(Section::Vertices);
-        r.fs(vertex::P, &p);
-        let i = index16(i, "vertices")?;
-        self.positions.insert(p.map(f32::to_bits), i);
-        Ok(i)
+        let key = p.map(f32::to_bits);
+        record_once(
+            &mut self.positions,
+            key,
+            w,
+            Section::Vertices,
+            "vertices",
+            |r| {
+                r.fs(vertex::P, &p);
+            },
+        )
     }
     /// A unit normal, compressed to i16 components (see [`normal`]).
     fn normal(&mut self, w: &mut ImageWriter, n: [f32; 3]) -> Result<u16, DmError> {
         let q = n.map(|c| (f64::from(c).clamp(-1.0, 1.0) * normal::SCALE).round() as i16);
-        if let Some(&i) = self.normals.get(&q) {
-            return Ok(i);
-        }
-        let (i, r) = w.push(Section::Normals);
-        r.hs(normal::N, &q.map(|c| c as u16));
-        let i = index16(i, "normals")?;
-        self.normals.insert(q, i);
-        Ok(i)
+        record_once(&mut self.normals, q, w, Section::Normals, "normals", |r| {
+            r.hs(normal::N, &q.map(|c| c as u16));
+        })
     }
     fn uv(&mut self, w: &mut ImageWriter, uv: [f32; 2]) -> Result<u16, DmError> {
-        if let Some(&i) = self.uvs.get(&uv.map(f32::to_bits)) {
-            return Ok(i);
-        }
-        let (i, r) = w.push(Section::Uvs);
-        r.fs(uv::UV, &uv);
-        let i = index16(i, "uvs")?;
-        self.uvs.insert(uv.map(f32::to_bits), i);
-        Ok(i)
+        let key = uv.map(f32::to_bits);
+        record_once(&mut self.uvs, key, w, Section::Uvs, "uvs", |r| {
+            r.fs(uv::UV, &uv);
+        })
     }
+}
+
+/// The index of the record `key` names: the one written before, or a new record of `section`
+/// filled by `fill`.
+fn record_once<K: core::hash::Hash + Eq>(
+    seen: &mut std::collections::HashMap<K, u16>,
+    key: K,
+    w: &mut ImageWriter,
+    section: Section,
+    what: &str,
+    fill: impl FnOnce(crate::image::writer::Rec<'_>),
+) -> Result<u16, DmError> {
+    if let Some(&i) = seen.get(&key) {
+        return Ok(i);
+    }
+    let (i, r) = w.push(section);
+    fill(r);
+    let i = index16(i, what)?;
+    seen.insert(key, i);
+    Ok(i)
 }
 
 /// Put the triangles of the first triangle's material first (stable); returns how many.
