@@ -43,6 +43,9 @@ impl Storage {
 pub use crate::fixed::Fx;
 
 /// A scalar the renderer can compute with.
+/// Largest whole exponent [`Real::pow_exponent`] raises to by squaring.
+pub const POW_BY_SQUARING_MAX: u32 = 4096;
+
 pub trait Real:
     Copy
     + Debug
@@ -107,6 +110,28 @@ pub trait Real:
     fn abs(self) -> Self;
     fn floor(self) -> Self;
     fn powf(self, e: Self) -> Self;
+    /// `self^e` for `self >= 0`, `e >= 0` (specular and spot exponents): by repeated
+    /// squaring when `e` is a whole number up to [`POW_BY_SQUARING_MAX`] (a few multiplies
+    /// instead of `powf`'s logarithm and exponential), else [`Real::powf`].
+    #[inline]
+    fn pow_exponent(self, e: Self) -> Self {
+        let ef = e.to_f32();
+        let k = ef as u32;
+        if k as f32 != ef || k > POW_BY_SQUARING_MAX {
+            return self.powf(e);
+        }
+        let (mut k, mut base, mut acc) = (k, self, Self::ONE);
+        while k > 0 {
+            if k & 1 == 1 {
+                acc *= base;
+            }
+            k >>= 1;
+            if k > 0 {
+                base *= base;
+            }
+        }
+        acc
+    }
     fn atan2(self, x: Self) -> Self;
     fn acos(self) -> Self;
     fn is_finite(self) -> bool;
@@ -346,6 +371,16 @@ mod tests {
         assert_eq!(Real::sqrt(2.0f64), 2.0f64.sqrt());
         assert!((Real::powf(0.5f32, 10.0) - 0.5f32.powi(10)).abs() < 1e-7);
         assert!((Real::atan2(1.0f64, 1.0) - core::f64::consts::FRAC_PI_4).abs() < 1e-15);
+        // Whole exponents by squaring: exact where the products are (powers of two), close
+        // to powf elsewhere; anything else goes to powf.
+        assert_eq!(Real::pow_exponent(0.5f32, 10.0), 1.0 / 1024.0);
+        assert_eq!(Real::pow_exponent(0.5f64, 0.0), 1.0);
+        assert_eq!(Real::pow_exponent(3.0f64, 5.0), 243.0);
+        let c = 0.93f32;
+        let want = (c as f64).powi(40);
+        assert!((Real::pow_exponent(c, 40.0) as f64 - want).abs() < 8.0 * f32::EPSILON as f64);
+        assert_eq!(Real::pow_exponent(c, 2.5), Real::powf(c, 2.5));
+        assert_eq!(Real::pow_exponent(c, 1e6), Real::powf(c, 1e6));
     }
 }
 

@@ -32,6 +32,48 @@ fn edge_positive<T: Real>(e: T, ax: T, ay: T, bx: T, by: T) -> bool {
     dy > T::ZERO || (dy == T::ZERO && dx < T::ZERO)
 }
 
+/// What every triangle test of one ray shares (Woop, Benthin and Wald): the ray's origin,
+/// the axis permutation that makes the largest direction component z, and the shear that
+/// turns the ray into the +z axis. Made once per ray instead of once per triangle.
+#[derive(Clone, Copy, Debug)]
+pub struct Shear<T> {
+    origin: Vec3<T>,
+    kz: usize,
+    sx: T,
+    sy: T,
+    sz: T,
+}
+
+impl<T: Real> Shear<T> {
+    /// The shear of a ray from the origin along +z (no set-up work).
+    #[inline]
+    pub fn along_z() -> Self {
+        Self {
+            origin: Vec3::zero(),
+            kz: 2,
+            sx: T::ZERO,
+            sy: T::ZERO,
+            sz: T::ONE,
+        }
+    }
+
+    #[inline]
+    pub fn new(ray: &Ray<T>) -> Self {
+        let kz = ray.dir.abs().max_dimension();
+        let kx = if kz == 2 { 0 } else { kz + 1 };
+        let ky = if kx == 2 { 0 } else { kx + 1 };
+        let d = ray.dir.permute(kx, ky, kz);
+        let sz = d.z.recip();
+        Self {
+            origin: ray.origin,
+            kz,
+            sx: -d.x * sz,
+            sy: -d.y * sz,
+            sz,
+        }
+    }
+}
+
 impl<T: Real> Triangle<T> {
     /// Unnormalised geometric normal (p1 - p0) x (p2 - p0).
     #[inline]
@@ -47,25 +89,41 @@ impl<T: Real> Triangle<T> {
     }
 
     /// Intersect for t in (0, t_max). Two-sided.
-    // The negated comparisons below are deliberate: they reject NaN.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    #[inline]
     pub fn intersect(&self, ray: &Ray<T>, t_max: T) -> Option<TriHit<T>> {
+        self.intersect_sheared(&Shear::new(ray), t_max)
+    }
+
+    /// [`Self::intersect`] with the ray's part of the work done once per ray.
+    // The negated comparisons in the test are deliberate: they reject NaN.
+    #[inline]
+    pub fn intersect_sheared(&self, ray: &Shear<T>, t_max: T) -> Option<TriHit<T>> {
+        // One copy per axis permutation, so the permutation is register naming, not
+        // run-time component selects.
+        match ray.kz {
+            0 => self.intersect_permuted::<1, 2, 0>(ray, t_max),
+            1 => self.intersect_permuted::<2, 0, 1>(ray, t_max),
+            _ => self.intersect_permuted::<0, 1, 2>(ray, t_max),
+        }
+    }
+
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    fn intersect_permuted<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        ray: &Shear<T>,
+        t_max: T,
+    ) -> Option<TriHit<T>> {
         // Translate to the ray origin, permute so the largest direction component is z.
-        let mut p0 = self.p[0] - ray.origin;
-        let mut p1 = self.p[1] - ray.origin;
-        let mut p2 = self.p[2] - ray.origin;
-        let kz = ray.dir.abs().max_dimension();
-        let kx = if kz == 2 { 0 } else { kz + 1 };
-        let ky = if kx == 2 { 0 } else { kx + 1 };
-        let d = ray.dir.permute(kx, ky, kz);
-        p0 = p0.permute(kx, ky, kz);
-        p1 = p1.permute(kx, ky, kz);
-        p2 = p2.permute(kx, ky, kz);
+        let permute = |v: Vec3<T>| {
+            let c = [v.x, v.y, v.z];
+            Vec3::new(c[KX], c[KY], c[KZ])
+        };
+        let mut p0 = permute(self.p[0] - ray.origin);
+        let mut p1 = permute(self.p[1] - ray.origin);
+        let mut p2 = permute(self.p[2] - ray.origin);
 
         // Shear so the ray runs along +z.
-        let sz = d.z.recip();
-        let sx = -d.x * sz;
-        let sy = -d.y * sz;
+        let (sx, sy, sz) = (ray.sx, ray.sy, ray.sz);
         p0.x += sx * p0.z;
         p0.y += sy * p0.z;
         p1.x += sx * p1.z;
@@ -73,9 +131,13 @@ impl<T: Real> Triangle<T> {
         p2.x += sx * p2.z;
         p2.y += sy * p2.z;
 
-        // Edge functions at the ray (the 2-D origin).
+        // Edge functions at the ray (the 2-D origin). Two strictly opposite signs reject
+        // before the third is computed (the tie-break only matters for exact zeros).
         let e0 = p1.x * p2.y - p1.y * p2.x;
         let e1 = p2.x * p0.y - p2.y * p0.x;
+        if (e0 > T::ZERO && e1 < T::ZERO) || (e0 < T::ZERO && e1 > T::ZERO) {
+            return None;
+        }
         let e2 = p0.x * p1.y - p0.y * p1.x;
         let s0 = edge_positive(e0, p1.x, p1.y, p2.x, p2.y);
         let s1 = edge_positive(e1, p2.x, p2.y, p0.x, p0.y);
@@ -131,6 +193,114 @@ impl<T: Real> Triangle<T> {
         let err = ((self.p[0] * b[0]).abs() + (self.p[1] * b[1]).abs() + (self.p[2] * b[2]).abs())
             * T::err_gamma(7);
         (p, err)
+    }
+}
+
+/// A triangle prepared for rays from the eye (the origin of view coordinates): the three
+/// planes through the eye and each edge, and the triple product of the vertices.
+///
+/// A ray from the eye along `d` passes inside the triangle when `n_k . d` has the same sign
+/// for all three edge planes; then `d = sum b_k p_k / t` with barycentrics
+/// `b_k = e_k / sum e` and the hit at `t = det / sum e` (in units of `d`). Watertight: an
+/// edge's plane is computed from its endpoints in a fixed order (lower vertex index first)
+/// as `a x (b - a)` and negated for the other direction, so two triangles sharing the edge
+/// get exactly negated planes and exactly negated `n . d`; an exactly zero `n . d` takes the
+/// sign of the first non-zero component of `n` (as if the ray were nudged along +x, then
+/// +y, then +z), which flips with `n`. Writing the plane through `b - a` keeps the
+/// cancellation of nearly parallel vertex vectors out of it: the error of `n . d` is then
+/// relative to the triangle's size, as in the sheared test.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgePlanes<T> {
+    pub n: [Vec3<T>; 3],
+    pub det: T,
+}
+
+impl<T: Real> EdgePlanes<T> {
+    pub const ZERO: Self = Self {
+        n: [Vec3::new(T::ZERO, T::ZERO, T::ZERO); 3],
+        det: T::ZERO,
+    };
+
+    /// The planes of `tri`, whose vertices have indices `index` (shared vertices share an
+    /// index, which fixes each edge's orientation).
+    pub fn new(tri: &Triangle<T>, index: [u32; 3]) -> Self {
+        let edge = |i: usize, j: usize| {
+            let (a, b) = (tri.p[i], tri.p[j]);
+            if index[i] < index[j] {
+                a.cross(b - a)
+            } else {
+                -b.cross(a - b)
+            }
+        };
+        let n = [edge(1, 2), edge(2, 0), edge(0, 1)];
+        Self {
+            n,
+            det: n[0].dot(tri.p[0]),
+        }
+    }
+
+    /// Intersect the ray from the eye along `d` (any length; `len` = |d|) for distances
+    /// (along the unit direction) in (0, t_max). Two-sided.
+    // The negated comparisons below are deliberate: they reject NaN.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    #[inline]
+    pub fn intersect_from_eye(&self, d: Vec3<T>, len: T, t_max: T) -> Option<TriHit<T>> {
+        let e0 = self.n[0].dot(d);
+        let e1 = self.n[1].dot(d);
+        // Most rays miss: two planes strictly on opposite sides decide it before the third.
+        if (e0 > T::ZERO && e1 < T::ZERO) || (e0 < T::ZERO && e1 > T::ZERO) {
+            return None;
+        }
+        let e2 = self.n[2].dot(d);
+        let s0 = if e0 != T::ZERO && e1 != T::ZERO && e2 != T::ZERO {
+            let s0 = e0 > T::ZERO;
+            if s0 != (e2 > T::ZERO) {
+                return None;
+            }
+            s0
+        } else {
+            // An exact zero (or NaN): the tie-break.
+            let s0 = plane_positive(e0, self.n[0]);
+            if s0 != plane_positive(e1, self.n[1]) || s0 != plane_positive(e2, self.n[2]) {
+                return None;
+            }
+            s0
+        };
+        let sum = e0 + e1 + e2;
+        // In front of the eye: det and the sum agree in sign (and neither is zero or NaN).
+        let front = if s0 {
+            sum > T::ZERO && self.det > T::ZERO
+        } else {
+            sum < T::ZERO && self.det < T::ZERO
+        };
+        if !front {
+            return None;
+        }
+        let inv = sum.recip();
+        let t = self.det * inv * len;
+        if !(t < t_max) {
+            return None;
+        }
+        Some(TriHit {
+            t,
+            b: [e0 * inv, e1 * inv, e2 * inv],
+        })
+    }
+}
+
+/// The side of an edge plane `n` a ray with `e = n . d` lies on; exact zeros are broken by
+/// the plane's normal, which is negated for the neighbour sharing the edge.
+#[inline(never)]
+fn plane_positive<T: Real>(e: T, n: Vec3<T>) -> bool {
+    if e != T::ZERO {
+        return e > T::ZERO;
+    }
+    if n.x != T::ZERO {
+        n.x > T::ZERO
+    } else if n.y != T::ZERO {
+        n.y > T::ZERO
+    } else {
+        n.z > T::ZERO
     }
 }
 
@@ -195,6 +365,129 @@ mod tests {
             let n = a.intersect(&r, f32::MAX).is_some() as u32
                 + b.intersect(&r, f32::MAX).is_some() as u32;
             assert_eq!(n, 1, "y = {y}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod edge_plane_tests {
+    use super::*;
+
+    /// A small deterministic generator (tests need no crate for it).
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn hits_centre_with_the_sheared_tests_distance_and_barycentrics() {
+        let tri = Triangle {
+            p: [
+                Vec3::new(-1.0f64, -1.0, 5.0),
+                Vec3::new(1.0, -1.0, 5.0),
+                Vec3::new(0.0, 1.0, 5.0),
+            ],
+        };
+        let planes = EdgePlanes::new(&tri, [0, 1, 2]);
+        // Any length of d: the distance is along the unit direction.
+        let d = Vec3::new(0.0, 0.0, 2.0);
+        let h = planes.intersect_from_eye(d, 2.0, f64::MAX).expect("hit");
+        assert!((h.t - 5.0).abs() < 1e-12);
+        assert!((h.b[2] - 0.5).abs() < 1e-12 && (h.b[0] - 0.25).abs() < 1e-12);
+        assert!(
+            planes.intersect_from_eye(d, 2.0, 4.9).is_none(),
+            "beyond t_max"
+        );
+        let back = Vec3::new(0.0, 0.0, -1.0);
+        assert!(
+            planes.intersect_from_eye(back, 1.0, f64::MAX).is_none(),
+            "behind the eye"
+        );
+    }
+
+    #[test]
+    fn agrees_with_the_sheared_test_on_random_rays() {
+        let mut st = 12345u64;
+        let mut hits = 0;
+        for _ in 0..4000 {
+            let mut r = || lcg(&mut st) * 2.0 - 1.0;
+            let p = [
+                Vec3::new(r(), r(), 4.0 + r()),
+                Vec3::new(r(), r(), 4.0 + r()),
+                Vec3::new(r(), r(), 4.0 + r()),
+            ];
+            let tri = Triangle { p };
+            let d = Vec3::new(r() * 0.3, r() * 0.3, 1.0);
+            let len = d.length();
+            let ray = Ray::new(Vec3::zero(), d * (1.0 / len));
+            let a = tri.intersect(&ray, f64::MAX);
+            let b = EdgePlanes::new(&tri, [0, 1, 2]).intersect_from_eye(d, len, f64::MAX);
+            match (a, b) {
+                (Some(a), Some(b)) => {
+                    hits += 1;
+                    assert!((a.t - b.t).abs() <= 1e-9 * a.t, "{} vs {}", a.t, b.t);
+                    for k in 0..3 {
+                        assert!((a.b[k] - b.b[k]).abs() < 1e-9);
+                    }
+                }
+                (None, None) => {}
+                (a, b) => panic!("sheared {a:?} vs planes {b:?} for {tri:?} along {d:?}"),
+            }
+        }
+        assert!(
+            hits > 200,
+            "the sample must hit often enough to mean something: {hits}"
+        );
+    }
+
+    #[test]
+    fn a_shared_edge_is_hit_by_exactly_one_triangle_whatever_the_winding() {
+        // A fan of four triangles around vertex 0 (a pyramid seen from the eye), with
+        // vertex indices as the DM shares them; rays on and near every edge, in f32.
+        let v = [
+            Vec3::new(0.0f32, 0.0, 5.0),
+            Vec3::new(1.0, 0.0, 6.0),
+            Vec3::new(0.0, 1.0, 6.0),
+            Vec3::new(-1.0, 0.0, 6.0),
+            Vec3::new(0.0, -1.0, 6.0),
+        ];
+        // Mixed windings: watertightness must not depend on them.
+        let fan = [[0u32, 1, 2], [0, 3, 2], [3, 0, 4], [0, 4, 1]];
+        let planes: Vec<EdgePlanes<f32>> = fan
+            .iter()
+            .map(|i| {
+                EdgePlanes::new(
+                    &Triangle {
+                        p: i.map(|k| v[k as usize]),
+                    },
+                    *i,
+                )
+            })
+            .collect();
+        let mut st = 99u64;
+        for k in 0..2000 {
+            // Points on the four spokes (shared edges) and random points inside the fan.
+            let s = lcg(&mut st) as f32;
+            let p = if k % 2 == 0 {
+                let spoke = v[1 + (k / 2) % 4];
+                v[0] + (spoke - v[0]) * s
+            } else {
+                let a = v[1 + (k / 2) % 4];
+                let b = v[1 + (k / 2 + 1) % 4];
+                let t = lcg(&mut st) as f32;
+                v[0] + (a - v[0]) * (s * (1.0 - t)) + (b - v[0]) * (s * t)
+            };
+            if p == v[0] {
+                continue;
+            }
+            let len = p.length();
+            let n = planes
+                .iter()
+                .filter(|pl| pl.intersect_from_eye(p, len, f32::MAX).is_some())
+                .count();
+            assert_eq!(n, 1, "ray through {p:?} hit {n} triangles of the fan");
         }
     }
 }

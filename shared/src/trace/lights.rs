@@ -3,6 +3,7 @@
 
 use super::surface::Surface;
 use super::tracer::{Tracer, MAX_CROSSINGS};
+use super::traversal::Probe;
 use crate::geom::{offset_ray_origin, Ray, Vec3};
 use crate::image::LightKind;
 use crate::num::Real;
@@ -39,7 +40,7 @@ impl<T: Real> Tracer<'_, T> {
                         s * s * (T::from_i32(3) - T::TWO * s)
                     };
                     let shape = if l.exponent > T::ZERO {
-                        cos_axis.max(T::ZERO).powf(l.exponent)
+                        cos_axis.max(T::ZERO).pow_exponent(l.exponent)
                     } else {
                         T::ONE
                     };
@@ -53,7 +54,13 @@ impl<T: Real> Tracer<'_, T> {
     /// Light transmitted from `surf` towards a light `dist` away along `dir`: the product of
     /// the transmittances of every surface crossed (LINKS-1: transparent objects cast
     /// lighter shadows).
-    pub(super) fn shadow(&mut self, surf: &Surface<T>, dir: Vec3<T>, dist: T) -> Vec3<T> {
+    pub(super) fn shadow(
+        &mut self,
+        light: u32,
+        surf: &Surface<T>,
+        dir: Vec3<T>,
+        dist: T,
+    ) -> Vec3<T> {
         let mut atten = Vec3::splat(T::ONE);
         if self.camera.no_shadows {
             return atten;
@@ -71,10 +78,30 @@ impl<T: Real> Tracer<'_, T> {
                 T::MAX
             };
             if t_max > T::ZERO {
-                let (opaque, transparent) = self.any_opaque(&Ray::new(origin, dir), t_max);
-                if opaque || !transparent {
+                let probe = Probe::new(&Ray::new(origin, dir));
+                // The shape that blocked this light's last shadow ray is tried first: the
+                // rays of neighbouring pixels are likely blocked by it too.
+                let slot = self.blockers.get_mut(light as usize).and_then(|b| b.take());
+                if let Some(b) = slot {
+                    if self.blocks(b, &probe, t_max) {
+                        self.blockers[light as usize] = Some(b);
+                        self.stats.shadow_early_exits += 1;
+                        return Vec3::zero();
+                    }
+                }
+                let (blocker, transparent) = self.any_opaque(&probe, t_max);
+                if let Some(b) = blocker {
+                    if let Some(slot) = self.blockers.get_mut(light as usize) {
+                        *slot = Some(b);
+                    }
+                }
+                if blocker.is_some() || !transparent {
                     self.stats.shadow_early_exits += 1;
-                    return if opaque { Vec3::zero() } else { atten };
+                    return if blocker.is_some() {
+                        Vec3::zero()
+                    } else {
+                        atten
+                    };
                 }
             }
         }

@@ -4,6 +4,7 @@
 //! - [`tracer`]: the entry ([`Tracer`], [`render_run`]), its limits and its error.
 //! - [`clip`]: screen-space Y/X clipping of primary rays (LINKS-1 4.4).
 //! - [`traversal`]: the nearest hit along a ray (boxes, clipping, the plain algorithm).
+//! - [`primary`]: primary rays from the eye, triangles tested against cached edge planes.
 //! - [`surface`]: completing a hit into a surface point.
 //! - [`texture`]: materials with their texture maps applied.
 //! - [`lights`]: light sources and shadow rays.
@@ -14,6 +15,7 @@
 
 pub mod clip;
 pub mod lights;
+pub mod primary;
 pub mod shading;
 pub mod stats;
 pub mod surface;

@@ -33,7 +33,7 @@ impl<T: Real> Tracer<'_, T> {
             if cos_t <= T::ZERO {
                 continue;
             }
-            let t = self.shadow(surf, ldir, dist);
+            let t = self.shadow(i, surf, ldir, dist);
             if t.max_component() <= T::ZERO {
                 continue;
             }
@@ -45,7 +45,7 @@ impl<T: Real> Tracer<'_, T> {
                 let r = n * (T::TWO * cos_t) - ldir;
                 let cos_p = r.dot(view);
                 if cos_p > T::ZERO {
-                    c = c + ls * (src * cos_p.powf(m.shininess));
+                    c = c + ls * (src * cos_p.pow_exponent(m.shininess));
                 }
             }
         }

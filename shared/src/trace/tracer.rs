@@ -16,6 +16,8 @@ use crate::geom::{Ray, Vec3};
 use crate::image::{Camera, SceneView};
 use crate::num::Real;
 use crate::trace::clip::RowClip;
+use crate::trace::primary::{EyeRay, PlaneCache};
+use crate::trace::traversal::Blocker;
 use core::fmt;
 
 /// Most recursive rays one pixel may spawn (reflection and transmission, two per surface):
@@ -26,6 +28,10 @@ pub const SECONDARY_RAYS_PER_PIXEL: u32 = 4096;
 /// Most surfaces a shadow ray or a straight-through ray may cross before it gives up (the
 /// light is then treated as blocked, the straight ray as ending in the background).
 pub const MAX_CROSSINGS: u32 = 64;
+
+/// Lights whose last shadow-ray blocker the tracer remembers (further lights walk the
+/// tree every time).
+pub const BLOCKER_LIGHTS: usize = 8;
 
 /// An 8-bit RGB pixel.
 pub type Rgb8 = [u8; 3];
@@ -56,6 +62,9 @@ pub struct Tracer<'a, T: Real> {
     pub(super) camera: Camera<T>,
     pub(super) techniques: Techniques,
     pub(super) clip: RowClip,
+    pub(super) planes: PlaneCache<T>,
+    /// Per light, the shape that blocked its last shadow ray (tried first on the next).
+    pub(super) blockers: [Option<Blocker>; BLOCKER_LIGHTS],
     /// Recursive (reflected, refracted, straight) rays the current pixel may still spawn.
     pub(super) secondary_left: u32,
     pub stats: Stats,
@@ -74,6 +83,8 @@ impl<'a, T: Real> Tracer<'a, T> {
             camera,
             techniques,
             clip: RowClip::new(),
+            planes: PlaneCache::new(),
+            blockers: [None; BLOCKER_LIGHTS],
             secondary_left: SECONDARY_RAYS_PER_PIXEL,
             stats: Stats::default(),
         }
@@ -103,24 +114,44 @@ impl<'a, T: Real> Tracer<'a, T> {
         &self.camera
     }
 
-    /// The primary ray through the centre of pixel (x, y): from the eye at the origin.
-    pub fn primary_ray(&self, x: u32, y: u32) -> Ray<T> {
+    /// The direction from the eye through the centre of pixel (x, y), before normalising.
+    #[inline]
+    fn eye_direction(&self, x: u32, y: u32) -> Vec3<T> {
         let f = &self.camera;
         let half = T::HALF;
         let dx = f.x0 + (T::from_i32(x as i32) + half) * f.dx;
         let dy = f.y0 - (T::from_i32(y as i32) + half) * f.dy;
-        Ray::new(Vec3::zero(), Vec3::new(dx, dy, f.dz).normalize())
+        Vec3::new(dx, dy, f.dz)
+    }
+
+    /// The primary ray through the centre of pixel (x, y): from the eye at the origin.
+    pub fn primary_ray(&self, x: u32, y: u32) -> Ray<T> {
+        Ray::new(Vec3::zero(), self.eye_direction(x, y).normalize())
     }
 
     /// Colour of the primary ray through pixel (x, y), linear RGB.
     pub fn pixel(&mut self, x: u32, y: u32) -> Vec3<T> {
         self.stats.primary_rays += 1;
         self.secondary_left = SECONDARY_RAYS_PER_PIXEL;
-        let ray = self.primary_ray(x, y);
-        let hit = if self.clip.row() == Some(y.min(u16::MAX as u32) as u16) {
-            self.closest_hit_clipped(&ray, x)
+        let d = self.eye_direction(x, y);
+        // Fixed point keeps the sheared test (its products of two coordinates would leave
+        // the format's range in the edge planes).
+        let (ray, eye) = if T::ABSOLUTE_ROUNDING {
+            (self.primary_ray(x, y), None)
         } else {
-            self.closest_hit(&ray, T::MAX)
+            // What `normalize` computes, with the length kept for the edge-plane test.
+            let len = d.length();
+            let unit = if len > T::ZERO && len.is_finite() {
+                d * len.recip()
+            } else {
+                d
+            };
+            (Ray::new(Vec3::zero(), unit), Some(EyeRay { d, len }))
+        };
+        let hit = if self.clip.row() == Some(y.min(u16::MAX as u32) as u16) {
+            self.closest_hit_clipped(&ray, eye, x)
+        } else {
+            self.closest_hit_from(&ray, eye, T::MAX)
         };
         self.shade_hit(&ray, hit, 0)
     }
@@ -139,17 +170,10 @@ impl<'a, T: Real> Tracer<'a, T> {
 }
 
 /// Quantise a linear colour to 8 bits (clamped, rounded to nearest).
+#[inline]
 pub fn to_rgb8<T: Real>(c: Vec3<T>) -> Rgb8 {
-    let q = |v: T| {
-        let x = v.clamp01().to_f32() * 255.0 + 0.5;
-        if x >= 255.0 {
-            255
-        } else if x > 0.0 {
-            x as u8
-        } else {
-            0
-        }
-    };
+    // `as u8` saturates (and takes NaN to 0), so values at or above 255 give 255.
+    let q = |v: T| (v.clamp01().to_f32() * 255.0 + 0.5) as u8;
     [q(c.x), q(c.y), q(c.z)]
 }
 

@@ -4,12 +4,57 @@
 //! [`super::surface`]'s and [`super::shading`]'s business.
 
 use super::tracer::Tracer;
-use crate::geom::{Ray, RayInv};
+use crate::geom::{Aabb, Ray, RayInv};
 use crate::image::{BlobGroupRec, Leaf, MapTarget, SceneView, ShapeKind, ShapeRef, NONE};
 use crate::num::Real;
 use crate::shape::blob::{Ball, BlobGroup, BlobStats};
 use crate::shape::boxshape::BoxHit;
 use crate::shape::ellipsoid::EllipsoidHit;
+use crate::shape::triangle::Shear;
+use crate::trace::primary::EyeRay;
+
+/// A ray with what every test along it shares: the reciprocal direction of the slab tests
+/// and the shear of the triangle tests, made once per ray.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Probe<T> {
+    pub(super) ray: Ray<T>,
+    pub(super) inv: RayInv<T>,
+    shear: Shear<T>,
+    /// A primary ray: triangles are tested against their edge planes through the eye.
+    eye: Option<EyeRay<T>>,
+}
+
+impl<T: Real> Probe<T> {
+    #[inline]
+    pub(super) fn new(ray: &Ray<T>) -> Self {
+        Self::from_eye(ray, None)
+    }
+    #[inline]
+    pub(super) fn from_eye(ray: &Ray<T>, eye: Option<EyeRay<T>>) -> Self {
+        Self {
+            ray: *ray,
+            inv: RayInv::new(ray.dir),
+            // A primary ray's triangles use the edge planes, never the shear.
+            shear: if eye.is_some() {
+                Shear::along_z()
+            } else {
+                Shear::new(ray)
+            },
+            eye,
+        }
+    }
+
+    /// The slab test ([`Aabb::entry`]): where the ray enters `b` within `[0, t_max]`.
+    #[inline]
+    pub(super) fn entry(&self, b: &Aabb<T>, t_max: T) -> Option<T> {
+        b.entry(&self.ray, &self.inv, t_max)
+    }
+
+    #[inline]
+    pub(super) fn hits(&self, b: &Aabb<T>, t_max: T) -> bool {
+        self.entry(b, t_max).is_some()
+    }
+}
 
 /// Which shape a ray hit, with what each kind needs to finish the hit.
 #[derive(Clone, Copy, Debug)]
@@ -31,6 +76,13 @@ pub(super) struct Hit<T> {
     pub(super) t: T,
     pub(super) shape: ShapeRef,
     pub(super) detail: HitDetail<T>,
+}
+
+/// A shape that stopped a shadow ray: the `k`-th shape of `leaf`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Blocker {
+    leaf: Leaf,
+    k: u32,
 }
 
 /// Depth of the closest-hit traversal stack (a node and its box entry distance per entry).
@@ -100,8 +152,13 @@ impl<T: Real> Nearest<T> {
 impl<T: Real> Tracer<'_, T> {
     /// The primary ray's nearest hit among the Y-clipped leaves (and, with X clipping, only
     /// those whose rectangle contains column `x`), each behind its own box test.
-    pub(super) fn closest_hit_clipped(&mut self, ray: &Ray<T>, x: u32) -> Option<Hit<T>> {
-        let inv = RayInv::new(ray.dir);
+    pub(super) fn closest_hit_clipped(
+        &mut self,
+        ray: &Ray<T>,
+        eye: Option<EyeRay<T>>,
+        x: u32,
+    ) -> Option<Hit<T>> {
+        let probe = Probe::from_eye(ray, eye);
         let mut near = Nearest::new(T::MAX);
         let col = x.min(u16::MAX as u32) as u16;
         let swept = self.techniques.x_clip && self.clip.advance(col, &mut self.stats.clip_compares);
@@ -118,11 +175,11 @@ impl<T: Real> Tracer<'_, T> {
             };
             let node = self.scene.node::<T>(leaf);
             self.stats.box_tests += 1;
-            if !node.bounds.hit(ray, &inv, near.limit()) {
+            if !node.bounds.hit(ray, &probe.inv, near.limit()) {
                 continue;
             }
             if let Some(l) = node.leaf {
-                self.offer(&mut near, l, leaf, ray);
+                self.offer(&mut near, l, leaf, &probe);
             }
         }
         near.hit
@@ -132,14 +189,24 @@ impl<T: Real> Tracer<'_, T> {
     /// the subtree of every box the ray misses (LINKS-1 4.2) or enters beyond the nearest
     /// hit so far; a small fixed stack holds the children still to visit.
     pub(super) fn closest_hit(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
+        self.closest_hit_from(ray, None, t_max)
+    }
+
+    /// [`Self::closest_hit`], for a primary ray when `eye` is given.
+    pub(super) fn closest_hit_from(
+        &mut self,
+        ray: &Ray<T>,
+        eye: Option<EyeRay<T>>,
+        t_max: T,
+    ) -> Option<Hit<T>> {
+        let probe = Probe::from_eye(ray, eye);
         if !self.techniques.bounding_boxes {
-            return self.closest_hit_plain(ray, t_max);
+            return self.closest_hit_plain(&probe, t_max);
         }
-        let inv = RayInv::new(ray.dir);
         let mut near = Nearest::new(t_max);
         let mut stack = [(0u32, T::ZERO); TRAVERSAL_STACK];
         self.stats.box_tests += 1;
-        let t_root = self.scene.node::<T>(0).bounds.entry(ray, &inv, t_max)?;
+        let t_root = probe.entry(&self.scene.node::<T>(0).bounds, t_max)?;
         stack[0] = (0, t_root);
         let mut sp = 1;
         while sp > 0 {
@@ -150,7 +217,7 @@ impl<T: Real> Tracer<'_, T> {
             }
             let node = self.scene.node::<T>(i);
             if let Some(l) = node.leaf {
-                self.offer(&mut near, l, i, ray);
+                self.offer(&mut near, l, i, &probe);
                 continue;
             }
             // Test the children's boxes; visit the nearest first so later ones can be pruned.
@@ -160,13 +227,13 @@ impl<T: Real> Tracer<'_, T> {
             while c < node.skip {
                 let child = self.scene.node::<T>(c);
                 self.stats.box_tests += 1;
-                if let Some(t) = child.bounds.entry(ray, &inv, near.limit()) {
+                if let Some(t) = probe.entry(&child.bounds, near.limit()) {
                     if nk < ORDERED_FANOUT && sp + nk < TRAVERSAL_STACK {
                         kids[nk] = (c, t);
                         nk += 1;
                     } else {
                         // No room to order it: walk its subtree in place.
-                        self.walk_hit_subtree(c, child.leaf, child.skip, ray, &inv, &mut near);
+                        self.walk_hit_subtree(c, child.leaf, child.skip, &probe, &mut near);
                     }
                 }
                 c = child.skip;
@@ -193,24 +260,23 @@ impl<T: Real> Tracer<'_, T> {
         root: u32,
         root_leaf: Option<Leaf>,
         end: u32,
-        ray: &Ray<T>,
-        inv: &RayInv<T>,
+        probe: &Probe<T>,
         near: &mut Nearest<T>,
     ) {
         if let Some(l) = root_leaf {
-            self.offer(near, l, root, ray);
+            self.offer(near, l, root, probe);
             return;
         }
         let mut i = root + 1;
         while i < end {
             let node = self.scene.node::<T>(i);
             self.stats.box_tests += 1;
-            if !node.bounds.hit(ray, inv, near.limit()) {
+            if !probe.hits(&node.bounds, near.limit()) {
                 i = node.skip;
                 continue;
             }
             if let Some(l) = node.leaf {
-                self.offer(near, l, i, ray);
+                self.offer(near, l, i, probe);
             }
             i += 1;
         }
@@ -218,29 +284,62 @@ impl<T: Real> Tracer<'_, T> {
 
     /// Test a leaf's shapes and keep each that is the nearest so far.
     #[inline]
-    pub(super) fn offer(&mut self, near: &mut Nearest<T>, leaf: Leaf, node: u32, ray: &Ray<T>) {
+    pub(super) fn offer(&mut self, near: &mut Nearest<T>, leaf: Leaf, node: u32, probe: &Probe<T>) {
+        if let (ShapeKind::Triangle, Some(eye)) = (leaf.kind, &probe.eye) {
+            return self.offer_triangles_from_eye(near, leaf, node, eye);
+        }
         for k in 0..leaf.count {
-            if let Some(h) = self.intersect_shape(leaf, k, ray, near.limit()) {
+            if let Some(h) = self.intersect_shape(leaf, k, probe, near.limit()) {
                 near.offer(h, shape_key(node, k));
             }
         }
     }
 
+    /// [`Self::offer`] for a leaf of triangles and a primary ray: each triangle against
+    /// its cached edge planes.
+    fn offer_triangles_from_eye(
+        &mut self,
+        near: &mut Nearest<T>,
+        leaf: Leaf,
+        node: u32,
+        eye: &EyeRay<T>,
+    ) {
+        self.stats.triangle_tests += leaf.count as u64;
+        let mut limit = near.limit();
+        for k in 0..leaf.count {
+            let index = leaf.first + k;
+            let planes = self.planes.get(&self.scene, index);
+            if let Some(h) = planes.intersect_from_eye(eye.d, eye.len, limit) {
+                let hit = Hit {
+                    t: h.t,
+                    shape: leaf.shape(k),
+                    detail: HitDetail::Triangle {
+                        b: h.b,
+                        material: leaf.material,
+                    },
+                };
+                near.offer(hit, shape_key(node, k));
+                limit = near.limit();
+            }
+        }
+    }
+
     /// The plain algorithm: every shape, no boxes (the paper's type 4).
-    pub(super) fn closest_hit_plain(&mut self, ray: &Ray<T>, t_max: T) -> Option<Hit<T>> {
+    pub(super) fn closest_hit_plain(&mut self, probe: &Probe<T>, t_max: T) -> Option<Hit<T>> {
         let mut near = Nearest::new(t_max);
         for i in 0..self.scene.node_count() {
             if let Some(l) = self.scene.node_leaf(i) {
-                self.offer(&mut near, l, i, ray);
+                self.offer(&mut near, l, i, probe);
             }
         }
         near.hit
     }
 
-    /// Whether any opaque surface lies along `ray` in (0, t_max) (stops at the first), and
-    /// whether a transparent one was seen on the way.
-    pub(super) fn any_opaque(&mut self, ray: &Ray<T>, t_max: T) -> (bool, bool) {
-        let inv = RayInv::new(ray.dir);
+    /// Whether any opaque surface lies along the probe's ray in (0, t_max) (stops at the
+    /// first, and says which shape it was), and whether a transparent one was seen on the
+    /// way. Which opaque shape is found first depends on the order of the walk, whether
+    /// one is found does not.
+    pub(super) fn any_opaque(&mut self, probe: &Probe<T>, t_max: T) -> (Option<Blocker>, bool) {
         let n = self.scene.node_count();
         let mut transparent = false;
         let mut i = 0;
@@ -248,18 +347,16 @@ impl<T: Real> Tracer<'_, T> {
             let node = self.scene.node::<T>(i);
             if self.techniques.bounding_boxes {
                 self.stats.box_tests += 1;
-                if !node.bounds.hit(ray, &inv, t_max) {
+                if !probe.hits(&node.bounds, t_max) {
                     i = node.skip;
                     continue;
                 }
             }
             if let Some(l) = node.leaf {
                 for k in 0..l.count {
-                    if let Some(h) = self.intersect_shape(l, k, ray, t_max) {
-                        let m = self.scene.material::<T>(self.material_of(&h));
-                        let mapped = m.texture != NONE && m.target == MapTarget::Transmit;
-                        if m.transmit.max_component() <= T::ZERO && !mapped {
-                            return (true, transparent);
+                    if let Some(h) = self.intersect_shape(l, k, probe, t_max) {
+                        if self.is_opaque(&h) {
+                            return (Some(Blocker { leaf: l, k }), transparent);
                         }
                         transparent = true;
                     }
@@ -267,7 +364,21 @@ impl<T: Real> Tracer<'_, T> {
             }
             i += 1;
         }
-        (false, transparent)
+        (None, transparent)
+    }
+
+    /// Whether `blocker` stops the probe's ray within (0, t_max).
+    #[inline]
+    pub(super) fn blocks(&mut self, blocker: Blocker, probe: &Probe<T>, t_max: T) -> bool {
+        self.intersect_shape(blocker.leaf, blocker.k, probe, t_max)
+            .is_some_and(|h| self.is_opaque(&h))
+    }
+
+    /// Whether a hit surface lets no light through (no transmission, no transmission map).
+    fn is_opaque(&self, h: &Hit<T>) -> bool {
+        let m = self.scene.material::<T>(self.material_of(h));
+        let mapped = m.texture != NONE && m.target == MapTarget::Transmit;
+        m.transmit.max_component() <= T::ZERO && !mapped
     }
 
     pub(super) fn material_of(&self, hit: &Hit<T>) -> u32 {
@@ -288,16 +399,26 @@ impl<T: Real> Tracer<'_, T> {
         &mut self,
         leaf: Leaf,
         k: u32,
-        ray: &Ray<T>,
+        probe: &Probe<T>,
         t_max: T,
     ) -> Option<Hit<T>> {
         let s = &self.scene;
+        let ray = &probe.ray;
         let shape = leaf.shape(k);
         match shape.kind {
             ShapeKind::Triangle => {
                 self.stats.triangle_tests += 1;
-                let rec = s.triangle::<T>(shape.index);
-                rec.tri.intersect(ray, t_max).map(|h| Hit {
+                let h = match &probe.eye {
+                    Some(eye) => self
+                        .planes
+                        .get(s, shape.index)
+                        .intersect_from_eye(eye.d, eye.len, t_max),
+                    None => s
+                        .triangle::<T>(shape.index)
+                        .tri
+                        .intersect_sheared(&probe.shear, t_max),
+                };
+                h.map(|h| Hit {
                     t: h.t,
                     shape,
                     detail: HitDetail::Triangle {

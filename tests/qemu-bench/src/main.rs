@@ -611,11 +611,12 @@ fn main() -> ! {
     );
 
     let mut pixels = [[0u8; 3]; MAX_PIXELS];
-    // `--features profile` (scripts/qemu-profile): one frame only, photo1 primary rays +
-    // shading in f32, the window an instruction trace of QEMU is taken over.
+    // `--features profile` (scripts/qemu-profile): one frame only in f32 (photo1 primary
+    // rays + shading unless LINKS_PROFILE_SCENE names another scene at build time), the
+    // window an instruction trace of QEMU is taken over.
     #[cfg(feature = "profile")]
     {
-        let s = scene("photo1-noshadow");
+        let s = scene(option_env!("LINKS_PROFILE_SCENE").unwrap_or("photo1-noshadow"));
         let r = &s.runs[0];
         ok &= render_scene::<f32>(&mut o, s, r, &mut pixels, overhead);
         say!(o, "END ok={}", ok);

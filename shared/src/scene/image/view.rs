@@ -402,6 +402,24 @@ impl<'a> SceneView<'a> {
         }
     }
 
+    /// Triangle `i`'s vertex indices and vertices (shared vertices share an index).
+    #[inline]
+    pub fn triangle_corners<T: Real>(&self, i: u32) -> ([u32; 3], Triangle<T>) {
+        use triangle::*;
+        let r = self.record::<TRIANGLE_SIZE>(Section::Triangles, i);
+        let index = [r.h(V) as u32, r.h(V + 2) as u32, r.h(V + 4) as u32];
+        let v = |k: usize| {
+            self.record::<VERTEX_SIZE>(Section::Vertices, index[k])
+                .v3(vertex::P)
+        };
+        (
+            index,
+            Triangle {
+                p: [v(0), v(1), v(2)],
+            },
+        )
+    }
+
     /// The three indices of record `i` of a corners section ([`NONE16`] when absent).
     #[inline]
     fn corners(&self, s: Section, i: u32) -> [u16; 3] {

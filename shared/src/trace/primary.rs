@@ -1,0 +1,138 @@
+//! Primary rays: what view coordinates give them.
+//!
+//! Every primary ray starts at the eye, the origin of view coordinates, along
+//! `d = (x0 + (x + 1/2) dx, y0 - (y + 1/2) dy, dz)`. A triangle is then tested against the
+//! three planes through the eye and its edges ([`EdgePlanes`]): three dot products with
+//! `d`, no per-ray set-up and no divide unless the ray passes inside. The planes depend on
+//! the triangle only, so the tracer keeps the ones it made in a small direct-mapped cache
+//! ([`PlaneCache`]) for the rays of the rows that follow. Every technique set tests
+//! primary rays this way (the plain algorithm too), so they keep giving the same pixels.
+
+use crate::geom::Vec3;
+use crate::image::SceneView;
+use crate::num::Real;
+use crate::shape::triangle::EdgePlanes;
+
+/// Triangles whose planes the cache holds at once (a power of two: the slot is the low bits
+/// of the triangle index).
+pub const PLANE_SLOTS: usize = 256;
+
+/// A primary ray's direction before normalising, and its length.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct EyeRay<T> {
+    pub(super) d: Vec3<T>,
+    pub(super) len: T,
+}
+
+/// The edge planes of recently tested triangles, by triangle index.
+pub struct PlaneCache<T> {
+    /// Triangle index + 1 of each slot's planes (0: empty).
+    tags: [u32; PLANE_SLOTS],
+    planes: [EdgePlanes<T>; PLANE_SLOTS],
+    /// Planes made (cache misses), for the operation counts.
+    pub(super) made: u64,
+}
+
+impl<T: Real> PlaneCache<T> {
+    pub fn new() -> Self {
+        Self {
+            tags: [0; PLANE_SLOTS],
+            planes: [EdgePlanes::ZERO; PLANE_SLOTS],
+            made: 0,
+        }
+    }
+
+    /// The planes of triangle `i` of `scene`, made now unless the cache holds them.
+    #[inline(always)]
+    pub(super) fn get(&mut self, scene: &SceneView<'_>, i: u32) -> &EdgePlanes<T> {
+        let slot = i as usize % PLANE_SLOTS;
+        if self.tags[slot] != i.wrapping_add(1) {
+            self.make(scene, i, slot);
+        }
+        &self.planes[slot]
+    }
+
+    /// A miss: make triangle `i`'s planes into `slot` (out of line, so a hit pays no call).
+    #[inline(never)]
+    fn make(&mut self, scene: &SceneView<'_>, i: u32, slot: usize) {
+        let (index, tri) = scene.triangle_corners::<T>(i);
+        self.planes[slot] = EdgePlanes::new(&tri, index);
+        self.tags[slot] = i.wrapping_add(1);
+        self.made += 1;
+    }
+}
+
+impl<T: Real> Default for PlaneCache<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::solid::Triangle;
+
+    /// More triangles than slots, asked for in an order that makes them evict each other:
+    /// every answer is the triangle's own planes.
+    #[cfg(feature = "std")]
+    #[test]
+    fn the_cache_answers_each_triangle_with_its_own_planes() {
+        use crate::desc::{Camera, Node, Shape};
+        use crate::dm::{compile, CompileOptions};
+        let n = PLANE_SLOTS + 300;
+        let tris = (0..n)
+            .map(|i| {
+                let x = i as f64 * 0.01 - 3.0;
+                Node::Shape(Shape::Triangle {
+                    v: [[x, 0.0, 10.0], [x + 0.01, 0.0, 10.0], [x, 0.5, 10.5]],
+                    normals: None,
+                    uv: None,
+                    material: 0,
+                })
+            })
+            .collect();
+        let camera = Camera {
+            eye: [0.0; 3],
+            look_at: [0.0, 0.0, 1.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 60.0,
+        };
+        let desc = crate::testkit::scene::scene_desc(camera, 32, 24, tris);
+        let img = compile(&desc, &CompileOptions::default()).unwrap().bytes;
+        let view = SceneView::new(&img).unwrap();
+        let count = view.count(crate::image::Section::Triangles);
+        assert_eq!(count as usize, n);
+        let mut cache = PlaneCache::<f32>::new();
+        let order = (0..count).flat_map(|i| [i, (i + PLANE_SLOTS as u32) % count, i]);
+        let mut asked = 0u64;
+        for i in order {
+            let (index, tri) = view.triangle_corners::<f32>(i);
+            assert_eq!(
+                *cache.get(&view, i),
+                EdgePlanes::new(&tri, index),
+                "triangle {i}"
+            );
+            asked += 1;
+        }
+        // The repeat of each triangle right after it is a hit; the others evicted it.
+        assert!(cache.made < asked && cache.made >= count as u64);
+    }
+
+    #[test]
+    fn planes_from_the_cache_equal_fresh_ones() {
+        let tri = Triangle {
+            p: [
+                crate::geom::Vec3::new(-1.0f32, -1.0, 5.0),
+                crate::geom::Vec3::new(1.0, -1.0, 5.0),
+                crate::geom::Vec3::new(0.0, 1.0, 6.0),
+            ],
+        };
+        let a = EdgePlanes::new(&tri, [3, 1, 2]);
+        let b = EdgePlanes::new(&tri, [3, 1, 2]);
+        assert_eq!(a, b);
+        // The triple product is the volume term: p0 . (p1 x p2).
+        let want = tri.p[0].dot(tri.p[1].cross(tri.p[2]));
+        assert!((a.det - want).abs() <= 1e-5 * want.abs());
+    }
+}
