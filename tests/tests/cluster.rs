@@ -762,12 +762,13 @@ fn a_slow_dm_sets_the_frame_interval_and_a_fast_one_changes_nothing() {
         ..cfg.clone()
     };
     let interval = steady_state_interval(&img, &fast, 8).expect("simulates");
-    // Not slower, and within 2%: the DM's delivery times move when the RC broadcasts the
+    // Not slower, and within 3%: the DM's delivery times move when the RC broadcasts the
     // next frame among this frame's exchanges. With a 116 KB image the broadcast filled the
     // bus and the two intervals were equal; photo1's 18 KB image at 64x60 leaves gaps, and a
-    // fast DM's later broadcast lands in them (measured: 1.4% shorter).
+    // fast DM's later broadcast lands in them (measured: 2.2% shorter with the edge-plane
+    // kernel, whose shorter runs leave more of them; 1.4% before).
     assert!(
-        interval <= render + 1e-9 && interval >= 0.98 * render,
+        interval <= render + 1e-9 && interval >= 0.97 * render,
         "{interval} vs {render}"
     );
     let t = simulate_frame(&img, &fast).expect("simulates").time_s;

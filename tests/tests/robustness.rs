@@ -5,6 +5,7 @@ use links_core::geom::{offset_ray_origin, Ray, Vec3};
 use links_core::image::{SceneView, Section};
 use links_core::num::Real;
 use links_core::render::Tracer;
+use links_core::shape::triangle::{EdgePlanes, Shear};
 use links_tests::*;
 
 fn closed_mesh_image() -> Vec<u8> {
@@ -98,6 +99,73 @@ fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_f64(
 #[test]
 fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_q16_16() {
     edge_and_vertex_rays::<links_core::num::Fx>(4000, 0x5851f42d4c957f2d);
+}
+
+/// Primary rays: from the eye (the origin of view coordinates) at points exactly on shared
+/// edges and at shared vertices of the closed mesh, tested against the triangles' edge planes
+/// through the eye, falling back to the sheared test where a sign is uncertain (what the
+/// tracer does for primary rays): every ray crosses an even number of triangles, and one
+/// facing the eye exactly two.
+fn eye_rays_through_edges_and_vertices<T: Real>(n: usize, seed: u64) -> usize {
+    let img = closed_mesh_image();
+    let view = SceneView::new(&img).unwrap();
+    let ntri = view.count(Section::Triangles);
+    let planes: Vec<_> = (0..ntri)
+        .map(|i| {
+            let (index, tri) = view.triangle_corners::<T>(i);
+            // Every ray below aims at a point of the sphere: |d|_1 < 20.
+            (EdgePlanes::new(&tri, index, T::from_i32(20)), tri)
+        })
+        .collect();
+    let center = [0.3, -0.2, 12.0]; // view coordinates of the sphere centre
+    let mut rng = Rng(seed);
+    let mut facing_rays = 0;
+    for k in 0..n {
+        let p = view
+            .triangle::<T>((rng.next_u64() % ntri as u64) as u32)
+            .tri
+            .p;
+        let a = (rng.next_u64() % 3) as usize;
+        let d = if k % 4 == 0 {
+            p[a]
+        } else {
+            let s = T::from_f64(rng.f64());
+            p[a] * (T::ONE - s) + p[(a + 1) % 3] * s
+        };
+        let len = d.length();
+        let shear = Shear::new(&Ray::new(Vec3::zero(), d * len.recip()));
+        let c = planes
+            .iter()
+            .filter(|(pl, tri)| {
+                pl.intersect_from_eye(d, len, T::MAX)
+                    .or_sheared(|| *tri, &shear, T::MAX)
+                    .is_some()
+            })
+            .count();
+        // A line meets a closed surface an even number of times: a crack makes it odd (in,
+        // never out), a double hit too. Away from the silhouette it is exactly in and out;
+        // a ray through a silhouette edge only grazes (0 or 2 are both exact answers).
+        let c64 = Vec3::new(center[0], center[1], center[2]);
+        let p64 = Vec3::new(d.x.to_f64(), d.y.to_f64(), d.z.to_f64());
+        let facing = -(p64 - c64).normalize().dot(p64.normalize());
+        assert!(
+            c % 2 == 0,
+            "{} eye ray {k} towards {d:?} crossed {c}",
+            T::NAME
+        );
+        if facing > 0.2 {
+            assert_eq!(c, 2, "{} eye ray {k} towards {d:?} crossed {c}", T::NAME);
+            facing_rays += 1;
+        }
+    }
+    facing_rays
+}
+
+#[test]
+fn eye_rays_through_shared_edges_and_vertices_cross_a_closed_mesh_in_and_out() {
+    // About 28% of the rays (1,127 in f32) meet a point facing the eye by cos > 0.2.
+    assert!(eye_rays_through_edges_and_vertices::<f32>(4000, 0x243f6a8885a308d3) > 1000);
+    assert!(eye_rays_through_edges_and_vertices::<f64>(4000, 0x13198a2e03707344) > 1000);
 }
 
 /// Convex test objects, each alone in a scene, with a size for distance checks.

@@ -45,18 +45,6 @@ pub struct Shear<T> {
 }
 
 impl<T: Real> Shear<T> {
-    /// The shear of a ray from the origin along +z (no set-up work).
-    #[inline]
-    pub fn along_z() -> Self {
-        Self {
-            origin: Vec3::zero(),
-            kz: 2,
-            sx: T::ZERO,
-            sy: T::ZERO,
-            sz: T::ONE,
-        }
-    }
-
     #[inline]
     pub fn new(ray: &Ray<T>) -> Self {
         let kz = ray.dir.abs().max_dimension();
@@ -201,71 +189,111 @@ impl<T: Real> Triangle<T> {
 ///
 /// A ray from the eye along `d` passes inside the triangle when `n_k . d` has the same sign
 /// for all three edge planes; then `d = sum b_k p_k / t` with barycentrics
-/// `b_k = e_k / sum e` and the hit at `t = det / sum e` (in units of `d`). Watertight: an
-/// edge's plane is computed from its endpoints in a fixed order (lower vertex index first)
-/// as `a x (b - a)` and negated for the other direction, so two triangles sharing the edge
-/// get exactly negated planes and exactly negated `n . d`; an exactly zero `n . d` takes the
-/// sign of the first non-zero component of `n` (as if the ray were nudged along +x, then
-/// +y, then +z), which flips with `n`. Writing the plane through `b - a` keeps the
-/// cancellation of nearly parallel vertex vectors out of it: the error of `n . d` is then
-/// relative to the triangle's size, as in the sheared test.
+/// `b_k = e_k / sum e` and the hit at `t = det / sum e` (in units of `d`). An edge's plane is
+/// computed from its endpoints in a fixed order (lower vertex index first) as `a x (b - a)`
+/// and negated for the other direction, so two triangles sharing the edge get exactly
+/// negated planes; writing it through `b - a` keeps the cancellation of nearly parallel
+/// vertex vectors out of it. Each plane also carries a bound on the rounding error of
+/// `n . d` for every ray with `|d|_1` up to a given length: a sign within it is not certain, and the triangle is then
+/// decided by the sheared test instead ([`EyeTest::Uncertain`]). A ray near a shared edge
+/// or vertex therefore meets every triangle around it in the same (watertight) test, and
+/// every other triangle in a test whose signs are exact.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EdgePlanes<T> {
     pub n: [Vec3<T>; 3],
     pub det: T,
+    /// Per plane, the error bound of `n . d` for the rays the planes were made for.
+    pub bound: [T; 3],
+}
+
+/// What the edge-plane test says about a ray from the eye.
+#[derive(Clone, Copy, Debug)]
+pub enum EyeTest<T> {
+    Miss,
+    Hit(TriHit<T>),
+    /// A sign lies within its rounding error: ask [`Triangle::intersect_sheared`].
+    Uncertain,
+}
+
+impl<T: Real> EyeTest<T> {
+    /// The answer, asking the sheared test (with the same ray, normalised) when uncertain.
+    #[inline]
+    pub fn or_sheared(
+        self,
+        tri: impl FnOnce() -> Triangle<T>,
+        ray: &Shear<T>,
+        t_max: T,
+    ) -> Option<TriHit<T>> {
+        match self {
+            EyeTest::Miss => None,
+            EyeTest::Hit(h) => Some(h),
+            EyeTest::Uncertain => tri().intersect_sheared(ray, t_max),
+        }
+    }
 }
 
 impl<T: Real> EdgePlanes<T> {
     pub const ZERO: Self = Self {
         n: [Vec3::new(T::ZERO, T::ZERO, T::ZERO); 3],
         det: T::ZERO,
+        bound: [T::ZERO; 3],
     };
 
     /// The planes of `tri`, whose vertices have indices `index` (shared vertices share an
-    /// index, which fixes each edge's orientation).
-    pub fn new(tri: &Triangle<T>, index: [u32; 3]) -> Self {
+    /// index, which fixes each edge's orientation), for rays whose `|d|_1` is at most `l1`.
+    pub fn new(tri: &Triangle<T>, index: [u32; 3], l1: T) -> Self {
+        // |fl(n . d) - n . d| <= gamma(3) |n| |d|_1 + |fl(n) - n| |d|_1 (max norm for n);
+        // each component of n = a x c (c = fl(b - a)) is at most 2 |a| |c| and lies within
+        // 2 gamma(3) |a| |c| of the exact one, c within eps |c| of b - a. So 12 gamma(3)
+        // |a| |c| |d|_1 bounds it, with room to spare.
+        let k = T::from_i32(12) * T::err_gamma(3) * l1;
         let edge = |i: usize, j: usize| {
-            let (a, b) = (tri.p[i], tri.p[j]);
-            if index[i] < index[j] {
-                a.cross(b - a)
+            let (a, b) = if index[i] < index[j] {
+                (tri.p[i], tri.p[j])
             } else {
-                -b.cross(a - b)
-            }
+                (tri.p[j], tri.p[i])
+            };
+            let c = b - a;
+            let n = a.cross(c);
+            // The 1-norms (>= the max norms) cost fewer instructions than maxima.
+            let norm1 = |v: Vec3<T>| v.x.abs() + v.y.abs() + v.z.abs();
+            let bound = k * norm1(a) * norm1(c);
+            (if index[i] < index[j] { n } else { -n }, bound)
         };
-        let n = [edge(1, 2), edge(2, 0), edge(0, 1)];
+        let (n0, b0) = edge(1, 2);
+        let (n1, b1) = edge(2, 0);
+        let (n2, b2) = edge(0, 1);
         Self {
-            n,
-            det: n[0].dot(tri.p[0]),
+            n: [n0, n1, n2],
+            det: n0.dot(tri.p[0]),
+            bound: [b0, b1, b2],
         }
     }
 
-    /// Intersect the ray from the eye along `d` (any length; `len` = |d|) for distances
-    /// (along the unit direction) in (0, t_max). Two-sided.
+    /// Intersect the ray from the eye along `d` (`len` = |d|; `|d|_1` at most the planes'
+    /// `l1`) for distances (along the unit direction) in (0, t_max). Two-sided.
     // The negated comparisons below are deliberate: they reject NaN.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    #[inline]
-    pub fn intersect_from_eye(&self, d: Vec3<T>, len: T, t_max: T) -> Option<TriHit<T>> {
+    #[inline(always)]
+    pub fn intersect_from_eye(&self, d: Vec3<T>, len: T, t_max: T) -> EyeTest<T> {
+        let [b0, b1, b2] = self.bound;
         let e0 = self.n[0].dot(d);
         let e1 = self.n[1].dot(d);
-        // Most rays miss: two planes strictly on opposite sides decide it before the third.
-        if (e0 > T::ZERO && e1 < T::ZERO) || (e0 < T::ZERO && e1 > T::ZERO) {
-            return None;
+        // Most rays miss: two planes certainly on opposite sides decide it.
+        if (e0 > b0 && e1 < -b1) || (e0 < -b0 && e1 > b1) {
+            return EyeTest::Miss;
         }
         let e2 = self.n[2].dot(d);
-        let s0 = if e0 != T::ZERO && e1 != T::ZERO && e2 != T::ZERO {
-            let s0 = e0 > T::ZERO;
-            if s0 != (e2 > T::ZERO) {
-                return None;
-            }
-            s0
-        } else {
-            // An exact zero (or NaN): the tie-break.
-            let s0 = plane_positive(e0, self.n[0]);
-            if s0 != plane_positive(e1, self.n[1]) || s0 != plane_positive(e2, self.n[2]) {
-                return None;
-            }
-            s0
-        };
+        if (e2 > b2 && (e0 < -b0 || e1 < -b1)) || (e2 < -b2 && (e0 > b0 || e1 > b1)) {
+            return EyeTest::Miss;
+        }
+        if !(e0.abs() > b0 && e1.abs() > b1 && e2.abs() > b2) {
+            // Near an edge or vertex (or NaN): the whole triangle goes to the sheared test,
+            // as does every triangle sharing that edge.
+            return EyeTest::Uncertain;
+        }
+        // All three certain and none opposite: all of one sign.
+        let s0 = e0 > T::ZERO;
         let sum = e0 + e1 + e2;
         // In front of the eye: det and the sum agree in sign (and neither is zero or NaN).
         let front = if s0 {
@@ -274,33 +302,17 @@ impl<T: Real> EdgePlanes<T> {
             sum < T::ZERO && self.det < T::ZERO
         };
         if !front {
-            return None;
+            return EyeTest::Miss;
         }
         let inv = sum.recip();
         let t = self.det * inv * len;
         if !(t < t_max) {
-            return None;
+            return EyeTest::Miss;
         }
-        Some(TriHit {
+        EyeTest::Hit(TriHit {
             t,
             b: [e0 * inv, e1 * inv, e2 * inv],
         })
-    }
-}
-
-/// The side of an edge plane `n` a ray with `e = n . d` lies on; exact zeros are broken by
-/// the plane's normal, which is negated for the neighbour sharing the edge.
-#[inline(never)]
-fn plane_positive<T: Real>(e: T, n: Vec3<T>) -> bool {
-    if e != T::ZERO {
-        return e > T::ZERO;
-    }
-    if n.x != T::ZERO {
-        n.x > T::ZERO
-    } else if n.y != T::ZERO {
-        n.y > T::ZERO
-    } else {
-        n.z > T::ZERO
     }
 }
 
@@ -390,21 +402,26 @@ mod edge_plane_tests {
                 Vec3::new(0.0, 1.0, 5.0),
             ],
         };
-        let planes = EdgePlanes::new(&tri, [0, 1, 2]);
+        let planes = EdgePlanes::new(&tri, [0, 1, 2], 4.0);
         // Any length of d: the distance is along the unit direction.
         let d = Vec3::new(0.0, 0.0, 2.0);
-        let h = planes.intersect_from_eye(d, 2.0, f64::MAX).expect("hit");
+        let eye = |d: Vec3<f64>, t_max: f64| {
+            let len = d.length();
+            let ray = Shear::new(&Ray::new(Vec3::zero(), d * (1.0 / len)));
+            planes
+                .intersect_from_eye(d, len, t_max)
+                .or_sheared(|| tri, &ray, t_max)
+        };
+        assert!(matches!(
+            planes.intersect_from_eye(d, 2.0, f64::MAX),
+            EyeTest::Hit(_)
+        ));
+        let h = eye(d, f64::MAX).expect("hit");
         assert!((h.t - 5.0).abs() < 1e-12);
         assert!((h.b[2] - 0.5).abs() < 1e-12 && (h.b[0] - 0.25).abs() < 1e-12);
-        assert!(
-            planes.intersect_from_eye(d, 2.0, 4.9).is_none(),
-            "beyond t_max"
-        );
+        assert!(eye(d, 4.9).is_none(), "beyond t_max");
         let back = Vec3::new(0.0, 0.0, -1.0);
-        assert!(
-            planes.intersect_from_eye(back, 1.0, f64::MAX).is_none(),
-            "behind the eye"
-        );
+        assert!(eye(back, f64::MAX).is_none(), "behind the eye");
     }
 
     #[test]
@@ -423,7 +440,9 @@ mod edge_plane_tests {
             let len = d.length();
             let ray = Ray::new(Vec3::zero(), d * (1.0 / len));
             let a = tri.intersect(&ray, f64::MAX);
-            let b = EdgePlanes::new(&tri, [0, 1, 2]).intersect_from_eye(d, len, f64::MAX);
+            let b = EdgePlanes::new(&tri, [0, 1, 2], 2.0)
+                .intersect_from_eye(d, len, f64::MAX)
+                .or_sheared(|| tri, &Shear::new(&ray), f64::MAX);
             match (a, b) {
                 (Some(a), Some(b)) => {
                     hits += 1;
@@ -455,16 +474,16 @@ mod edge_plane_tests {
         ];
         // Mixed windings: watertightness must not depend on them.
         let fan = [[0u32, 1, 2], [0, 3, 2], [3, 0, 4], [0, 4, 1]];
-        let planes: Vec<EdgePlanes<f32>> = fan
+        let tris: Vec<Triangle<f32>> = fan
             .iter()
-            .map(|i| {
-                EdgePlanes::new(
-                    &Triangle {
-                        p: i.map(|k| v[k as usize]),
-                    },
-                    *i,
-                )
+            .map(|i| Triangle {
+                p: i.map(|k| v[k as usize]),
             })
+            .collect();
+        let planes: Vec<EdgePlanes<f32>> = tris
+            .iter()
+            .zip(&fan)
+            .map(|(t, i)| EdgePlanes::new(t, *i, 16.0))
             .collect();
         let mut st = 99u64;
         for k in 0..2000 {
@@ -483,9 +502,15 @@ mod edge_plane_tests {
                 continue;
             }
             let len = p.length();
+            let shear = Shear::new(&Ray::new(Vec3::zero(), p * (1.0 / len)));
             let n = planes
                 .iter()
-                .filter(|pl| pl.intersect_from_eye(p, len, f32::MAX).is_some())
+                .zip(&tris)
+                .filter(|(pl, tri)| {
+                    pl.intersect_from_eye(p, len, f32::MAX)
+                        .or_sheared(|| **tri, &shear, f32::MAX)
+                        .is_some()
+                })
                 .count();
             assert_eq!(n, 1, "ray through {p:?} hit {n} triangles of the fan");
         }

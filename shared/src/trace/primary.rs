@@ -29,17 +29,32 @@ pub struct PlaneCache<T> {
     /// Triangle index + 1 of each slot's planes (0: empty).
     tags: [u32; PLANE_SLOTS],
     planes: [EdgePlanes<T>; PLANE_SLOTS],
+    /// The largest `|d|_1` of the frame's primary rays, which the planes' error bounds
+    /// scale with.
+    l1: T,
     /// Planes made (cache misses), for the operation counts.
     pub(super) made: u64,
 }
 
 impl<T: Real> PlaneCache<T> {
-    pub fn new() -> Self {
+    /// An empty cache for primary rays whose `|d|_1` is at most `l1`.
+    pub fn new(l1: T) -> Self {
         Self {
             tags: [0; PLANE_SLOTS],
             planes: [EdgePlanes::ZERO; PLANE_SLOTS],
+            l1,
             made: 0,
         }
+    }
+
+    /// The largest `|d|_1` of a camera's primary rays (at the frame's corners), rounded up
+    /// generously so every pixel's computed `|d|_1` stays below it.
+    pub fn max_l1(camera: &crate::image::Camera<T>) -> T {
+        let w = T::from_i32(camera.width.min(i32::MAX as u32) as i32);
+        let h = T::from_i32(camera.height.min(i32::MAX as u32) as i32);
+        let x = camera.x0.abs().max((camera.x0 + w * camera.dx).abs());
+        let y = camera.y0.abs().max((camera.y0 - h * camera.dy).abs());
+        (x + y + camera.dz.abs()) * T::TWO
     }
 
     /// The planes of triangle `i` of `scene`, made now unless the cache holds them.
@@ -56,15 +71,9 @@ impl<T: Real> PlaneCache<T> {
     #[inline(never)]
     fn make(&mut self, scene: &SceneView<'_>, i: u32, slot: usize) {
         let (index, tri) = scene.triangle_corners::<T>(i);
-        self.planes[slot] = EdgePlanes::new(&tri, index);
+        self.planes[slot] = EdgePlanes::new(&tri, index, self.l1);
         self.tags[slot] = i.wrapping_add(1);
         self.made += 1;
-    }
-}
-
-impl<T: Real> Default for PlaneCache<T> {
-    fn default() -> Self {
-        Self::new()
     }
 }
 
@@ -103,14 +112,14 @@ mod tests {
         let view = SceneView::new(&img).unwrap();
         let count = view.count(crate::image::Section::Triangles);
         assert_eq!(count as usize, n);
-        let mut cache = PlaneCache::<f32>::new();
+        let mut cache = PlaneCache::<f32>::new(4.0);
         let order = (0..count).flat_map(|i| [i, (i + PLANE_SLOTS as u32) % count, i]);
         let mut asked = 0u64;
         for i in order {
             let (index, tri) = view.triangle_corners::<f32>(i);
             assert_eq!(
                 *cache.get(&view, i),
-                EdgePlanes::new(&tri, index),
+                EdgePlanes::new(&tri, index, 4.0),
                 "triangle {i}"
             );
             asked += 1;
@@ -128,8 +137,8 @@ mod tests {
                 crate::geom::Vec3::new(0.0, 1.0, 6.0),
             ],
         };
-        let a = EdgePlanes::new(&tri, [3, 1, 2]);
-        let b = EdgePlanes::new(&tri, [3, 1, 2]);
+        let a = EdgePlanes::new(&tri, [3, 1, 2], 2.0);
+        let b = EdgePlanes::new(&tri, [3, 1, 2], 2.0);
         assert_eq!(a, b);
         // The triple product is the volume term: p0 . (p1 x p2).
         let want = tri.p[0].dot(tri.p[1].cross(tri.p[2]));

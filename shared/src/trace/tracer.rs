@@ -83,7 +83,7 @@ impl<'a, T: Real> Tracer<'a, T> {
             camera,
             techniques,
             clip: RowClip::new(),
-            planes: PlaneCache::new(),
+            planes: PlaneCache::new(PlaneCache::max_l1(&camera)),
             blockers: [None; BLOCKER_LIGHTS],
             secondary_left: SECONDARY_RAYS_PER_PIXEL,
             stats: Stats::default(),

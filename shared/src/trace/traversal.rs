@@ -34,12 +34,7 @@ impl<T: Real> Probe<T> {
         Self {
             ray: *ray,
             inv: RayInv::new(ray.dir),
-            // A primary ray's triangles use the edge planes, never the shear.
-            shear: if eye.is_some() {
-                Shear::along_z()
-            } else {
-                Shear::new(ray)
-            },
+            shear: Shear::new(ray),
             eye,
         }
     }
@@ -286,7 +281,7 @@ impl<T: Real> Tracer<'_, T> {
     #[inline]
     pub(super) fn offer(&mut self, near: &mut Nearest<T>, leaf: Leaf, node: u32, probe: &Probe<T>) {
         if let (ShapeKind::Triangle, Some(eye)) = (leaf.kind, &probe.eye) {
-            return self.offer_triangles_from_eye(near, leaf, node, eye);
+            return self.offer_triangles_from_eye(near, leaf, node, probe, eye);
         }
         for k in 0..leaf.count {
             if let Some(h) = self.intersect_shape(leaf, k, probe, near.limit()) {
@@ -302,14 +297,20 @@ impl<T: Real> Tracer<'_, T> {
         near: &mut Nearest<T>,
         leaf: Leaf,
         node: u32,
+        probe: &Probe<T>,
         eye: &EyeRay<T>,
     ) {
         self.stats.triangle_tests += leaf.count as u64;
         let mut limit = near.limit();
         for k in 0..leaf.count {
             let index = leaf.first + k;
-            let planes = self.planes.get(&self.scene, index);
-            if let Some(h) = planes.intersect_from_eye(eye.d, eye.len, limit) {
+            let scene = &self.scene;
+            let test = self
+                .planes
+                .get(scene, index)
+                .intersect_from_eye(eye.d, eye.len, limit);
+            let tri = || scene.triangle::<T>(index).tri;
+            if let Some(h) = test.or_sheared(tri, &probe.shear, limit) {
                 let hit = Hit {
                     t: h.t,
                     shape: leaf.shape(k),
@@ -408,15 +409,14 @@ impl<T: Real> Tracer<'_, T> {
         match shape.kind {
             ShapeKind::Triangle => {
                 self.stats.triangle_tests += 1;
+                let tri = || s.triangle::<T>(shape.index).tri;
                 let h = match &probe.eye {
                     Some(eye) => self
                         .planes
                         .get(s, shape.index)
-                        .intersect_from_eye(eye.d, eye.len, t_max),
-                    None => s
-                        .triangle::<T>(shape.index)
-                        .tri
-                        .intersect_sheared(&probe.shear, t_max),
+                        .intersect_from_eye(eye.d, eye.len, t_max)
+                        .or_sheared(tri, &probe.shear, t_max),
+                    None => tri().intersect_sheared(&probe.shear, t_max),
                 };
                 h.map(|h| Hit {
                     t: h.t,
