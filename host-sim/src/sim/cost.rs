@@ -88,26 +88,27 @@ define_cycle_model! {
 impl CycleModel {
     /// Cortex-M4F at 168 MHz computing in hard-float `f32`: weights fitted by `links calibrate`
     /// to the 53 M4F f32 frames of `docs/cortex-m-bench.csv` (11 scene variants x up to 5
-    /// technique sets), re-fitted after records came to be read in place (a node read + slab
-    /// test went from ~90 to ~55 instructions, so a box test weighs less and clip compares
-    /// next to nothing); the mean error is under 8%, every frame within 38% (checked by a
-    /// test): the worst are photo1 with Y clipping but no X clipping (type 2), whose flat loop
-    /// over a row's leaves costs less per box test than the tree walks the one box-test
-    /// weight also covers. Weights are in-situ costs: a box test includes the traversal around
-    /// it, the per-primary-ray set-up is absorbed by the per-shading weight (every primary ray
-    /// that hits is shaded once).
+    /// technique sets), re-fitted for the edge-plane kernel (primary rays test cached edge
+    /// planes; shadow and secondary rays the sheared test once per ray): one triangle-test
+    /// weight now averages a cheap primary test and a dearer secondary one, and the per-shadow-
+    /// ray weight took up the any-hit walk's set-up. Worst frames: photo1 primary rays with Y
+    /// but no X clipping (type 2/3, whose flat loop over a row's leaves costs less per box test
+    /// than the tree walks the one box-test weight also covers) and the plain algorithm (type 4,
+    /// all primary tests cheap). Weights are in-situ costs: a box test includes the traversal
+    /// around it, the per-primary-ray set-up is absorbed by the per-shading weight (every
+    /// primary ray that hits is shaded once).
     pub const CORTEX_M4F_F32: CycleModel = CycleModel {
         name: "cortex-m4f f32 (QEMU-calibrated)",
         per_primary_ray: 0.0,
-        per_secondary_ray: 1705.3,
-        per_shadow_ray: 259.1,
-        per_box_test: 126.3,
-        per_triangle_test: 214.3,
-        per_ellipsoid_test: 261.9,
-        per_box_shape_test: 120.6,
-        per_blob_test: 643.1,
-        per_blob_field_eval: 827.2,
-        per_shading: 1558.8,
+        per_secondary_ray: 2229.6,
+        per_shadow_ray: 1040.0,
+        per_box_test: 106.2,
+        per_triangle_test: 227.4,
+        per_ellipsoid_test: 285.1,
+        per_box_shape_test: 189.4,
+        per_blob_test: 653.4,
+        per_blob_field_eval: 868.1,
+        per_shading: 585.0,
         per_clip_compare: 0.0,
         cycles_per_instruction: 1.3,
     };
