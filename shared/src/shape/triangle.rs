@@ -45,6 +45,18 @@ pub struct Shear<T> {
 }
 
 impl<T: Real> Shear<T> {
+    /// A placeholder for rays that will test no triangle (no set-up work).
+    #[inline]
+    pub fn unused() -> Self {
+        Self {
+            origin: Vec3::zero(),
+            kz: 2,
+            sx: T::ZERO,
+            sy: T::ZERO,
+            sz: T::ONE,
+        }
+    }
+
     #[inline]
     pub fn new(ray: &Ray<T>) -> Self {
         let kz = ray.dir.abs().max_dimension();

@@ -78,7 +78,7 @@ impl<T: Real> Tracer<'_, T> {
                 T::MAX
             };
             if t_max > T::ZERO {
-                let probe = Probe::new(&Ray::new(origin, dir));
+                let probe = Probe::new(&Ray::new(origin, dir), None, self.has_triangles);
                 // The shape that blocked this light's last shadow ray is tried first: the
                 // rays of neighbouring pixels are likely blocked by it too.
                 let slot = self.blockers.get_mut(light as usize).and_then(|b| b.take());

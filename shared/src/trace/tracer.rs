@@ -63,6 +63,8 @@ pub struct Tracer<'a, T: Real> {
     pub(super) techniques: Techniques,
     pub(super) clip: RowClip,
     pub(super) planes: PlaneCache<T>,
+    /// Whether the scene has triangles (rays of a scene without make no triangle set-up).
+    pub(super) has_triangles: bool,
     /// Per light, the shape that blocked its last shadow ray (tried first on the next).
     pub(super) blockers: [Option<Blocker>; BLOCKER_LIGHTS],
     /// Recursive (reflected, refracted, straight) rays the current pixel may still spawn.
@@ -84,6 +86,7 @@ impl<'a, T: Real> Tracer<'a, T> {
             techniques,
             clip: RowClip::new(),
             planes: PlaneCache::new(PlaneCache::max_l1(&camera)),
+            has_triangles: scene.count(crate::image::Section::Triangles) != 0,
             blockers: [None; BLOCKER_LIGHTS],
             secondary_left: SECONDARY_RAYS_PER_PIXEL,
             stats: Stats::default(),

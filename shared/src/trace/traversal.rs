@@ -25,16 +25,18 @@ pub(super) struct Probe<T> {
 }
 
 impl<T: Real> Probe<T> {
+    /// The probe of `ray` (a primary ray when `eye` is given); `triangles`: whether the
+    /// scene has any (the shear is made only then).
     #[inline]
-    pub(super) fn new(ray: &Ray<T>) -> Self {
-        Self::from_eye(ray, None)
-    }
-    #[inline]
-    pub(super) fn from_eye(ray: &Ray<T>, eye: Option<EyeRay<T>>) -> Self {
+    pub(super) fn new(ray: &Ray<T>, eye: Option<EyeRay<T>>, triangles: bool) -> Self {
         Self {
             ray: *ray,
             inv: RayInv::new(ray.dir),
-            shear: Shear::new(ray),
+            shear: if triangles {
+                Shear::new(ray)
+            } else {
+                Shear::unused()
+            },
             eye,
         }
     }
@@ -153,7 +155,7 @@ impl<T: Real> Tracer<'_, T> {
         eye: Option<EyeRay<T>>,
         x: u32,
     ) -> Option<Hit<T>> {
-        let probe = Probe::from_eye(ray, eye);
+        let probe = Probe::new(ray, eye, self.has_triangles);
         let mut near = Nearest::new(T::MAX);
         let col = x.min(u16::MAX as u32) as u16;
         let swept = self.techniques.x_clip && self.clip.advance(col, &mut self.stats.clip_compares);
@@ -194,7 +196,7 @@ impl<T: Real> Tracer<'_, T> {
         eye: Option<EyeRay<T>>,
         t_max: T,
     ) -> Option<Hit<T>> {
-        let probe = Probe::from_eye(ray, eye);
+        let probe = Probe::new(ray, eye, self.has_triangles);
         if !self.techniques.bounding_boxes {
             return self.closest_hit_plain(&probe, t_max);
         }
