@@ -17,7 +17,7 @@ use crate::image::{Camera, SceneView};
 use crate::num::Real;
 use crate::trace::clip::RowClip;
 use crate::trace::primary::{EyeRay, PlaneCache};
-use crate::trace::traversal::Blocker;
+use crate::trace::traversal::{Blocker, WalkSpace};
 use core::fmt;
 
 /// Most recursive rays one pixel may spawn (reflection and transmission, two per surface):
@@ -63,6 +63,7 @@ pub struct Tracer<'a, T: Real> {
     pub(super) techniques: Techniques,
     pub(super) clip: RowClip,
     pub(super) planes: PlaneCache<T>,
+    pub(super) walk: WalkSpace<T>,
     /// Whether the scene has triangles (rays of a scene without make no triangle set-up).
     pub(super) has_triangles: bool,
     /// Per light, the shape that blocked its last shadow ray (tried first on the next).
@@ -86,6 +87,7 @@ impl<'a, T: Real> Tracer<'a, T> {
             techniques,
             clip: RowClip::new(),
             planes: PlaneCache::new(PlaneCache::max_l1(&camera)),
+            walk: WalkSpace::new(),
             has_triangles: scene.count(crate::image::Section::Triangles) != 0,
             blockers: [None; BLOCKER_LIGHTS],
             secondary_left: SECONDARY_RAYS_PER_PIXEL,

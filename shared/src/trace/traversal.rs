@@ -82,6 +82,22 @@ pub(super) struct Blocker {
     k: u32,
 }
 
+/// The closest-hit walk's work space: the stack of nodes still to visit with their box
+/// entry distances, and one node's hit children being ordered.
+pub(super) struct WalkSpace<T> {
+    pub(super) stack: [(u32, T); TRAVERSAL_STACK],
+    pub(super) kids: [(u32, T); ORDERED_FANOUT],
+}
+
+impl<T: Real> WalkSpace<T> {
+    pub(super) fn new() -> Self {
+        Self {
+            stack: [(0, T::ZERO); TRAVERSAL_STACK],
+            kids: [(0, T::ZERO); ORDERED_FANOUT],
+        }
+    }
+}
+
 /// Depth of the closest-hit traversal stack (a node and its box entry distance per entry).
 pub(super) const TRAVERSAL_STACK: usize = 48;
 /// Most children of one node visited nearest-first; further hit children are walked in place.
@@ -201,14 +217,15 @@ impl<T: Real> Tracer<'_, T> {
             return self.closest_hit_plain(&probe, t_max);
         }
         let mut near = Nearest::new(t_max);
-        let mut stack = [(0u32, T::ZERO); TRAVERSAL_STACK];
+        // The walk's stack and child list live in the tracer (a walk never nests in another),
+        // so no call zeroes them: that cost 6% of the glass scene on the M4F.
         self.stats.box_tests += 1;
         let t_root = probe.entry(&self.scene.node::<T>(0).bounds, t_max)?;
-        stack[0] = (0, t_root);
+        self.walk.stack[0] = (0, t_root);
         let mut sp = 1;
         while sp > 0 {
             sp -= 1;
-            let (i, t_in) = stack[sp];
+            let (i, t_in) = self.walk.stack[sp];
             if near.beyond(t_in) {
                 continue;
             }
@@ -218,7 +235,6 @@ impl<T: Real> Tracer<'_, T> {
                 continue;
             }
             // Test the children's boxes; visit the nearest first so later ones can be pruned.
-            let mut kids = [(0u32, T::ZERO); ORDERED_FANOUT];
             let mut nk = 0;
             let mut c = i + 1;
             while c < node.skip {
@@ -226,7 +242,7 @@ impl<T: Real> Tracer<'_, T> {
                 self.stats.box_tests += 1;
                 if let Some(t) = probe.entry(&child.bounds, near.limit()) {
                     if nk < ORDERED_FANOUT && sp + nk < TRAVERSAL_STACK {
-                        kids[nk] = (c, t);
+                        self.walk.kids[nk] = (c, t);
                         nk += 1;
                     } else {
                         // No room to order it: walk its subtree in place.
@@ -236,6 +252,7 @@ impl<T: Real> Tracer<'_, T> {
                 c = child.skip;
             }
             // Push farthest first (insertion sort of at most ORDERED_FANOUT entries).
+            let kids = &mut self.walk.kids;
             for k in 1..nk {
                 let mut j = k;
                 while j > 0 && kids[j - 1].1 < kids[j].1 {
@@ -243,8 +260,8 @@ impl<T: Real> Tracer<'_, T> {
                     j -= 1;
                 }
             }
-            for kid in &kids[..nk] {
-                stack[sp] = *kid;
+            for k in 0..nk {
+                self.walk.stack[sp] = self.walk.kids[k];
                 sp += 1;
             }
         }
