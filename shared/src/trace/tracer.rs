@@ -200,3 +200,24 @@ pub fn render_run<T: Real>(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::board::NodeBoard;
+
+    /// A node renders each run with a tracer on its stack, which lives in the F407's 64 KB
+    /// CCM beside the firmware's statics (11.4 KB, `scripts/fw-size`) and `run_node`'s
+    /// future (~9 KB): the tracer (clipping lists, plane cache, walk stack) must leave room.
+    #[test]
+    fn a_tracer_fits_half_the_node_cpu_ram() {
+        let size = core::mem::size_of::<Tracer<'static, f32>>();
+        assert!(
+            size <= NodeBoard::F407.ccm / 2,
+            "Tracer<f32> is {size} bytes, over half of the F407's {} B CCM",
+            NodeBoard::F407.ccm
+        );
+        // The plane cache is the largest new part: 256 slots of 13 f32 and a tag.
+        assert!(size > crate::trace::primary::PLANE_SLOTS * 56);
+    }
+}
