@@ -373,18 +373,40 @@ impl<T: Real> Tracer<'_, T> {
                 }
             }
             if let Some(l) = node.leaf {
-                for k in 0..l.count {
-                    if let Some(h) = self.intersect_shape(l, k, probe, t_max) {
-                        if self.is_opaque(&h) {
+                if l.kind == ShapeKind::Triangle {
+                    // One material for the whole leaf: its first hit decides it.
+                    if let Some(k) = self.first_triangle_hit(l, probe, t_max) {
+                        if self.material_is_opaque(l.material) {
                             return (Some(Blocker { leaf: l, k }), transparent);
                         }
                         transparent = true;
+                    }
+                } else {
+                    for k in 0..l.count {
+                        if let Some(h) = self.intersect_shape(l, k, probe, t_max) {
+                            if self.is_opaque(&h) {
+                                return (Some(Blocker { leaf: l, k }), transparent);
+                            }
+                            transparent = true;
+                        }
                     }
                 }
             }
             i += 1;
         }
         (None, transparent)
+    }
+
+    /// The first triangle of a leaf the probe's ray crosses in (0, t_max), in leaf order.
+    fn first_triangle_hit(&mut self, leaf: Leaf, probe: &Probe<T>, t_max: T) -> Option<u32> {
+        for k in 0..leaf.count {
+            self.stats.triangle_tests += 1;
+            let tri = self.scene.triangle::<T>(leaf.first + k).tri;
+            if tri.intersect_sheared(&probe.shear, t_max).is_some() {
+                return Some(k);
+            }
+        }
+        None
     }
 
     /// Whether `blocker` stops the probe's ray within (0, t_max).
@@ -396,7 +418,11 @@ impl<T: Real> Tracer<'_, T> {
 
     /// Whether a hit surface lets no light through (no transmission, no transmission map).
     fn is_opaque(&self, h: &Hit<T>) -> bool {
-        let m = self.scene.material::<T>(self.material_of(h));
+        self.material_is_opaque(self.material_of(h))
+    }
+
+    fn material_is_opaque(&self, material: u32) -> bool {
+        let m = self.scene.material::<T>(material);
         let mapped = m.texture != NONE && m.target == MapTarget::Transmit;
         m.transmit.max_component() <= T::ZERO && !mapped
     }
