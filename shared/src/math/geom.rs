@@ -291,32 +291,63 @@ impl<T: Real> Aabb<T> {
     /// `None` when it misses within `[0, t_max]`.
     #[inline]
     pub fn entry(&self, ray: &Ray<T>, inv: &RayInv<T>, t_max: T) -> Option<T> {
-        let mut t0 = T::ZERO;
-        let mut t1 = t_max;
-        let widen = T::ONE + T::TWO * T::err_gamma(3);
+        let mut span = SlabSpan::new(t_max);
         let mut axis = 0;
         while axis < 3 {
-            let o = ray.origin[axis];
-            let id = inv.inv_dir[axis];
-            let mut tn = (self.min[axis] - o) * id;
-            let mut tf = (self.max[axis] - o) * id;
-            if tn > tf {
-                core::mem::swap(&mut tn, &mut tf);
-            }
-            tf *= widen;
-            // `x > t0` is false for NaN, so NaN leaves the interval unchanged.
-            if tn > t0 {
-                t0 = tn;
-            }
-            if tf < t1 {
-                t1 = tf;
-            }
-            if t0 > t1 {
+            let (lo, hi) = (self.min[axis], self.max[axis]);
+            if !span.clip(lo, hi, ray.origin[axis], inv.inv_dir[axis]) {
                 return None;
             }
             axis += 1;
         }
-        Some(t0)
+        Some(span.t0)
+    }
+}
+
+/// The interval of `t` a slab test has narrowed so far. The slabs may be clipped in any
+/// order with the same result: each only raises `t0` and lowers `t1`.
+#[derive(Clone, Copy, Debug)]
+pub struct SlabSpan<T> {
+    pub t0: T,
+    pub t1: T,
+}
+
+impl<T: Real> SlabSpan<T> {
+    /// `[0, t_max]`.
+    #[inline(always)]
+    pub fn new(t_max: T) -> Self {
+        SlabSpan {
+            t0: T::ZERO,
+            t1: t_max,
+        }
+    }
+
+    /// Narrow to where a ray from `o` (one coordinate) with reciprocal direction `id` lies
+    /// between `lo` and `hi`; false when the interval empties.
+    ///
+    /// NaN-safe: `0 * inf` (a ray in a slab's plane) gives NaN, and the comparisons are
+    /// written so that a NaN bound never shrinks the interval. The far bound is widened by
+    /// 1 + 2·gamma(3) (pbrt) so rounding can't make a ray graze past a box it touches.
+    #[inline(always)]
+    pub fn clip(&mut self, lo: T, hi: T, o: T, id: T) -> bool {
+        let widen = T::ONE + T::TWO * T::err_gamma(3);
+        let mut tn = (lo - o) * id;
+        let mut tf = (hi - o) * id;
+        if tn > tf {
+            core::mem::swap(&mut tn, &mut tf);
+        }
+        tf *= widen;
+        // `x > t0` is false for NaN, so NaN leaves the interval unchanged.
+        if tn > self.t0 {
+            self.t0 = tn;
+        }
+        if tf < self.t1 {
+            self.t1 = tf;
+        }
+        if self.t0 > self.t1 {
+            return false;
+        }
+        true
     }
 }
 

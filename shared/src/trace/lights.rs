@@ -11,8 +11,8 @@ use crate::num::Real;
 impl<T: Real> Tracer<'_, T> {
     /// Direction to light `i` from `p`, its distance (MAX for parallel light) and the
     /// light's intensity arriving at `p` before shadowing.
-    pub(super) fn light_at(&self, i: u32, p: Vec3<T>) -> Option<(Vec3<T>, T, Vec3<T>)> {
-        let l = self.scene.light::<T>(i);
+    pub(super) fn light_at(&mut self, i: u32, p: Vec3<T>) -> Option<(Vec3<T>, T, Vec3<T>)> {
+        let l = self.records.light(&self.scene, i);
         match l.kind {
             LightKind::Directional => Some((-l.dir, T::MAX, l.color)),
             LightKind::Point | LightKind::Spot => {

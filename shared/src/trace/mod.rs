@@ -7,6 +7,7 @@
 //! - [`primary`]: primary rays from the eye, triangles tested against cached edge planes.
 //! - [`surface`]: completing a hit into a surface point.
 //! - [`texture`]: materials with their texture maps applied.
+//! - [`records`]: material and light records decoded once per tracer.
 //! - [`lights`]: light sources and shadow rays.
 //! - [`shading`]: eq. 2.1 and eq. 2.2.
 //! - [`stats`], [`techniques`]: the operation counts and the switchable speed techniques.
@@ -16,6 +17,7 @@
 pub mod clip;
 pub mod lights;
 pub mod primary;
+pub mod records;
 pub mod shading;
 pub mod stats;
 pub mod surface;

@@ -22,8 +22,8 @@ pub(super) struct Mat<T> {
 
 impl<T: Real> Tracer<'_, T> {
     /// Material at a surface point, with its texture or coefficient map applied (bilinear).
-    pub(super) fn material_at(&self, surf: &Surface<T>) -> Mat<T> {
-        let m: Material<T> = self.scene.material(surf.material);
+    pub(super) fn material_at(&mut self, surf: &Surface<T>) -> Mat<T> {
+        let m: Material<T> = self.records.material(&self.scene, surf.material);
         let mut out = Mat {
             diffuse: m.diffuse,
             specular: m.specular,

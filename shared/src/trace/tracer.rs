@@ -17,6 +17,7 @@ use crate::image::{Camera, SceneView};
 use crate::num::Real;
 use crate::trace::clip::RowClip;
 use crate::trace::primary::{EyeRay, PlaneCache};
+use crate::trace::records::Records;
 use crate::trace::traversal::{Blocker, WalkSpace};
 use core::fmt;
 
@@ -68,6 +69,8 @@ pub struct Tracer<'a, T: Real> {
     pub(super) has_triangles: bool,
     /// Per light, the shape that blocked its last shadow ray (tried first on the next).
     pub(super) blockers: [Option<Blocker>; BLOCKER_LIGHTS],
+    /// Material and light records, decoded at first use.
+    pub(super) records: Records<T>,
     /// Recursive (reflected, refracted, straight) rays the current pixel may still spawn.
     pub(super) secondary_left: u32,
     pub stats: Stats,
@@ -90,6 +93,7 @@ impl<'a, T: Real> Tracer<'a, T> {
             walk: WalkSpace::new(),
             has_triangles: scene.count(crate::image::Section::Triangles) != 0,
             blockers: [None; BLOCKER_LIGHTS],
+            records: Records::new(),
             secondary_left: SECONDARY_RAYS_PER_PIXEL,
             stats: Stats::default(),
         }

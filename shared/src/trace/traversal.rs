@@ -4,7 +4,7 @@
 //! [`super::surface`]'s and [`super::shading`]'s business.
 
 use super::tracer::Tracer;
-use crate::geom::{Aabb, Ray, RayInv};
+use crate::geom::{Aabb, Ray, RayInv, SlabSpan};
 use crate::image::{BlobGroupRec, Leaf, MapTarget, SceneView, ShapeKind, ShapeRef, NONE};
 use crate::num::Real;
 use crate::shape::blob::{Ball, BlobGroup, BlobStats};
@@ -186,16 +186,37 @@ impl<T: Real> Tracer<'_, T> {
             } else {
                 self.clip.leaves()[k]
             };
-            let node = self.scene.node::<T>(leaf);
             self.stats.box_tests += 1;
-            if !node.bounds.hit(ray, &probe.inv, near.limit()) {
+            if !self.leaf_box_hit(leaf, ray, &probe, near.limit()) {
                 continue;
             }
-            if let Some(l) = node.leaf {
+            if let Some(l) = self.scene.node_leaf(leaf) {
                 self.offer(&mut near, l, leaf, &probe);
             }
         }
         near.hit
+    }
+
+    /// The slab test of a clipped leaf's box, depth (view z) first: the leaf's screen
+    /// rectangle already holds the pixel, so x and y rarely reject it, while a leaf behind
+    /// the nearest hit so far is rejected by z alone, before its x and y are decoded. The
+    /// answer is the full slab test's (slabs clip in any order to the same interval).
+    #[inline(always)]
+    fn leaf_box_hit(&self, leaf: u32, ray: &Ray<T>, probe: &Probe<T>, t_max: T) -> bool {
+        let mut span = SlabSpan::new(t_max);
+        let (lo, hi) = self.scene.node_span::<T>(leaf, 2);
+        if !span.clip(lo, hi, ray.origin.z, probe.inv.inv_dir.z) {
+            return false;
+        }
+        let mut axis = 0;
+        while axis < 2 {
+            let (lo, hi) = self.scene.node_span::<T>(leaf, axis);
+            if !span.clip(lo, hi, ray.origin[axis], probe.inv.inv_dir[axis]) {
+                return false;
+            }
+            axis += 1;
+        }
+        true
     }
 
     /// Nearest shape along `ray` in (0, t_max): walk the node tree nearest-first, skipping

@@ -335,6 +335,20 @@ impl<'a> SceneView<'a> {
         }
     }
 
+    /// Node `i`'s box along one axis (`min`, `max`), decoded exactly as [`Self::node`] does,
+    /// without the other two axes.
+    #[inline]
+    pub fn node_span<T: Real>(&self, i: u32, axis: usize) -> (T, T) {
+        use node::*;
+        let r = self.record::<NODE_SIZE>(Section::Nodes, i);
+        let g = &self.grid;
+        let k = axis.min(2);
+        let c = |q: u16| {
+            T::from_stored(g.origin[k]) + T::from_i32(q as i16 as i32) * T::from_stored(g.step[k])
+        };
+        (c(r.h(LO + 2 * k)), c(r.h(HI + 2 * k)))
+    }
+
     /// The skip index of node `i` (first node after its subtree), without decoding its box.
     #[inline]
     pub fn node_skip(&self, i: u32) -> u32 {
