@@ -20,9 +20,10 @@ use super::wire::{
 };
 use crate::image::SceneView;
 use crate::num::Real;
-use crate::render::{render_run, RenderError, Rgb8, Stats, Tracer};
+use crate::render::{
+    render_run, RenderError, Rgb8, SceneKey, Stats, Techniques, Tracer, TracerState,
+};
 use core::fmt;
-use core::marker::PhantomData;
 
 mod bank;
 use bank::Bank;
@@ -52,13 +53,23 @@ pub trait RunRenderer {
     ) -> Result<Stats, RenderError>;
 }
 
-/// The real renderer: a [`Tracer`] in number type `T`.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Tracing<T>(PhantomData<T>);
+/// The real renderer: a [`Tracer`] in number type `T`, working in one [`TracerState`] it
+/// keeps from run to run (its caches stay warm while the scene stays the same).
+pub struct Tracing<T: Real> {
+    state: TracerState<T>,
+}
+
+impl<T: Real> Default for Tracing<T> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 impl<T: Real> Tracing<T> {
-    pub const fn new() -> Self {
-        Self(PhantomData)
+    pub fn new() -> Self {
+        Self {
+            state: TracerState::new(),
+        }
     }
 }
 
@@ -66,12 +77,13 @@ impl<T: Real> RunRenderer for Tracing<T> {
     fn render(
         &mut self,
         scene: SceneView<'_>,
-        _frame: u16,
+        frame: u16,
         y: u32,
         x: u32,
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError> {
-        let mut t = Tracer::<T>::new(scene);
+        let key = SceneKey::of(&scene, frame);
+        let mut t = Tracer::with_state(scene, Techniques::ALL, &mut self.state, key);
         render_run(&mut t, y, x, out)?;
         Ok(t.stats)
     }

@@ -2,17 +2,18 @@
 //! transmittance of the surfaces between (transparent objects cast lighter shadows).
 
 use super::surface::Surface;
-use super::tracer::{Tracer, MAX_CROSSINGS};
+use super::tracer::{Tracer, TracerState, MAX_CROSSINGS};
 use super::traversal::Probe;
 use crate::geom::{offset_ray_origin, Ray, Vec3};
 use crate::image::LightKind;
 use crate::num::Real;
+use core::borrow::BorrowMut;
 
-impl<T: Real> Tracer<'_, T> {
+impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Direction to light `i` from `p`, its distance (MAX for parallel light) and the
     /// light's intensity arriving at `p` before shadowing.
     pub(super) fn light_at(&mut self, i: u32, p: Vec3<T>) -> Option<(Vec3<T>, T, Vec3<T>)> {
-        let l = self.records.light(&self.scene, i);
+        let l = self.state.borrow_mut().records.light(&self.scene, i);
         match l.kind {
             LightKind::Directional => Some((-l.dir, T::MAX, l.color)),
             LightKind::Point | LightKind::Spot => {
@@ -81,17 +82,22 @@ impl<T: Real> Tracer<'_, T> {
                 let probe = Probe::new(&Ray::new(origin, dir), None, self.has_triangles);
                 // The shape that blocked this light's last shadow ray is tried first: the
                 // rays of neighbouring pixels are likely blocked by it too.
-                let slot = self.blockers.get_mut(light as usize).and_then(|b| b.take());
+                let slot = self
+                    .state
+                    .borrow_mut()
+                    .blockers
+                    .get_mut(light as usize)
+                    .and_then(|b| b.take());
                 if let Some(b) = slot {
                     if self.blocks(b, &probe, t_max) {
-                        self.blockers[light as usize] = Some(b);
+                        self.state.borrow_mut().blockers[light as usize] = Some(b);
                         self.stats.shadow_early_exits += 1;
                         return Vec3::zero();
                     }
                 }
                 let (blocker, transparent) = self.any_opaque(&probe, t_max);
                 if let Some(b) = blocker {
-                    if let Some(slot) = self.blockers.get_mut(light as usize) {
+                    if let Some(slot) = self.state.borrow_mut().blockers.get_mut(light as usize) {
                         *slot = Some(b);
                     }
                 }

@@ -30,5 +30,6 @@ pub use stats::Stats;
 pub use surface::Surface;
 pub use techniques::Techniques;
 pub use tracer::{
-    render_run, to_rgb8, RenderError, Rgb8, Tracer, MAX_CROSSINGS, SECONDARY_RAYS_PER_PIXEL,
+    render_run, to_rgb8, RenderError, Rgb8, SceneKey, Tracer, TracerState, MAX_CROSSINGS,
+    SECONDARY_RAYS_PER_PIXEL,
 };

@@ -47,6 +47,12 @@ impl<T: Real> PlaneCache<T> {
         }
     }
 
+    /// Empty the cache, for primary rays whose `|d|_1` is at most `l1`.
+    pub fn reset(&mut self, l1: T) {
+        self.tags = [0; PLANE_SLOTS];
+        self.l1 = l1;
+    }
+
     /// The largest `|d|_1` of a camera's primary rays (at the frame's corners), rounded up
     /// generously so every pixel's computed `|d|_1` stays below it.
     pub fn max_l1(camera: &crate::image::Camera<T>) -> T {

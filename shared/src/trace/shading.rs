@@ -3,11 +3,12 @@
 
 use super::surface::Surface;
 use super::texture::Mat;
-use super::tracer::{Tracer, MAX_CROSSINGS};
+use super::tracer::{Tracer, TracerState, MAX_CROSSINGS};
 use super::traversal::Hit;
 use crate::geom::{offset_ray_origin, Ray, Vec3};
 use crate::image::MAX_DEPTH_LIMIT;
 use crate::num::Real;
+use core::borrow::BorrowMut;
 
 pub(super) fn schlick<T: Real>(at_normal: T, at_edge: T, cos: T) -> T {
     let m = (T::ONE - cos.clamp01()).max(T::ZERO);
@@ -15,7 +16,7 @@ pub(super) fn schlick<T: Real>(at_normal: T, at_edge: T, cos: T) -> T {
     at_normal + (at_edge - at_normal) * (m2 * m2 * m)
 }
 
-impl<T: Real> Tracer<'_, T> {
+impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Eq. 2.1 at a surface point seen along `view` (unit, towards the eye).
     pub(super) fn local_shade(&mut self, surf: &Surface<T>, m: &Mat<T>, view: Vec3<T>) -> Vec3<T> {
         self.stats.shadings += 1;

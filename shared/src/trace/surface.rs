@@ -1,12 +1,13 @@
 //! Completing a hit into a surface point: position with its error bound, geometric and
 //! shading normals, texture coordinates, material index.
 
-use super::tracer::Tracer;
+use super::tracer::{Tracer, TracerState};
 use super::traversal::{blob_group, Hit, HitDetail};
 use crate::geom::{Ray, Vec3};
 use crate::image::{ShapeRef, NONE};
 use crate::num::Real;
 use crate::shape::ellipsoid::LocalSurface;
+use core::borrow::BorrowMut;
 
 /// A finished hit: where, how accurately, which way the surface faces, what it is made of.
 #[derive(Clone, Copy, Debug)]
@@ -38,7 +39,7 @@ impl<T: Copy> Surface<T> {
     }
 }
 
-impl<T: Real> Tracer<'_, T> {
+impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Complete a hit: position with error bound, normals, texture coordinates.
     pub(super) fn surface(&self, ray: &Ray<T>, hit: &Hit<T>) -> Surface<T> {
         let s = &self.scene;

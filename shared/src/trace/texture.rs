@@ -2,10 +2,11 @@
 //! wrapping texture lookup.
 
 use super::surface::Surface;
-use super::tracer::Tracer;
+use super::tracer::{Tracer, TracerState};
 use crate::geom::Vec3;
 use crate::image::{MapTarget, Material, NONE};
 use crate::num::Real;
+use core::borrow::BorrowMut;
 
 /// A material with its texture map already applied at a surface point.
 #[derive(Clone, Copy, Debug)]
@@ -20,10 +21,14 @@ pub(super) struct Mat<T> {
     pub(super) ior: T,
 }
 
-impl<T: Real> Tracer<'_, T> {
+impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Material at a surface point, with its texture or coefficient map applied (bilinear).
     pub(super) fn material_at(&mut self, surf: &Surface<T>) -> Mat<T> {
-        let m: Material<T> = self.records.material(&self.scene, surf.material);
+        let m: Material<T> = self
+            .state
+            .borrow_mut()
+            .records
+            .material(&self.scene, surf.material);
         let mut out = Mat {
             diffuse: m.diffuse,
             specular: m.specular,

@@ -3,7 +3,7 @@
 //! any-opaque test of shadow rays. It returns hits; completing and shading them is
 //! [`super::surface`]'s and [`super::shading`]'s business.
 
-use super::tracer::Tracer;
+use super::tracer::{Tracer, TracerState};
 use crate::geom::{Aabb, Ray, RayInv, SlabSpan};
 use crate::image::{BlobGroupRec, Leaf, MapTarget, SceneView, ShapeKind, ShapeRef, NONE};
 use crate::num::Real;
@@ -12,6 +12,7 @@ use crate::shape::boxshape::BoxHit;
 use crate::shape::ellipsoid::EllipsoidHit;
 use crate::shape::triangle::Shear;
 use crate::trace::primary::EyeRay;
+use core::borrow::BorrowMut;
 
 /// A ray with what every test along it shares: the reciprocal direction of the slab tests
 /// and the shear of the triangle tests, made once per ray.
@@ -162,7 +163,7 @@ impl<T: Real> Nearest<T> {
     }
 }
 
-impl<T: Real> Tracer<'_, T> {
+impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// The primary ray's nearest hit among the Y-clipped leaves (and, with X clipping, only
     /// those whose rectangle contains column `x`), each behind its own box test.
     pub(super) fn closest_hit_clipped(
@@ -174,17 +175,22 @@ impl<T: Real> Tracer<'_, T> {
         let probe = Probe::new(ray, eye, self.has_triangles);
         let mut near = Nearest::new(T::MAX);
         let col = x.min(u16::MAX as u32) as u16;
-        let swept = self.techniques.x_clip && self.clip.advance(col, &mut self.stats.clip_compares);
+        let swept = self.techniques.x_clip
+            && self
+                .state
+                .borrow_mut()
+                .clip
+                .advance(col, &mut self.stats.clip_compares);
         let n = if swept {
-            self.clip.active_len()
+            self.state.borrow_mut().clip.active_len()
         } else {
-            self.clip.leaves().len()
+            self.state.borrow_mut().clip.leaves().len()
         };
         for k in 0..n {
             let leaf = if swept {
-                self.clip.active_leaf(k)
+                self.state.borrow_mut().clip.active_leaf(k)
             } else {
-                self.clip.leaves()[k]
+                self.state.borrow_mut().clip.leaves()[k]
             };
             self.stats.box_tests += 1;
             if !self.leaf_box_hit(leaf, ray, &probe, near.limit()) {
@@ -242,11 +248,11 @@ impl<T: Real> Tracer<'_, T> {
         // so no call zeroes them: that cost 6% of the glass scene on the M4F.
         self.stats.box_tests += 1;
         let t_root = probe.entry(&self.scene.node::<T>(0).bounds, t_max)?;
-        self.walk.stack[0] = (0, t_root);
+        self.state.borrow_mut().walk.stack[0] = (0, t_root);
         let mut sp = 1;
         while sp > 0 {
             sp -= 1;
-            let (i, t_in) = self.walk.stack[sp];
+            let (i, t_in) = self.state.borrow_mut().walk.stack[sp];
             if near.beyond(t_in) {
                 continue;
             }
@@ -263,7 +269,7 @@ impl<T: Real> Tracer<'_, T> {
                 self.stats.box_tests += 1;
                 if let Some(t) = probe.entry(&child.bounds, near.limit()) {
                     if nk < ORDERED_FANOUT && sp + nk < TRAVERSAL_STACK {
-                        self.walk.kids[nk] = (c, t);
+                        self.state.borrow_mut().walk.kids[nk] = (c, t);
                         nk += 1;
                     } else {
                         // No room to order it: walk its subtree in place.
@@ -273,7 +279,7 @@ impl<T: Real> Tracer<'_, T> {
                 c = child.skip;
             }
             // Push farthest first (insertion sort of at most ORDERED_FANOUT entries).
-            let kids = &mut self.walk.kids;
+            let kids = &mut self.state.borrow_mut().walk.kids;
             for k in 1..nk {
                 let mut j = k;
                 while j > 0 && kids[j - 1].1 < kids[j].1 {
@@ -282,7 +288,7 @@ impl<T: Real> Tracer<'_, T> {
                 }
             }
             for k in 0..nk {
-                self.walk.stack[sp] = self.walk.kids[k];
+                self.state.borrow_mut().walk.stack[sp] = self.state.borrow_mut().walk.kids[k];
                 sp += 1;
             }
         }
@@ -346,6 +352,8 @@ impl<T: Real> Tracer<'_, T> {
             let index = leaf.first + k;
             let scene = &self.scene;
             let test = self
+                .state
+                .borrow_mut()
                 .planes
                 .get(scene, index)
                 .intersect_from_eye(eye.d, eye.len, limit);
@@ -478,6 +486,8 @@ impl<T: Real> Tracer<'_, T> {
                 let tri = || s.triangle::<T>(shape.index).tri;
                 let h = match &probe.eye {
                     Some(eye) => self
+                        .state
+                        .borrow_mut()
                         .planes
                         .get(s, shape.index)
                         .intersect_from_eye(eye.d, eye.len, t_max)
