@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::Subcommand;
+use links_core::board::BoardProfile;
 
 use super::args::SceneArgs;
 use super::error::write_file;
@@ -41,6 +42,9 @@ pub enum SweepCmd {
         /// Directory for nodes.csv and nodes.svg
         #[arg(short, long, default_value = "docs/cluster")]
         output: PathBuf,
+        /// The board profile: f407 (the firmware's) or ideal (the idealised link)
+        #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
+        board: &'static BoardProfile,
     },
     /// Reliability: frame time against the moment a node dies (every policy, with the
     /// recovery bound), the bit-error rate and the fraction of nodes killed; writes the
@@ -58,6 +62,9 @@ pub enum SweepCmd {
         /// Directory for divisions[-noshadows].csv/svg
         #[arg(short, long, default_value = "docs/cluster")]
         output: PathBuf,
+        /// The board profile: f407 (the firmware's) or ideal (the idealised link)
+        #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
+        board: &'static BoardProfile,
     },
 }
 
@@ -81,10 +88,15 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
             };
             ablation(&scene, &cfg, &output)
         }
-        SweepCmd::Nodes { scene, output } => {
+        SweepCmd::Nodes {
+            scene,
+            output,
+            board,
+        } => {
             let image = SceneArgs::plain(&scene).compile()?;
-            let text =
-                cli_cluster::nodes_study(&image, &output, &|s| eprintln!("simulating {s} ..."))?;
+            let text = cli_cluster::nodes_study(&image, *board, &output, &|s| {
+                eprintln!("simulating {s} ...")
+            })?;
             outln!("{text}");
             eprintln!("wrote {}/nodes.csv and nodes.svg", output.display());
             Ok(())
@@ -94,7 +106,11 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
             outln!("{text}");
             Ok(())
         }
-        SweepCmd::Divisions { scene, output } => divisions(&scene, &output),
+        SweepCmd::Divisions {
+            scene,
+            output,
+            board,
+        } => divisions(&scene, *board, &output),
     }
 }
 
@@ -116,7 +132,7 @@ fn ablation(scene: &Path, cfg: &AblationConfig, output: &Path) -> Result<(), Cli
 }
 
 /// `links sweep divisions`: the study with and without shadows.
-fn divisions(scene: &Path, output: &Path) -> Result<(), CliError> {
+fn divisions(scene: &Path, board: BoardProfile, output: &Path) -> Result<(), CliError> {
     let image = SceneArgs::plain(scene).compile()?;
     let no_shadows = SceneArgs {
         no_shadows: true,
@@ -125,6 +141,7 @@ fn divisions(scene: &Path, output: &Path) -> Result<(), CliError> {
     .compile()?;
     let text = cli_cluster::divisions_study(
         &[("divisions-noshadows", &no_shadows), ("divisions", &image)],
+        board,
         output,
         &|s| eprintln!("simulating {s} ..."),
     )?;
