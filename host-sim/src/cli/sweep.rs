@@ -55,6 +55,18 @@ pub enum SweepCmd {
         #[command(flatten)]
         opts: cli_cluster::FaultSweepArgs,
     },
+    /// The board profiles compared: single frame and steady state (the repeated still) on
+    /// f407 and ideal, and what lifting each of the F407's limits buys
+    Board {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        /// Node counts of the profiles table
+        #[arg(long, value_delimiter = ',', default_value = "1,16,64,256")]
+        counts: Vec<u16>,
+        /// Node counts at which each F407 limit is lifted in turn
+        #[arg(long, value_delimiter = ',', default_value = "64,256")]
+        lift_at: Vec<u16>,
+    },
     /// LINKS-1 Fig. 5.2 analog: frame time against the number of sub-screens at 64 nodes
     Divisions {
         /// Scene file (.ron)
@@ -99,6 +111,18 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
             })?;
             outln!("{text}");
             eprintln!("wrote {}/nodes.csv and nodes.svg", output.display());
+            Ok(())
+        }
+        SweepCmd::Board {
+            scene,
+            counts,
+            lift_at,
+        } => {
+            let image = SceneArgs::plain(&scene).compile()?;
+            let text = crate::studies::board_study::board_study(&image, &counts, &lift_at, &|s| {
+                eprintln!("simulating {s} ...")
+            })?;
+            outln!("{text}");
             Ok(())
         }
         SweepCmd::Faults { scene, opts } => {

@@ -285,7 +285,7 @@ Every point: [`{}`]({}).
 
 /// One configuration's single frame and steady state, and the same on one node: (one
 /// node's frame time, one node's steady interval, the report, the steady interval).
-fn single_and_steady(
+pub(crate) fn single_and_steady(
     image: &[u8],
     cfg: &SimConfig,
 ) -> Result<(f64, f64, SimReport, f64), SimError> {
