@@ -39,6 +39,10 @@ pub const MAX_NODES: u32 = 256;
 /// frame of raw RGB still takes well under the 2^64 ps of virtual time.
 pub const BIT_RATE_MHZ: (f64, f64) = (0.001, 10_000.0);
 
+/// Most intervals a cluster frame's timeline keeps (`links render --timeline`): about
+/// 24 MB of log; photo1 at 512x480 on 256 nodes needs some tens of thousands.
+pub const MAX_TIMELINE_INTERVALS: usize = 1_000_000;
+
 /// Why a file was not read.
 #[derive(Debug)]
 #[non_exhaustive]

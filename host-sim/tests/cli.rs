@@ -878,3 +878,47 @@ fn a_scene_no_bank_holds_is_refused_before_anything_is_sent() {
     let (code, err) = run(&["upload", big.to_str().unwrap(), "--port", "/no/such/port"]);
     assert_eq!((code, err.trim_end()), (Some(1), want.as_str()));
 }
+
+/// `--board` picks the profile the summary names, `speed-up <X>x` is on the summary line, an
+/// unknown board is refused by name, and `--timeline` writes the picture naming the board.
+#[test]
+fn cluster_render_names_its_board_and_draws_the_timeline() {
+    let (host, cluster, svg) = (tmp("b-host.png"), tmp("b-cluster.png"), tmp("t.svg"));
+    assert!(render_64x60("photo1.ron", &host)
+        .arg("--quiet")
+        .status()
+        .unwrap()
+        .success());
+    for board in ["f407", "ideal"] {
+        let o = render_64x60("photo1.ron", &cluster)
+            .args(["--nodes", "4", "--board", board, "--timeline"])
+            .arg(&svg)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert_eq!(
+            std::fs::read(&host).unwrap(),
+            std::fs::read(&cluster).unwrap()
+        );
+        assert!(err.contains(&format!("board {board}: ")), "{err}");
+        let x = err
+            .split("speed-up ")
+            .nth(1)
+            .and_then(|t| t.split_once("x "))
+            .map(|(n, _)| n.parse::<f64>());
+        assert!(matches!(x, Some(Ok(v)) if v > 1.0 && v <= 4.0), "{err}");
+        let pic = std::fs::read_to_string(&svg).unwrap();
+        assert!(pic.starts_with("<svg") && pic.trim_end().ends_with("</svg>"));
+        assert!(pic.contains(&format!("board {board}: ")) && pic.contains("node 3"));
+    }
+    let o = render_64x60("photo1.ron", &cluster)
+        .args(["--nodes", "4", "--board", "f429"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("unknown board 'f429'"),
+        "{err}"
+    );
+}

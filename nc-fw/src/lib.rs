@@ -16,11 +16,14 @@ pub mod port;
 /// [`links_core::board::NodeBoard::F407`], which the host checks SceneImages against. See
 /// `docs/hardware.md`.
 pub mod plan {
-    use links_core::board::{Memory, NodeBoard};
+    use links_core::board::{BoardProfile, Memory, NodeBoard};
     use links_core::spi::BANK;
 
-    /// The board this firmware runs on: its RAM and the scene banks of this plan.
-    pub const BOARD: NodeBoard = NodeBoard::F407;
+    /// The board profile this firmware is built for.
+    pub const PROFILE: BoardProfile = BoardProfile::F407;
+    /// The board this firmware runs on: its RAM and the scene banks of this plan (the
+    /// profile's node).
+    pub const BOARD: NodeBoard = PROFILE.node;
     /// SRAM1 + SRAM2 (DMA-reachable) and CCM data RAM (CPU only): the board's.
     pub use links_board::{CCM, SRAM};
     /// The link's DMA banks: two TX, two RX, one scratch (in SRAM).
@@ -41,6 +44,7 @@ pub mod plan {
 
     const _: () = assert!(BOARD.sram == SRAM && BOARD.ccm == CCM);
     const _: () = assert!(LINK_BANKS == 5 * BANK);
+    const _: () = assert!(BANK == PROFILE.dma_bank_bytes());
     const _: () = assert!(SCENE_ODD_SRAM + SCENE_ODD_CCM == SCENE_ODD);
     const _: () = assert!(LINK_BANKS + SCENE_EVEN + SCENE_ODD_SRAM <= SRAM);
     const _: () = assert!(SCENE_EVEN <= links_core::wire::MAX_SCENE);
@@ -63,4 +67,26 @@ pub mod pins {
     pub const MISO_PA: usize = 6;
     /// MOSI pin number on GPIOA.
     pub const MOSI_PA: usize = 7;
+}
+
+#[cfg(test)]
+mod tests {
+    use links_core::board::BoardProfile;
+
+    /// The node's memory plan and link banks are the F407 board profile's.
+    #[test]
+    fn the_firmware_constants_are_the_f407_profile() {
+        let p = BoardProfile::F407;
+        assert_eq!(super::plan::PROFILE, p);
+        assert_eq!(super::plan::BOARD, p.node);
+        assert_eq!(super::plan::LINK_BANKS, 5 * p.dma_bank_bytes());
+        assert_eq!(
+            [super::plan::SCENE_EVEN, super::plan::SCENE_ODD],
+            p.node.scene_banks
+        );
+        assert_eq!(
+            links_core::spi::BANK,
+            (8 + links_core::wire::MAX_MESSAGE + 1).div_ceil(4) * 4
+        );
+    }
 }

@@ -10,6 +10,28 @@
 #[cfg(target_os = "none")]
 pub mod port;
 
+/// The link's numbers, all the board profile's ([`links_core::board::BoardProfile::F407`]):
+/// the SPI clock, chip-select timing and nodes per bus the port and `main` use.
+pub mod link {
+    use links_core::board::{BoardProfile, LinkProfile};
+
+    /// The board this firmware is: every number below is its.
+    pub const PROFILE: BoardProfile = BoardProfile::F407;
+    const LINK: LinkProfile = PROFILE.link;
+    /// SPI1's clock (Hz): APB2's 84 MHz / 4.
+    pub const SPI_HZ: u32 = LINK.bit_rate_hz;
+    /// Chip-select to first clock edge: the node's EXTI wakes its link task, which drops its
+    /// handshake line and starts driving MISO (a few µs at 168 MHz; margin included).
+    pub const CS_SETUP_US: u64 = LINK.cs_setup_ns as u64 / 1000;
+    /// Chip-select high before the next selection: the node stops its DMA and re-arms.
+    pub const CS_HOLD_US: u64 = LINK.cs_hold_ns as u64 / 1000;
+    /// Nodes on the one bus this firmware drives.
+    pub const NODES: usize = LINK.nodes_per_bus as usize;
+    // The timer counts whole microseconds: the profile's times must be whole too.
+    const _: () =
+        assert!(LINK.cs_setup_ns.is_multiple_of(1000) && LINK.cs_hold_ns.is_multiple_of(1000));
+}
+
 /// Where every large buffer lives (bytes). See `docs/hardware.md`.
 pub mod plan {
     use links_core::spi::BANK;
@@ -17,7 +39,8 @@ pub mod plan {
     /// SRAM1 + SRAM2 (DMA-reachable) and CCM data RAM (CPU only): the board's.
     pub use links_board::{CCM, SRAM};
     /// The bus's DMA banks: two TX (double-buffered: the RC composes into one while the
-    /// other waits for or crosses the bus) and one RX (in SRAM).
+    /// other waits for or crosses the bus) and one RX (in SRAM), each the board profile's
+    /// bank size (`links_core::spi::BANK`).
     pub const LINK_BANKS: usize = 3 * BANK;
     /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
     /// through the TX bank): what the DMA banks leave, in whole KB.
@@ -78,8 +101,9 @@ macro_rules! pin_names {
 /// wires. See `docs/hardware.md`.
 pub mod pins {
     /// Nodes on the one bus this firmware drives (one chip-select and one handshake line
-    /// each; EXTI lines must differ, so at most 16 per RC without a decoder).
-    pub const NODES: usize = 8;
+    /// each; EXTI lines must differ, so at most 16 per RC without a decoder): the board
+    /// profile's ([`crate::link::NODES`]); the pin table must list that many.
+    pub use crate::link::NODES;
     crate::with_pins!(pin_names);
 }
 
@@ -89,6 +113,27 @@ pub use links_core::serial::{readback, render, session, throttle};
 
 #[cfg(test)]
 mod tests {
+    use links_core::board::BoardProfile;
+
+    /// Every link number of this firmware is the F407 board profile's.
+    #[test]
+    fn the_firmware_constants_are_the_f407_profile() {
+        let p = BoardProfile::F407;
+        assert_eq!(super::link::PROFILE, p);
+        assert_eq!(super::link::SPI_HZ, p.link.bit_rate_hz);
+        assert_eq!(super::link::SPI_HZ, 21_000_000);
+        assert_eq!(super::link::CS_SETUP_US * 1000, p.link.cs_setup_ns as u64);
+        assert_eq!(super::link::CS_HOLD_US * 1000, p.link.cs_hold_ns as u64);
+        assert_eq!((super::link::CS_SETUP_US, super::link::CS_HOLD_US), (8, 15));
+        assert_eq!(super::pins::NODES, p.link.nodes_per_bus as usize);
+        assert_eq!(super::pins::CS.len(), super::pins::NODES);
+        assert_eq!(super::plan::LINK_BANKS, 3 * p.dma_bank_bytes());
+        assert_eq!(links_core::spi::HEADER, p.link.header_bytes as usize);
+        assert_eq!(links_core::spi::TRAILER, p.link.trailer_bytes as usize);
+        assert_eq!(links_core::spi::RC_OVERLAPS, p.link.rc_overlaps);
+        assert_eq!(links_board::CORE_CLOCK_HZ, p.core_clock_hz);
+    }
+
     #[test]
     fn pins_are_distinct_and_exti_lines_differ() {
         let mut all: Vec<&str> = super::pins::CS.to_vec();

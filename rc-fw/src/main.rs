@@ -193,7 +193,7 @@ mod fw {
         let mut usb_cfg = usb::Config::default();
         usb_cfg.vbus_detection = false;
         let mut spi_cfg = spi::Config::default();
-        spi_cfg.frequency = Hertz(21_000_000);
+        spi_cfg.frequency = Hertz(rc_fw::link::SPI_HZ);
         spi_cfg.mode = spi::MODE_0;
         let (driver, port) = rc_fw::with_pins!(wire, p, usb_cfg, spi_cfg);
         // pid.codes test VID/PID (replace before distributing boards).

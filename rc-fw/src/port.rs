@@ -16,11 +16,7 @@ use links_core::spi::{MasterPort, PortError, Select};
 use crate::readback::ByteQueue;
 use crate::throttle::Room;
 
-/// Chip-select to first clock edge: the node's EXTI wakes its link task, which drops its
-/// handshake line and starts driving MISO (a few µs at 168 MHz; margin included).
-pub const CS_SETUP_US: u64 = 8;
-/// Chip-select high before the next selection: the node stops its DMA and re-arms.
-pub const CS_HOLD_US: u64 = 15;
+pub use crate::link::{CS_HOLD_US, CS_SETUP_US};
 /// A lost handshake edge costs at most this long (the lines are polled as well).
 pub const READY_POLL_US: u64 = 500;
 

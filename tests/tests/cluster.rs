@@ -2,6 +2,7 @@
 //! count, bus count, scheduling policy and collection path; recovery from corrupted frames;
 //! exact broadcast byte counts; determinism.
 
+use links_core::board::BoardProfile;
 use links_core::node::NodeConfig;
 use links_core::sched::{Policy, Split};
 use links_core::wire::{self, Down, SCENE_CHUNK};
@@ -53,7 +54,12 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
             },
         ),
     ];
-    for (i, (nodes, buses, policy)) in cases.into_iter().enumerate() {
+    let boards = [BoardProfile::F407, BoardProfile::IDEAL];
+    for (i, (board, (nodes, buses, policy))) in boards
+        .iter()
+        .flat_map(|b| cases.iter().map(move |c| (*b, *c)))
+        .enumerate()
+    {
         let r = run(
             &img,
             SimConfig {
@@ -61,13 +67,15 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
                 buses,
                 policy,
                 node: NodeConfig { rle: i % 2 == 0 },
-                ..SimConfig::default()
+                ..SimConfig::for_board(board)
             },
         );
         assert_eq!(r.frames.len(), 1);
+        assert_eq!(r.profile, board);
         assert!(
             r.frames[0] == want,
-            "{nodes} nodes, {buses} buses, {policy:?}"
+            "{} board, {nodes} nodes, {buses} buses, {policy:?}",
+            board.name
         );
         assert_eq!(r.root.pixels, 64 * 60);
         assert_eq!(r.root.bad_messages, 0);
@@ -965,7 +973,7 @@ fn rc_double_buffering_hides_the_rcs_work_and_keeps_the_frame() {
     // A chunk encodes faster than it crosses the wire, so double buffering hides it fully:
     // the double-buffered RC's broadcast costs what the free RC's does, to within the
     // encoding of the first chunk and the rest of the frame's per-transfer RC work.
-    let wire_ps = SimConfig::default().timing.duration_ps(n);
+    let wire_ps = SimConfig::default().timing.duration_ps(n, false);
     assert!(chunk_ps < wire_ps, "{chunk_ps} vs {wire_ps}");
     assert!(
         double.time_s - free.time_s < 0.5 * gap,
@@ -1120,5 +1128,101 @@ fn photo2_renders_on_16_and_64_nodes_as_on_one() {
             },
         );
         assert!(r.frames[0] == want, "{nodes} nodes");
+    }
+}
+
+/// The board profile sets the link the star charges: the same frame on both, and the F407's
+/// slower link (21 MHz, 23 us of chip-select set-up and hold, 9 bytes of header and trailer)
+/// and serial RC make every transfer and the frame longer than the idealised link's.
+#[test]
+fn the_board_profile_sets_the_links_cost_and_keeps_the_frame() {
+    let img = image("photo1.ron", 64, 60);
+    let cfg = |b| SimConfig {
+        nodes: 16,
+        ..SimConfig::for_board(b)
+    };
+    let f407 = run(&img, cfg(BoardProfile::F407));
+    let ideal = run(&img, cfg(BoardProfile::IDEAL));
+    assert!(f407.frames[0] == ideal.frames[0]);
+    assert!(!cfg(BoardProfile::F407).rc_double_buffer && cfg(BoardProfile::IDEAL).rc_double_buffer);
+    let (bf, bi) = (&f407.bus[0], &ideal.bus[0]);
+    // Both broadcast the same scene: its chunks, its end and the stop.
+    assert_eq!(bf.broadcasts, bi.broadcasts);
+    // Busy time of the bus: 23 us + 8 bits / 21 MHz per clocked byte on the F407.
+    let want_ps = bf.exchanges as f64 * 23e6
+        + bf.broadcasts as f64 * 23e6
+        + bf.clocked_bytes as f64 * 8.0 * 1e12 / 21e6;
+    let got = bf.busy_ps as f64;
+    assert!(
+        (got - want_ps).abs() <= (bf.exchanges + bf.broadcasts) as f64,
+        "{got} vs {want_ps}"
+    );
+    assert!(
+        f407.time_s > ideal.time_s,
+        "{} vs {}",
+        f407.time_s,
+        ideal.time_s
+    );
+    assert!(
+        bf.busy_ps > 2 * bi.busy_ps,
+        "{} vs {}",
+        bf.busy_ps,
+        bi.busy_ps
+    );
+}
+
+/// The timeline of a cluster frame: a row's intervals never overlap, each node's compute sums
+/// to what the simulator reports, every bus transfer is counted, and the map names exactly
+/// one node for every pixel (rendered once).
+#[test]
+fn the_timeline_accounts_for_every_node_transfer_and_pixel() {
+    use links_host::cluster::timeline::{Interval, NO_NODE};
+    let img = image("photo1.ron", 64, 60);
+    for board in [BoardProfile::F407, BoardProfile::IDEAL] {
+        let r = run(
+            &img,
+            SimConfig {
+                nodes: 8,
+                buses: 2,
+                timeline: Some(1_000_000),
+                ..SimConfig::for_board(board)
+            },
+        );
+        let t = r.timeline.as_ref().expect("a timeline was asked for");
+        assert!(t.complete());
+        let apart = |row: &[Interval]| row.windows(2).all(|w| w[0].end <= w[1].start);
+        for (n, row) in t.compute.iter().enumerate() {
+            assert!(
+                apart(row) && row.iter().all(|i| i.start < i.end),
+                "node {n}"
+            );
+            let secs = t.compute_ps(n) as f64 * 1e-12;
+            assert_eq!(secs, r.node_compute_s[n], "node {n}");
+            assert!(apart(&t.exchanges[n]), "node {n}'s exchanges");
+        }
+        assert!(apart(&t.rc));
+        let rc_ps: u64 = t.rc.iter().map(Interval::len).sum();
+        assert_eq!(rc_ps as f64 * 1e-12, r.rc_busy_s);
+        for (b, row) in t.bus.iter().enumerate() {
+            let spans: Vec<Interval> = row.iter().map(|x| x.at).collect();
+            assert!(apart(&spans), "bus {b}");
+            let c = &r.bus[b];
+            assert_eq!(row.len() as u64, c.exchanges + c.broadcasts, "bus {b}");
+            let busy: u64 = spans.iter().map(Interval::len).sum();
+            assert_eq!(busy, c.busy_ps, "bus {b}");
+        }
+        let per_node: usize = t.exchanges.iter().map(Vec::len).sum();
+        assert_eq!(
+            per_node as u64,
+            r.bus.iter().map(|c| c.exchanges).sum::<u64>()
+        );
+        assert_eq!((t.width, t.height), (64, 60));
+        assert!(t.owner.iter().all(|&o| o != NO_NODE && o < 8));
+        assert!(t.renders.iter().all(|&k| k == 1));
+        // Each node's pixels in the map are the pixels it reports.
+        for (n, rep) in r.node_reports.iter().enumerate() {
+            let mine = t.owner.iter().filter(|&&o| o == n as u16).count() as u64;
+            assert_eq!(mine, rep.pixels, "node {n}");
+        }
     }
 }

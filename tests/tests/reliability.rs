@@ -2,7 +2,7 @@
 //! recovery bound, time-outs that false alarms cannot stretch, errors that name their cause.
 //! Every number is virtual time; every frame is compared with the single-node render.
 
-use links_core::board::NodeBoard;
+use links_core::board::{BoardProfile, NodeBoard};
 use links_core::image::SceneView;
 use links_core::render::{render_run, Tracer};
 use links_core::sched::{Policy, Split};
@@ -258,14 +258,20 @@ fn one_node_killed_at_any_moment_finishes_within_the_bound_under_every_policy() 
 /// docs/reliability.md.
 #[test]
 fn bit_errors_of_1e_3_both_ways_and_a_quarter_of_the_nodes_killed_keep_the_frame_exact() {
-    for (scene, max_cost) in [("photo1.ron", 20.0), ("reflections.ron", 4.0)] {
+    let cases = [
+        (BoardProfile::IDEAL, "photo1.ron", 20.0),
+        (BoardProfile::IDEAL, "reflections.ron", 4.0),
+        (BoardProfile::F407, "photo1.ron", 20.0),
+        (BoardProfile::F407, "reflections.ron", 4.0),
+    ];
+    for (board, scene, max_cost) in cases {
         let img = image(scene, 64, 60);
         let want = reference(&img);
         let cfg = SimConfig {
             nodes: 8,
             node_timeout_s: 0.05,
             cache: Some(RunCache::new()),
-            ..SimConfig::default()
+            ..SimConfig::for_board(board)
         };
         let clean = run(&img, &cfg);
         for seed in [1, 2, 3] {
@@ -310,9 +316,10 @@ fn bit_errors_of_1e_3_both_ways_and_a_quarter_of_the_nodes_killed_keep_the_frame
                 },
             );
             assert!(r.frames[0] == want, "{scene} seed {seed}, 2 of 8 killed");
-            if scene == "reflections.ron" {
+            if scene == "reflections.ron" && board == BoardProfile::IDEAL {
                 // At least one of them held jobs when it died (the other may just have
-                // finished its last one).
+                // finished its last one). On the idealised link's timing; on the F407's
+                // both may die idle at mid-frame (seed 2 does), which the bound covers too.
                 assert!(r.root.timeouts >= 1, "{scene} seed {seed}: {:?}", r.root);
                 assert!(r.root.reissued >= 1, "{scene} seed {seed}: {:?}", r.root);
             }

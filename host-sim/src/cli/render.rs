@@ -5,7 +5,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use links_core::board::NodeBoard;
+use links_core::board::{BoardProfile, NodeBoard};
 use links_core::image::SceneView;
 use links_core::render::Stats;
 
@@ -15,6 +15,7 @@ use super::{node, CliError};
 use crate::cli_cluster;
 use crate::frame::{encode_png, render_frame};
 use crate::limits;
+use crate::studies::timeline_chart::timeline_svg;
 
 /// The options of `links render`.
 #[derive(clap::Args)]
@@ -47,6 +48,12 @@ pub struct RenderArgs {
 /// The options of a cluster render (`--nodes`).
 #[derive(clap::Args)]
 pub struct ClusterArgs {
+    /// The board profile the cluster is built of (cluster only): f407 (the firmware's:
+    /// 21 MHz SPI, 8-byte header + 1-byte trailer, 8 + 15 us chip-select set-up and hold,
+    /// an RC that does not overlap) or ideal (42 MHz, 4-byte header, 0.5 us per transfer,
+    /// an RC that overlaps)
+    #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
+    pub board: &'static BoardProfile,
     /// The node computers' board (cluster only; known: f407): a SceneImage larger than its
     /// scene bank is refused before the run
     #[arg(long, default_value = nc_fw::plan::BOARD.name, value_parser = node::parse_node)]
@@ -54,9 +61,9 @@ pub struct ClusterArgs {
     /// SPI buses from the root computer (cluster only)
     #[arg(long, default_value_t = 1)]
     pub buses: u16,
-    /// SPI bit rate in MHz, 0.001..=10000 (cluster only)
-    #[arg(long, default_value_t = 42.0, value_parser = limits::parse_bit_rate_mhz)]
-    pub bit_rate_mhz: f64,
+    /// SPI bit rate in MHz, 0.001..=10000 (cluster only; default: the board's)
+    #[arg(long, value_parser = limits::parse_bit_rate_mhz)]
+    pub bit_rate_mhz: Option<f64>,
     /// Sub-screen policy (cluster only): decreasing, static, fixed=N, fixed-rect=N
     #[arg(long, default_value = "decreasing")]
     pub policy: String,
@@ -69,9 +76,14 @@ pub struct ClusterArgs {
     #[arg(long, default_value_t = 500.0)]
     pub timeout_ms: f64,
     /// A single-buffered RC: it composes, clocks and decodes one transfer at a time
-    /// (default: double-buffered, the bus busy while the RC works; cluster only)
+    /// (default: as the board does; cluster only)
     #[arg(long)]
     pub rc_single_buffer: bool,
+    /// Draw the frame's timeline into this SVG: one row per node (computing, waiting, its
+    /// exchanges), the RC's CPU and each bus in virtual time, and the map of which node
+    /// rendered which sub-screen (cluster only)
+    #[arg(long, value_name = "FILE.svg")]
+    pub timeline: Option<PathBuf>,
 }
 
 /// Runs `links render`.
@@ -102,6 +114,7 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
     };
     node::check_fits(&what, image.len(), &c.node)?;
     let mut cfg = cli_cluster::config(
+        *c.board,
         nodes,
         c.buses,
         c.bit_rate_mhz,
@@ -115,8 +128,11 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
     cfg.board = c.node;
     cfg.dm_s_per_frame = c.dm_ms * 1e-3;
     cfg.node_timeout_s = c.timeout_ms * 1e-3;
-    cfg.rc_double_buffer = !c.rc_single_buffer;
+    cfg.rc_double_buffer = cfg.rc_double_buffer && !c.rc_single_buffer;
     cli_cluster::apply_faults(&mut cfg, &c.faults)?;
+    if c.timeline.is_some() {
+        cfg.timeline = Some(limits::MAX_TIMELINE_INTERVALS);
+    }
     let start = std::time::Instant::now();
     let r = cli_cluster::render(&image, &cfg)?;
     let rep = &r.report;
@@ -126,23 +142,28 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
         .ok_or_else(|| CliError::Failed("the simulation kept no frame".into()))?;
     let png = encode_png(rep.width, rep.height, frame).map_err(CliError::failed)?;
     write_file(&a.output, png)?;
+    if let (Some(path), Some(log)) = (&c.timeline, &rep.timeline) {
+        let title = format!("{what}: {}", cli_cluster::board_text(&cfg));
+        write_file(path, timeline_svg(log, rep, &title))?;
+    }
     if !a.quiet {
         eprintln!(
-            "{}: {}x{} on {nodes} simulated nodes ({} bus(es) at {} MHz, {}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered), {} bytes moved{} | host {:.2} s",
+            "{}: {}x{} on {nodes} simulated nodes ({} bus(es), {}; {}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered), {} bytes moved{}{} | host {:.2} s",
             a.output.display(),
             rep.width,
             rep.height,
             c.buses,
-            c.bit_rate_mhz,
+            cli_cluster::board_text(&cfg),
             c.policy,
             rep.time_s,
             r.speedup,
             r.one_node_s,
             100.0 * rep.bus_utilisation(),
             100.0 * rep.rc_busy_s / rep.time_s,
-            if c.rc_single_buffer { "single" } else { "double" },
+            if cfg.rc_double_buffer { "double" } else { "single" },
             rep.bytes_moved(),
             cli_cluster::fault_summary(rep),
+            cli_cluster::topology_note(&cfg),
             start.elapsed().as_secs_f64()
         );
     }

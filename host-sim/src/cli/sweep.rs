@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use clap::Subcommand;
+use links_core::board::BoardProfile;
 
 use super::args::SceneArgs;
 use super::error::write_file;
@@ -41,6 +42,9 @@ pub enum SweepCmd {
         /// Directory for nodes.csv and nodes.svg
         #[arg(short, long, default_value = "docs/cluster")]
         output: PathBuf,
+        /// The board profile: f407 (the firmware's) or ideal (the idealised link)
+        #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
+        board: &'static BoardProfile,
     },
     /// Reliability: frame time against the moment a node dies (every policy, with the
     /// recovery bound), the bit-error rate and the fraction of nodes killed; writes the
@@ -51,6 +55,18 @@ pub enum SweepCmd {
         #[command(flatten)]
         opts: cli_cluster::FaultSweepArgs,
     },
+    /// The board profiles compared: single frame and steady state (the repeated still) on
+    /// f407 and ideal, and what lifting each of the F407's limits buys
+    Board {
+        /// Scene file (.ron)
+        scene: PathBuf,
+        /// Node counts of the profiles table
+        #[arg(long, value_delimiter = ',', default_value = "1,16,64,256")]
+        counts: Vec<u16>,
+        /// Node counts at which each F407 limit is lifted in turn
+        #[arg(long, value_delimiter = ',', default_value = "64,256")]
+        lift_at: Vec<u16>,
+    },
     /// LINKS-1 Fig. 5.2 analog: frame time against the number of sub-screens at 64 nodes
     Divisions {
         /// Scene file (.ron)
@@ -58,6 +74,9 @@ pub enum SweepCmd {
         /// Directory for divisions[-noshadows].csv/svg
         #[arg(short, long, default_value = "docs/cluster")]
         output: PathBuf,
+        /// The board profile: f407 (the firmware's) or ideal (the idealised link)
+        #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
+        board: &'static BoardProfile,
     },
 }
 
@@ -81,12 +100,29 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
             };
             ablation(&scene, &cfg, &output)
         }
-        SweepCmd::Nodes { scene, output } => {
+        SweepCmd::Nodes {
+            scene,
+            output,
+            board,
+        } => {
             let image = SceneArgs::plain(&scene).compile()?;
-            let text =
-                cli_cluster::nodes_study(&image, &output, &|s| eprintln!("simulating {s} ..."))?;
+            let text = cli_cluster::nodes_study(&image, *board, &output, &|s| {
+                eprintln!("simulating {s} ...")
+            })?;
             outln!("{text}");
             eprintln!("wrote {}/nodes.csv and nodes.svg", output.display());
+            Ok(())
+        }
+        SweepCmd::Board {
+            scene,
+            counts,
+            lift_at,
+        } => {
+            let image = SceneArgs::plain(&scene).compile()?;
+            let text = crate::studies::board_study::board_study(&image, &counts, &lift_at, &|s| {
+                eprintln!("simulating {s} ...")
+            })?;
+            outln!("{text}");
             Ok(())
         }
         SweepCmd::Faults { scene, opts } => {
@@ -94,7 +130,11 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
             outln!("{text}");
             Ok(())
         }
-        SweepCmd::Divisions { scene, output } => divisions(&scene, &output),
+        SweepCmd::Divisions {
+            scene,
+            output,
+            board,
+        } => divisions(&scene, *board, &output),
     }
 }
 
@@ -116,7 +156,7 @@ fn ablation(scene: &Path, cfg: &AblationConfig, output: &Path) -> Result<(), Cli
 }
 
 /// `links sweep divisions`: the study with and without shadows.
-fn divisions(scene: &Path, output: &Path) -> Result<(), CliError> {
+fn divisions(scene: &Path, board: BoardProfile, output: &Path) -> Result<(), CliError> {
     let image = SceneArgs::plain(scene).compile()?;
     let no_shadows = SceneArgs {
         no_shadows: true,
@@ -125,6 +165,7 @@ fn divisions(scene: &Path, output: &Path) -> Result<(), CliError> {
     .compile()?;
     let text = cli_cluster::divisions_study(
         &[("divisions-noshadows", &no_shadows), ("divisions", &image)],
+        board,
         output,
         &|s| eprintln!("simulating {s} ..."),
     )?;

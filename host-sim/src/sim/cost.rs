@@ -139,6 +139,15 @@ impl Default for CycleModel {
     }
 }
 
+impl CycleModel {
+    /// The weights of a board's core (`links_core::board::BoardProfile::core`).
+    pub const fn for_core(core: links_core::board::Core) -> CycleModel {
+        match core {
+            links_core::board::Core::CortexM4F => Self::CORTEX_M4F_F32,
+        }
+    }
+}
+
 /// What a node's check of a complete scene costs (`run_node`'s `check_scene`: the CRC-32
 /// over the bank, then [`SceneView::new`] once per bank; later runs open the checked bank
 /// with `SceneView::open_validated`, which the per-run weights cover). Instructions on the
@@ -183,7 +192,7 @@ impl Default for SceneCheckCost {
 }
 
 /// The reference node clock: STM32F407 at 168 MHz.
-pub const DEFAULT_CLOCK_HZ: f64 = 168e6;
+pub const DEFAULT_CLOCK_HZ: f64 = links_core::board::BoardProfile::F407.core_clock_hz as f64;
 
 /// One measured frame, a row of `docs/cortex-m-bench.csv`: where it ran, what it rendered,
 /// the instructions QEMU counted and every [`Stats`] counter. The QEMU bench's report

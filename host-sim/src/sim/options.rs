@@ -4,6 +4,7 @@
 
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
+use links_core::board::BoardProfile;
 use links_core::sched::{Policy, Split};
 use std::fmt;
 use std::str::FromStr;
@@ -32,6 +33,55 @@ impl FromStr for PolicyArg {
                 _ => Err(OptionError::UnknownPolicy(s.into())),
             },
         }
+    }
+}
+
+/// The known board profiles, borrowed by the command line's arguments (a reference keeps
+/// them small).
+static BOARDS: [BoardProfile; 2] = BoardProfile::ALL;
+
+/// `--board NAME`: a known board profile (`f407`, `ideal`; ASCII case ignored).
+pub fn parse_board(s: &str) -> Result<BoardProfile, OptionError> {
+    parse_board_arg(s).copied()
+}
+
+/// `--board NAME` as the command line keeps it (see [`parse_board`]).
+pub fn parse_board_arg(s: &str) -> Result<&'static BoardProfile, OptionError> {
+    BOARDS
+        .iter()
+        .find(|b| b.name.eq_ignore_ascii_case(s))
+        .ok_or_else(|| OptionError::UnknownBoard(s.into()))
+}
+
+/// The board profile in words, as summaries print it: name, bit rate, per-transfer
+/// handshake, header / trailer, nodes per bus, RC overlap.
+pub fn board_text(cfg: &SimConfig) -> String {
+    let (p, t) = (&cfg.profile, &cfg.timing);
+    format!(
+        "board {}: {} MHz, {:.1} us CS set-up+hold, {}+{} B header+trailer, {} nodes/bus, RC {}",
+        p.name,
+        t.bit_rate_hz / 1e6,
+        t.overhead_ns * 1e-3,
+        t.header_bytes,
+        t.trailer_bytes,
+        p.link.nodes_per_bus,
+        if cfg.rc_double_buffer {
+            "overlaps"
+        } else {
+            "serial"
+        }
+    )
+}
+
+/// A warning when the star puts more nodes on a bus than the profile's link drives ("" if
+/// not).
+pub fn topology_note(cfg: &SimConfig) -> String {
+    match cfg.overloaded_bus() {
+        Some(n) => format!(
+            " | note: {n} nodes on a bus, the {} board drives {} (a topology not yet buildable)",
+            cfg.profile.name, cfg.profile.link.nodes_per_bus
+        ),
+        None => String::new(),
     }
 }
 
@@ -99,6 +149,8 @@ pub fn parse_deaths(s: &str) -> Result<Vec<NodeDeath>, OptionError> {
 #[derive(Clone, Debug, PartialEq)]
 pub enum OptionError {
     UnknownPolicy(String),
+    /// `--board NAME` with no such profile.
+    UnknownBoard(String),
     /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
     BadDivisions(String),
     BadKill(String),
@@ -128,6 +180,10 @@ impl fmt::Display for OptionError {
                 f,
                 "unknown policy '{s}' (expected decreasing, static, fixed=N or fixed-rect=N)"
             ),
+            OptionError::UnknownBoard(s) => {
+                let known: Vec<&str> = BoardProfile::ALL.iter().map(|b| b.name).collect();
+                write!(f, "unknown board '{s}' (known: {})", known.join(", "))
+            }
             OptionError::BadDivisions(s) => {
                 write!(f, "'{s}': the sub-screen count must be a positive integer")
             }
@@ -236,15 +292,24 @@ pub fn fault_summary(r: &SimReport) -> String {
     )
 }
 
-/// A cluster configuration from the command line's settings.
-pub fn config(nodes: u16, buses: u16, bit_rate_mhz: f64, policy: Policy) -> SimConfig {
+/// A cluster configuration from the command line's settings: the board profile's, with
+/// the bit rate overridden if one is given.
+pub fn config(
+    board: BoardProfile,
+    nodes: u16,
+    buses: u16,
+    bit_rate_mhz: Option<f64>,
+    policy: Policy,
+) -> SimConfig {
     let mut cfg = SimConfig {
         nodes,
         buses,
         policy,
-        ..SimConfig::default()
+        ..SimConfig::for_board(board)
     };
-    cfg.timing.bit_rate_hz = bit_rate_mhz * 1e6;
+    if let Some(mhz) = bit_rate_mhz {
+        cfg.timing.bit_rate_hz = mhz * 1e6;
+    }
     cfg
 }
 
@@ -289,6 +354,31 @@ mod tests {
     }
 
     #[test]
+    fn boards_parse_and_set_the_link() {
+        assert_eq!(parse_board("F407"), Ok(BoardProfile::F407));
+        let e = parse_board("f429").unwrap_err().to_string();
+        assert!(
+            e.contains("unknown board 'f429'") && e.contains("f407, ideal"),
+            "{e}"
+        );
+        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING);
+        assert_eq!(f.timing.bit_rate_hz, 21e6);
+        assert_eq!((f.timing.header_bytes, f.timing.trailer_bytes), (8, 1));
+        assert_eq!(f.timing.overhead_ns, 23_000.0);
+        assert!(!f.rc_double_buffer);
+        assert_eq!(f.overloaded_bus(), Some(64));
+        let text = board_text(&f);
+        assert!(text.starts_with("board f407: 21 MHz, 23.0 us"), "{text}");
+        assert!(topology_note(&f).contains("drives 8"));
+        let i = config(BoardProfile::IDEAL, 256, 1, Some(10.0), Policy::DECREASING);
+        assert_eq!((i.timing.bit_rate_hz, i.timing.overhead_ns), (10e6, 500.0));
+        assert!(i.rc_double_buffer && i.overloaded_bus().is_none());
+        assert_eq!(topology_note(&i), "");
+        let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING);
+        assert_eq!(eight.overloaded_bus(), None);
+    }
+
+    #[test]
     fn deaths_parse_single_nodes_and_ranges() {
         assert_eq!(
             parse_deaths("3@0.25"),
@@ -320,7 +410,7 @@ mod tests {
 
     #[test]
     fn fault_options_are_checked_and_set() {
-        let mut cfg = config(8, 1, 42.0, Policy::DECREASING);
+        let mut cfg = config(BoardProfile::IDEAL, 8, 1, Some(42.0), Policy::DECREASING);
         let args = FaultArgs {
             kills: vec!["2@0.1".into(), "5-7@0.2".into()],
             ber_down: 1e-4,

@@ -137,8 +137,8 @@ fn cluster_section(r: &AblationReport) -> String {
         "\n### Table 5.2 on the simulated {}-node cluster, communication included\n\n\
          The same images and techniques on the cluster simulator (`host-sim/src/sim/cluster`): the RC \
          broadcasts the SceneImage into every node's bank, hands out sub-screens in job exchanges \
-         and takes the pixel runs back, in virtual time on the default board (one SPI bus at {:.0} \
-         Mbit/s, {:.0} ns per transfer, the RC's CPU cost `RcCost::CORTEX_M4F`, run-length coded \
+         and takes the pixel runs back, in virtual time on the default board (`{}`: one SPI bus at {:.0} \
+         Mbit/s, {:.0} ns of chip-select set-up and hold per transfer, the RC's CPU cost `RcCost::CORTEX_M4F`, run-length coded \
          pixel runs, collection by snooping). Nodes compute with the same cycle model and clock. \
          Policy: `Policy::Fixed {{ divisions, shape: Split::Span }}` with each row's division \
          count, which cuts every row into exactly the runs of the modelled table and hands them \
@@ -147,6 +147,7 @@ fn cluster_section(r: &AblationReport) -> String {
          bit-identical to the host render of the same image (the run fails otherwise). Ratios \
          are to type 1 in the same row.\n\n",
         c.nodes,
+        sim.profile.name,
         sim.timing.bit_rate_hz / 1e6,
         sim.timing.overhead_ns,
         crate::studies::ablation_cluster::STUDY_NODE_TIMEOUT_S,

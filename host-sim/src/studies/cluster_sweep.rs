@@ -48,6 +48,8 @@ impl NamedPolicy {
 /// One point of the node sweep.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodePoint {
+    /// The board profile's name.
+    pub board: &'static str,
     pub policy: String,
     pub nodes: u16,
     pub buses: u16,
@@ -68,6 +70,8 @@ pub struct NodePoint {
 /// One point of the division sweep.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DivisionPoint {
+    /// The board profile's name.
+    pub board: &'static str,
     pub policy: String,
     /// Sub-screens handed out (for decreasing sizes: how many it produced).
     pub divisions: u32,
@@ -156,6 +160,7 @@ pub fn sweep_nodes(
             one = (single_s, steady_s);
         }
         out.push(NodePoint {
+            board: base.profile.name,
             policy: policies[p].name.clone(),
             nodes: n,
             buses: base.buses,
@@ -213,6 +218,7 @@ pub fn sweep_divisions(
                 };
                 match simulate(&[image], &cfg) {
                     Ok(r) => Ok(Some(DivisionPoint {
+                        board: base.profile.name,
                         policy: name.clone(),
                         divisions: r.root.jobs,
                         nodes,
@@ -240,12 +246,12 @@ pub fn sweep_divisions(
 /// The node sweep as CSV.
 pub fn nodes_csv(points: &[NodePoint]) -> String {
     let mut s = String::from(
-        "policy,nodes,buses,single_s,steady_s,speedup_single,speedup_steady,bus_utilisation,bytes,exchanges\n",
+        "policy,nodes,buses,single_s,steady_s,speedup_single,speedup_steady,bus_utilisation,bytes,exchanges,board\n",
     );
     for p in points {
         let _ = writeln!(
             s,
-            "{},{},{},{:.6},{:.6},{:.3},{:.3},{:.4},{},{}",
+            "{},{},{},{:.6},{:.6},{:.3},{:.3},{:.4},{},{},{}",
             p.policy,
             p.nodes,
             p.buses,
@@ -255,7 +261,8 @@ pub fn nodes_csv(points: &[NodePoint]) -> String {
             p.speedup_steady,
             p.bus_utilisation,
             p.bytes,
-            p.exchanges
+            p.exchanges,
+            p.board
         );
     }
     s
@@ -263,12 +270,20 @@ pub fn nodes_csv(points: &[NodePoint]) -> String {
 
 /// The division sweep as CSV.
 pub fn divisions_csv(points: &[DivisionPoint]) -> String {
-    let mut s = String::from("policy,divisions,nodes,time_s,bus_utilisation,bytes,exchanges\n");
+    let mut s =
+        String::from("policy,divisions,nodes,time_s,bus_utilisation,bytes,exchanges,board\n");
     for p in points {
         let _ = writeln!(
             s,
-            "{},{},{},{:.6},{:.4},{},{}",
-            p.policy, p.divisions, p.nodes, p.time_s, p.bus_utilisation, p.bytes, p.exchanges
+            "{},{},{},{:.6},{:.4},{},{},{}",
+            p.policy,
+            p.divisions,
+            p.nodes,
+            p.time_s,
+            p.bus_utilisation,
+            p.bytes,
+            p.exchanges,
+            p.board
         );
     }
     s

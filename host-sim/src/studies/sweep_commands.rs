@@ -4,24 +4,32 @@
 
 use crate::sim::cluster::rccost::RcCost;
 use crate::sim::cluster::{simulate_frame, RunCache, SimConfig, SimError, SimReport};
+use crate::sim::options::board_text;
 use crate::studies::cluster_sweep::{
     divisions_csv, nodes_csv, steady_state_interval, sweep_divisions, sweep_nodes,
     write_divisions_chart, write_nodes_chart, NamedPolicy,
 };
 use crate::studies::report::{table_head, write_file};
+use links_core::board::BoardProfile;
 use links_core::node::NodeConfig;
 use std::path::Path;
 
 /// The Fig. 5.1 study: the bus table (raw vs RLE pixels, 1/2/4 buses at 64 nodes) printed,
 /// and the speed-up sweep over node counts written as CSV and SVG into `out`.
-pub fn nodes_study(image: &[u8], out: &Path, progress: &dyn Fn(&str)) -> Result<String, String> {
+pub fn nodes_study(
+    image: &[u8],
+    board: BoardProfile,
+    out: &Path,
+    progress: &dyn Fn(&str),
+) -> Result<String, String> {
     let e = |e: SimError| e.to_string();
     std::fs::create_dir_all(out).map_err(|err| format!("{}: {err}", out.display()))?;
     let base = SimConfig {
         cache: Some(RunCache::new()),
-        ..SimConfig::default()
+        ..SimConfig::for_board(board)
     };
-    let mut table = table_head([
+    let mut table = format!("{}\n\n", board_text(&base));
+    table.push_str(&table_head([
         "pixels",
         "buses",
         "single frame (s)",
@@ -30,7 +38,7 @@ pub fn nodes_study(image: &[u8], out: &Path, progress: &dyn Fn(&str)) -> Result<
         "speed-up",
         "bus busy (single)",
         "bytes (single)",
-    ]);
+    ]));
     for rle in [false, true] {
         for buses in [1u16, 2, 4] {
             progress(&format!(
@@ -66,9 +74,10 @@ pub fn nodes_study(image: &[u8], out: &Path, progress: &dyn Fn(&str)) -> Result<
         "RC busy (single)",
         "bus busy (single)",
     ]));
+    let rc = RcCost::for_board(&board);
     let rcs = [
-        ("double-buffered", true, RcCost::CORTEX_M4F),
-        ("single-buffered", false, RcCost::CORTEX_M4F),
+        ("double-buffered", true, rc),
+        ("single-buffered", false, rc),
         ("free (no CPU time)", true, RcCost::FREE),
     ];
     for nodes in [64u16, 256] {
@@ -97,12 +106,12 @@ pub fn nodes_study(image: &[u8], out: &Path, progress: &dyn Fn(&str)) -> Result<
     let pts = sweep_nodes(image, &counts, &NamedPolicy::standard(), &base, 8, 0).map_err(e)?;
     let csv = nodes_csv(&pts);
     std::fs::write(out.join("nodes.csv"), &csv).map_err(|err| err.to_string())?;
-    write_nodes_chart(
-        &out.join("nodes.svg"),
-        &pts,
-        "speed-up vs nodes (1 bus, 42 MHz)",
-    )
-    .map_err(e)?;
+    let title = format!(
+        "speed-up vs nodes (1 bus; board {}, {} MHz)",
+        board.name,
+        base.timing.bit_rate_hz / 1e6
+    );
+    write_nodes_chart(&out.join("nodes.svg"), &pts, &title).map_err(e)?;
     Ok(format!("{table}\n{csv}"))
 }
 
@@ -110,6 +119,7 @@ pub fn nodes_study(image: &[u8], out: &Path, progress: &dyn Fn(&str)) -> Result<
 /// `divisions[-noshadows].csv/svg` into `out` for each image given.
 pub fn divisions_study(
     images: &[(&str, &[u8])],
+    board: BoardProfile,
     out: &Path,
     progress: &dyn Fn(&str),
 ) -> Result<String, String> {
@@ -117,7 +127,7 @@ pub fn divisions_study(
     std::fs::create_dir_all(out).map_err(|err| format!("{}: {err}", out.display()))?;
     let base = SimConfig {
         cache: Some(RunCache::new()),
-        ..SimConfig::default()
+        ..SimConfig::for_board(board)
     };
     let divs = [
         64u32, 128, 256, 480, 512, 1024, 2048, 2400, 4096, 7680, 15360,
@@ -129,12 +139,13 @@ pub fn divisions_study(
         let csv = divisions_csv(&dp);
         std::fs::write(out.join(format!("{name}.csv")), &csv).map_err(|err| err.to_string())?;
         let title = format!(
-            "64 nodes: frame time vs sub-screens{}",
+            "64 nodes: frame time vs sub-screens{} (board {})",
             if name.contains("noshadows") {
                 ", no shadows"
             } else {
                 ""
-            }
+            },
+            board.name
         );
         write_divisions_chart(&out.join(format!("{name}.svg")), &dp, &title).map_err(e)?;
         text.push_str(&format!("{name}\n{csv}\n"));
@@ -166,6 +177,9 @@ pub struct FaultSweepArgs {
     /// Host threads (0 = all cores); the results do not depend on it
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// The board profile: f407 (the firmware's) or ideal (the idealised link)
+    #[arg(long, default_value = "f407", value_parser = crate::sim::options::parse_board_arg)]
+    pub board: &'static BoardProfile,
 }
 
 /// `links sweep faults`: run the reliability sweep on `scene` and write the CSV, the chart
@@ -206,7 +220,7 @@ pub fn faults_study(
     )
     .map_err(|e| e.to_string())?
     .rgb;
-    let cfg = FaultSweepConfig::standard(opts.nodes, opts.timeout_ms * 1e-3);
+    let cfg = FaultSweepConfig::standard(*opts.board, opts.nodes, opts.timeout_ms * 1e-3);
     let start = std::time::Instant::now();
     let sweep = sweep_faults(&image, &reference, &cfg, opts.threads, &|s| {
         progress(&format!("simulating {s} ..."))
@@ -221,12 +235,13 @@ pub fn faults_study(
         start.elapsed().as_secs_f64()
     ));
     let command = format!(
-        "links sweep faults {} --width {} --height {} --nodes {} --timeout-ms {}",
+        "links sweep faults {} --width {} --height {} --nodes {} --timeout-ms {} --board {}",
         scene.display(),
         opts.width,
         opts.height,
         opts.nodes,
-        opts.timeout_ms
+        opts.timeout_ms,
+        opts.board.name
     );
     let chart_rel = opts
         .chart
@@ -270,7 +285,7 @@ Every point: [`{}`]({}).
 
 /// One configuration's single frame and steady state, and the same on one node: (one
 /// node's frame time, one node's steady interval, the report, the steady interval).
-fn single_and_steady(
+pub(crate) fn single_and_steady(
     image: &[u8],
     cfg: &SimConfig,
 ) -> Result<(f64, f64, SimReport, f64), SimError> {

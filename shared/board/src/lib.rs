@@ -9,6 +9,14 @@ pub const SRAM: usize = links_core::board::NodeBoard::F407.sram;
 /// CCM data RAM (CPU only): the board's data, `links_core::board::NodeBoard::F407`.
 pub const CCM: usize = links_core::board::NodeBoard::F407.ccm;
 
+/// The core clock the clock tree below gives: the board profile's
+/// (`links_core::board::BoardProfile::F407`).
+pub const CORE_CLOCK_HZ: u32 = links_core::board::BoardProfile::F407.core_clock_hz;
+/// The crystal.
+pub const HSE_HZ: u32 = 8_000_000;
+// The PLL of [`config`]: HSE / 4 (prediv) x 168 (mul) / 2 (P) must give the profile's clock.
+const _: () = assert!(HSE_HZ / 4 * 168 / 2 == CORE_CLOCK_HZ);
+
 /// The clock tree: 8 MHz crystal -> 168 MHz core, APB2 84 MHz (SPI1 up to 42 MHz), 48 MHz
 /// for USB.
 #[cfg(target_os = "none")]
@@ -17,7 +25,7 @@ pub fn config() -> embassy_stm32::Config {
     use embassy_stm32::time::Hertz;
     let mut c = embassy_stm32::Config::default();
     c.rcc.hse = Some(Hse {
-        freq: Hertz(8_000_000),
+        freq: Hertz(HSE_HZ),
         mode: HseMode::Oscillator,
     });
     c.rcc.pll_src = PllSource::HSE;

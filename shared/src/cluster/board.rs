@@ -9,6 +9,8 @@
 
 use crate::cluster::spi::BANK;
 
+pub use crate::cluster::profile::{BoardProfile, Core, LinkProfile};
+
 /// A node computer board: its RAM and the scene banks of its memory plan (bytes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]

@@ -1,6 +1,7 @@
 //! The cluster layer: LINKS-1's root computer (RC) and node computers (NCs) on one bus.
 //!
 //! - [`board`]: the node boards as data: RAM and the two scene banks of the memory plan.
+//! - [`profile`]: the board as one value: the SPI link, the node's memory, the core.
 //! - [`wire`]: every message on the RC-NC bus (postcard, CRC-32, run-length pixels).
 //! - [`link`]: the IMSU link as traits the node and root logic are generic over.
 //! - [`sched`]: sub-screen scheduling (which region a node renders next).
@@ -11,6 +12,7 @@
 pub mod board;
 pub mod link;
 pub mod node;
+pub mod profile;
 pub mod root;
 pub mod sched;
 pub mod spi;

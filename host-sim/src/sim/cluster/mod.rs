@@ -22,6 +22,7 @@ pub mod framemem;
 pub mod rccost;
 mod run;
 pub mod star;
+pub mod timeline;
 
 pub use crate::studies::cluster_sweep as sweep;
 pub use crate::studies::faults as reliability;
@@ -31,9 +32,9 @@ pub use sweep::{
     write_divisions_chart, write_nodes_chart, DivisionPoint, NamedPolicy, NodePoint,
 };
 
-use crate::cost::{CycleModel, DEFAULT_CLOCK_HZ};
+use crate::cost::CycleModel;
 use exec::ExecError;
-use links_core::board::NodeBoard;
+use links_core::board::{BoardProfile, NodeBoard};
 use links_core::node::{NodeConfig, NodeReport};
 use links_core::render::{Stats, Techniques};
 use links_core::root::{RootConfig, RootError, RootReport};
@@ -44,6 +45,7 @@ use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, Noise};
 use std::collections::HashMap;
 use std::fmt;
 use std::sync::{Arc, Mutex};
+use timeline::Timeline;
 
 /// How finished pixels reach the frame memory.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -58,6 +60,10 @@ pub enum Collect {
 /// One simulation's set-up.
 #[derive(Clone, Debug)]
 pub struct SimConfig {
+    /// The board the cluster is built of ([`SimConfig::for_board`] sets `timing`,
+    /// `clock_hz`, `model`, `board`, `rc_cost` and `rc_double_buffer` from it; reports and
+    /// figures name it). Default: the firmware's, [`BoardProfile::F407`].
+    pub profile: BoardProfile,
     /// Node computers (1..=256).
     pub nodes: u16,
     /// SPI buses from the RC (1..=8); nodes are split evenly across them.
@@ -79,8 +85,8 @@ pub struct SimConfig {
     pub drops: Vec<BroadcastDrop>,
     /// The node board: a scene larger than its larger scene bank
     /// ([`NodeBoard::largest_bank`]) is refused before the run; the simulated nodes have two
-    /// banks that size. Default: the NC firmware's board, [`nc_fw::plan::BOARD`]
-    /// ([`NodeBoard::F407`]).
+    /// banks that size. Default: the profile's node (the NC firmware's board,
+    /// [`nc_fw::plan::BOARD`], for [`BoardProfile::F407`]).
     pub board: NodeBoard,
     /// The RC declares a node holding jobs dead after this long without an exchange (s) and
     /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
@@ -101,38 +107,61 @@ pub struct SimConfig {
     /// Memo of rendered runs shared between simulations of the same scenes (sweeps). The
     /// memo returns exactly what rendering returns, so it changes no result.
     pub cache: Option<Arc<RunCache>>,
+    /// Record a [`Timeline`] of at most this many intervals (`None`: no log).
+    pub timeline: Option<usize>,
 }
 
 impl Default for SimConfig {
     fn default() -> Self {
+        Self::for_board(BoardProfile::F407)
+    }
+}
+
+impl SimConfig {
+    /// The default set-up on `profile`: its link's timing, its core's clock and cost-model
+    /// weights, its node's scene banks, and an RC that overlaps the wire with its work only
+    /// if the profile's does. 64 nodes, 1 bus, decreasing sizes, no faults.
+    pub fn for_board(profile: BoardProfile) -> Self {
         Self {
+            profile,
             nodes: 64,
             buses: 1,
             policy: Policy::DECREASING,
-            timing: BusTiming::default(),
-            clock_hz: DEFAULT_CLOCK_HZ,
-            model: CycleModel::default(),
+            timing: BusTiming::of(&profile.link),
+            clock_hz: profile.core_clock_hz as f64,
+            model: CycleModel::for_core(profile.core),
             techniques: Techniques::ALL,
             faults: Faults::default(),
             noise: Noise::default(),
             deaths: Vec::new(),
             drops: Vec::new(),
-            board: nc_fw::plan::BOARD,
+            board: profile.node,
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
             collect: Collect::Snoop,
             node: NodeConfig::default(),
-            rc_cost: RcCost::default(),
-            rc_double_buffer: true,
+            rc_cost: RcCost::for_board(&profile),
+            rc_double_buffer: profile.link.rc_overlaps,
             keep_frames: false,
             cache: None,
+            timeline: None,
         }
+    }
+
+    /// Nodes on the busiest bus, if more than the profile's link drives
+    /// ([`links_core::board::LinkProfile::nodes_per_bus`]): a star the board cannot be
+    /// wired as yet.
+    pub fn overloaded_bus(&self) -> Option<u16> {
+        let per_bus = self.nodes.div_ceil(self.buses.clamp(1, self.nodes.max(1)));
+        (per_bus > self.profile.link.nodes_per_bus).then_some(per_bus)
     }
 }
 
 /// What a simulation measured (all times virtual).
 #[derive(Clone, Debug)]
 pub struct SimReport {
+    /// The board profile it ran on.
+    pub profile: BoardProfile,
     pub nodes: u16,
     pub buses: u16,
     pub policy: Policy,
@@ -156,6 +185,8 @@ pub struct SimReport {
     pub frames: Vec<Vec<u8>>,
     /// Operation counts summed over all nodes.
     pub stats: Stats,
+    /// The event log, if [`SimConfig::timeline`] asked for one.
+    pub timeline: Option<Timeline>,
 }
 
 impl SimReport {

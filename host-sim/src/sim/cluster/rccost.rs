@@ -16,6 +16,8 @@
 //! 168 MHz as for the nodes (`crate::cost`; the RC is the same STM32F407).
 
 use super::exec::{Delay, Ps, SharedClock};
+use super::timeline::SharedTimeline;
+use links_core::board::{BoardProfile, Core};
 use links_core::root::{RcWork, RootClock};
 use links_core::wire::{self, Up};
 use std::cell::Cell;
@@ -48,7 +50,7 @@ pub struct RcCost {
 impl RcCost {
     /// The STM32F407 at 168 MHz, QEMU-measured instruction counts (see the module doc).
     pub const CORTEX_M4F: RcCost = RcCost {
-        clock_hz: 168e6,
+        clock_hz: crate::cost::DEFAULT_CLOCK_HZ,
         cycles_per_instruction: 1.3,
         per_transfer: 500.0,
         encode_fixed: 450.0,
@@ -63,7 +65,7 @@ impl RcCost {
 
     /// An RC whose work takes no time (the bus never waits for it).
     pub const FREE: RcCost = RcCost {
-        clock_hz: 168e6,
+        clock_hz: crate::cost::DEFAULT_CLOCK_HZ,
         cycles_per_instruction: 0.0,
         per_transfer: 0.0,
         encode_fixed: 0.0,
@@ -110,6 +112,19 @@ impl RcCost {
     }
 }
 
+impl RcCost {
+    /// The RC of `profile`: its core's instruction counts at its clock.
+    pub fn for_board(profile: &BoardProfile) -> RcCost {
+        let cost = match profile.core {
+            Core::CortexM4F => Self::CORTEX_M4F,
+        };
+        RcCost {
+            clock_hz: profile.core_clock_hz as f64,
+            ..cost
+        }
+    }
+}
+
 impl Default for RcCost {
     fn default() -> Self {
         Self::CORTEX_M4F
@@ -126,6 +141,8 @@ pub struct RcClock {
     pub cpu_free: Rc<Cell<Ps>>,
     /// Total RC CPU busy time.
     pub busy: Rc<Cell<Ps>>,
+    /// Where the RC's work is logged, if a timeline is recorded.
+    pub timeline: Option<SharedTimeline>,
 }
 
 impl RootClock for RcClock {
@@ -146,6 +163,9 @@ impl RootClock for RcClock {
         let end = now.max(self.cpu_free.get()) + d;
         self.cpu_free.set(end);
         self.busy.set(self.busy.get() + d);
+        if let Some(log) = &self.timeline {
+            log.borrow_mut().rc_work(end - d, end);
+        }
         Delay::new(&self.clock, end).await;
     }
 }

@@ -6,6 +6,7 @@ use super::exec::{self, Delay, ExecError, Ps, SharedClock, Task};
 use super::framemem::{self, FrameMemory, ViaRoot};
 use super::rccost::RcClock;
 use super::star::{SharedStar, SimBus, SimNodeLink, Star};
+use super::timeline::{SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
 use crate::cost::{CycleModel, SceneCheckCost};
 use links_core::image::SceneView;
@@ -25,6 +26,9 @@ struct SimRenderer {
     cache: Option<Arc<RunCache>>,
     crcs: Rc<Vec<u32>>,
     techniques: Techniques,
+    /// The node's number and the timeline's pixel map (frame 0), if one is recorded.
+    node: u16,
+    log: Option<SharedTimeline>,
 }
 
 impl SimRenderer {
@@ -51,6 +55,9 @@ impl RunRenderer for SimRenderer {
         x: u32,
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError> {
+        if let Some(log) = self.log.as_ref().filter(|_| frame == 0) {
+            log.borrow_mut().rendered(self.node, y, x, out.len());
+        }
         let Some(cache) = &self.cache else {
             return self.trace(scene, y, x, out);
         };
@@ -85,6 +92,7 @@ struct SimWork {
     busy: Ps,
     report: Rc<RefCell<Vec<Ps>>>,
     id: usize,
+    log: Option<SharedTimeline>,
 }
 
 impl SimWork {
@@ -93,7 +101,11 @@ impl SimWork {
         let ps = (cycles as f64 * 1e12 / self.hz).ceil() as Ps;
         self.busy += ps;
         self.report.borrow_mut()[self.id] = self.busy;
-        let until = self.clock.borrow().now + ps;
+        let now = self.clock.borrow().now;
+        let until = now + ps;
+        if let Some(log) = &self.log {
+            log.borrow_mut().compute(self.id as u16, now, until);
+        }
         Delay::new(&self.clock, until).await;
     }
 }
@@ -162,6 +174,13 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let star = build_star(&clock, cfg, &fm);
     let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
     let buses = star.borrow().bus_count();
+    let log: Option<SharedTimeline> = cfg.timeline.map(|limit| {
+        let t = Timeline::new(cfg.nodes, buses, width, height, limit);
+        Rc::new(RefCell::new(t))
+    });
+    if let Some(log) = &log {
+        star.borrow_mut().set_timeline(log.clone());
+    }
     let sink = RefCell::new(match cfg.collect {
         Collect::Snoop => Sink::None,
         Collect::ViaRoot => Sink::Memory(ViaRoot(&fm)),
@@ -179,13 +198,12 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         cfg,
         &clock,
         &star,
-        &rc_busy,
+        (&rc_busy, &log),
         (&root, &sink, &bus_results, &dm),
     );
     tasks.extend(node_tasks(
         cfg,
-        &clock,
-        &star,
+        (&clock, &star, &log),
         &busy,
         &crcs,
         &mut banks,
@@ -217,7 +235,10 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let root_report = root.borrow().report();
     let bus = star.borrow().counters();
     let time_ps = done_at.last().copied().unwrap_or(0);
+    drop(star);
+    let timeline = log.map(|l| l.borrow().clone());
     Ok(SimReport {
+        profile: cfg.profile,
         nodes: cfg.nodes,
         buses: buses as u16,
         policy: cfg.policy,
@@ -233,6 +254,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         node_reports,
         frames: kept,
         stats,
+        timeline,
     })
 }
 
@@ -317,7 +339,7 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
     cfg: &SimConfig,
     clock: &SharedClock,
     star: &SharedStar,
-    rc_busy: &Rc<Cell<Ps>>,
+    (rc_busy, log): (&Rc<Cell<Ps>>, &Option<SharedTimeline>),
     (root, sink, bus_results, dm): RootShared<'a, S>,
 ) -> Vec<Option<Task<'a>>> {
     let rc_cpu_free = Rc::new(Cell::new(0 as Ps));
@@ -331,6 +353,7 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
             sink_pixels: cfg.collect == Collect::ViaRoot,
             cpu_free: rc_cpu_free.clone(),
             busy: rc_busy.clone(),
+            timeline: log.clone(),
         };
         tasks.push(Some(Box::pin(async move {
             let mut bus = SimBus::new(&star, b);
@@ -344,8 +367,7 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
 /// The nodes: one task each, rendering into its two scene banks and reporting into its slot.
 fn node_tasks<'a>(
     cfg: &SimConfig,
-    clock: &SharedClock,
-    star: &SharedStar,
+    (clock, star, log): (&SharedClock, &SharedStar, &Option<SharedTimeline>),
     busy: &Rc<RefCell<Vec<Ps>>>,
     crcs: &Rc<Vec<u32>>,
     banks: &'a mut [[Vec<u8>; 2]],
@@ -361,11 +383,14 @@ fn node_tasks<'a>(
             busy: 0,
             report: busy.clone(),
             id: i,
+            log: log.clone(),
         };
         let mut renderer = SimRenderer {
             cache: cfg.cache.clone(),
             crcs: crcs.clone(),
             techniques: cfg.techniques,
+            node: i as u16,
+            log: log.clone(),
         };
         let node_cfg = cfg.node;
         tasks.push(Some(Box::pin(async move {

@@ -9,39 +9,57 @@
 
 use super::exec::{PollFn, Ps, SharedClock};
 use super::framemem::FrameMemory;
+use super::timeline::SharedTimeline;
+use links_core::board::{BoardProfile, LinkProfile};
 use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
 use links_core::wire::MAX_MESSAGE;
 use std::cell::RefCell;
 use std::collections::VecDeque;
 use std::rc::Rc;
 
-/// Bus timing.
+/// Bus timing: a board's link ([`LinkProfile`]) as the simulator charges it.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BusTiming {
-    /// SPI clock in bits per second (STM32F407 SPI1: up to 42 MHz).
+    /// SPI clock in bits per second (the profile's; `--bit-rate-mhz` overrides it).
     pub bit_rate_hz: f64,
-    /// Per-transfer handshake on the wire, in nanoseconds: chip-select set-up and hold,
-    /// starting the DMA streams and the transfer-complete interrupt on both ends. The RC's
-    /// CPU work per transfer (choosing it, composing, decoding) is not in here: see
-    /// [`super::rccost`].
+    /// Per-transfer handshake on the wire, in nanoseconds: the profile's chip-select
+    /// set-up and hold. The RC's CPU work per transfer (choosing it, composing, decoding) is
+    /// not in here: see [`super::rccost`].
     pub overhead_ns: f64,
-    /// Bytes of the length header each transfer starts with.
+    /// Bytes of the header phase each transfer starts with.
     pub header_bytes: u32,
+    /// Bytes of the trailer phase that ends an exchange (broadcasts have none).
+    pub trailer_bytes: u32,
 }
 
 impl Default for BusTiming {
+    /// The firmware's board's link ([`BoardProfile::F407`]).
     fn default() -> Self {
-        Self {
-            bit_rate_hz: 42e6,
-            overhead_ns: 500.0,
-            header_bytes: 4,
-        }
+        Self::of(&BoardProfile::F407.link)
     }
 }
 
 impl BusTiming {
-    pub fn duration_ps(&self, body: usize) -> Ps {
-        let bits = (self.header_bytes as f64 + body as f64) * 8.0;
+    /// What the simulator charges for a transfer on `link`.
+    pub fn of(link: &LinkProfile) -> Self {
+        Self {
+            bit_rate_hz: link.bit_rate_hz as f64,
+            overhead_ns: link.handshake_ns() as f64,
+            header_bytes: link.header_bytes as u32,
+            trailer_bytes: link.trailer_bytes as u32,
+        }
+    }
+
+    /// Bytes clocked by a transfer of `body` bytes: header, body and, for an exchange,
+    /// trailer.
+    pub fn clocked_bytes(&self, body: usize, exchange: bool) -> u64 {
+        let trailer = if exchange { self.trailer_bytes } else { 0 };
+        self.header_bytes as u64 + body as u64 + trailer as u64
+    }
+
+    /// Duration of a transfer of `body` bytes: handshake plus every clocked byte.
+    pub fn duration_ps(&self, body: usize, exchange: bool) -> Ps {
+        let bits = self.clocked_bytes(body, exchange) as f64 * 8.0;
         ((self.overhead_ns * 1e3) + bits * 1e12 / self.bit_rate_hz).ceil() as Ps
     }
 }
@@ -298,6 +316,8 @@ pub struct Star {
     dead_at: Vec<Ps>,
     drops: Vec<BroadcastDrop>,
     noise: NoiseGen,
+    /// Where every transfer is logged, if a timeline is recorded.
+    timeline: Option<SharedTimeline>,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -344,12 +364,18 @@ impl Star {
             dead_at: vec![Ps::MAX; nodes as usize],
             drops: Vec::new(),
             noise: NoiseGen::new(Noise::default()),
+            timeline: None,
         }))
     }
 
     /// Random bit errors and broadcast losses from now on (fault injection).
     pub fn set_noise(&mut self, noise: Noise) {
         self.noise = NoiseGen::new(noise);
+    }
+
+    /// Log every transfer from now on into `log`.
+    pub fn set_timeline(&mut self, log: SharedTimeline) {
+        self.timeline = Some(log);
     }
 
     /// A node loses some broadcasts (fault injection).
@@ -587,17 +613,22 @@ impl SimBus {
         }
     }
 
-    /// Claim the bus for a transfer of `body` bytes; returns its end time.
-    fn claim(&self, body: usize) -> Ps {
+    /// Claim the bus for a transfer of `body` bytes to `node` (an exchange) or every node
+    /// (`None`, a broadcast); returns its end time.
+    fn claim(&self, body: usize, node: Option<NodeId>) -> Ps {
         let mut s = self.star.borrow_mut();
         let now = self.clock.borrow().now;
-        let d = s.timing.duration_ps(body);
-        let header = s.timing.header_bytes as u64;
+        let exchange = node.is_some();
+        let d = s.timing.duration_ps(body, exchange);
+        let clocked = s.timing.clocked_bytes(body, exchange);
         let b = &mut s.buses[self.bus];
         let start = now.max(b.busy_until);
         b.busy_until = start + d;
         b.counters.busy_ps += d;
-        b.counters.clocked_bytes += header + body as u64;
+        b.counters.clocked_bytes += clocked;
+        if let Some(log) = &s.timeline {
+            log.borrow_mut().transfer(self.bus, node, start, start + d);
+        }
         start + d
     }
 }
@@ -653,7 +684,7 @@ impl RootBus for SimBus {
                 Transfer::Broadcast => (None, Vec::new()),
             }
         };
-        let end = self.claim(down.len().max(up.len()));
+        let end = self.claim(down.len().max(up.len()), node);
         self.clock.borrow_mut().at(end);
         let mut s = self.star.borrow_mut();
         s.buses[self.bus].inflight = Some(Inflight {

@@ -96,8 +96,8 @@ where
     let mut chart = linear_panel(
         area,
         format!(
-            "node {} of {} killed at a moment of the frame (τ = {} s)",
-            s.victim, s.nodes, s.timeout_s
+            "node {} of {} killed at a moment of the frame (τ = {} s, board {})",
+            s.victim, s.nodes, s.timeout_s, s.board
         ),
         tmax * 1.4,
         "moment of death (fraction of the fault-free frame)",
@@ -161,7 +161,10 @@ where
     let tmax = s.bers.iter().map(|b| b.time_s).fold(s.clean_s, f64::max);
     let mut chart = ChartBuilder::on(area)
         .caption(
-            format!("bit errors ({} nodes, decreasing)", s.nodes),
+            format!(
+                "bit errors ({} nodes, decreasing, board {})",
+                s.nodes, s.board
+            ),
             ("sans-serif", 18),
         )
         .margin(15)
@@ -241,8 +244,8 @@ where
     let mut chart = linear_panel(
         area,
         format!(
-            "nodes killed at once mid-frame ({} nodes, decreasing)",
-            s.nodes
+            "nodes killed at once mid-frame ({} nodes, decreasing, board {})",
+            s.nodes, s.board
         ),
         tmax * 1.1,
         "fraction of the nodes killed",

@@ -13,6 +13,7 @@
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{simulate, RunCache, SimConfig, SimError, SimReport};
 use crate::studies::cluster_sweep::{pool, NamedPolicy};
+use links_core::board::BoardProfile;
 use rayon::prelude::*;
 
 mod chart;
@@ -92,6 +93,9 @@ pub struct FractionPoint {
 /// Everything the sweep measured.
 #[derive(Clone, Debug, PartialEq)]
 pub struct FaultSweep {
+    /// The board profile every point ran on (its name), and the link in words.
+    pub board: &'static str,
+    pub board_text: String,
     pub nodes: u16,
     pub width: u32,
     pub height: u32,
@@ -106,8 +110,9 @@ pub struct FaultSweep {
 }
 
 impl FaultSweepConfig {
-    /// The sweep of docs/reliability.md on `nodes` nodes with time-out `timeout_s`.
-    pub fn standard(nodes: u16, timeout_s: f64) -> Self {
+    /// The sweep of docs/reliability.md on `nodes` nodes of `board` with time-out
+    /// `timeout_s`.
+    pub fn standard(board: BoardProfile, nodes: u16, timeout_s: f64) -> Self {
         use links_core::sched::{Policy, Split};
         let div = 4 * nodes as u32;
         Self {
@@ -115,7 +120,7 @@ impl FaultSweepConfig {
                 nodes,
                 node_timeout_s: timeout_s,
                 cache: Some(RunCache::new()),
-                ..SimConfig::default()
+                ..SimConfig::for_board(board)
             },
             policies: vec![
                 NamedPolicy::new("decreasing", Policy::DECREASING),
@@ -222,6 +227,8 @@ pub fn sweep_faults(
     progress("fractions of the nodes killed mid-frame");
     let fractions = fraction_series(cfg, &base, &clean_base, &run)?;
     Ok(FaultSweep {
+        board: base.profile.name,
+        board_text: crate::sim::options::board_text(&base),
         nodes,
         width,
         height,

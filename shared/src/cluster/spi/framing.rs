@@ -1,16 +1,21 @@
 //! The framing both ends share: the header and trailer phases, the DMA bank, CRC-16.
 
+use crate::cluster::profile::LinkProfile;
 use crate::cluster::wire::MAX_MESSAGE;
 
-/// Bytes of the header phase.
-pub const HEADER: usize = 8;
-/// Bytes of the trailer phase (exchange only).
-pub const TRAILER: usize = 1;
+/// Bytes of the header phase: the firmware's board's ([`LinkProfile::F407`]).
+pub const HEADER: usize = LinkProfile::F407.header_bytes as usize;
+/// Bytes of the trailer phase (exchange only): the firmware's board's.
+pub const TRAILER: usize = LinkProfile::F407.trailer_bytes as usize;
 /// Size of one DMA bank: header, the largest frame, trailer, rounded up to a word.
-pub const BANK: usize = (HEADER + MAX_MESSAGE + TRAILER).div_ceil(4) * 4;
+pub const BANK: usize = LinkProfile::F407.dma_bank_bytes();
 /// One DMA bank. On the STM32F4 banks must sit in SRAM (DMA cannot reach the CCM).
 pub type Bank = [u8; BANK];
 const _: () = assert!(BANK >= HEADER + MAX_MESSAGE + TRAILER && BANK.is_multiple_of(4));
+// The header's layout (magic, kind, length u16, body CRC-16, header CRC-16) fills it.
+const _: () = assert!(HEADER == 1 + 1 + 2 + 2 + 2);
+// The trailer is one ACK/NAK byte.
+const _: () = assert!(TRAILER == 1);
 
 /// Trailer byte: the node's frame arrived intact.
 pub const ACK: u8 = 0xAC;

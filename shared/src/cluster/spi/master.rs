@@ -52,6 +52,11 @@ pub struct MasterCounters {
     pub bytes: u64,
 }
 
+/// Whether [`MasterLink`] clocks the wire while the RC composes and decodes (no: the
+/// transfer runs inside [`RootBus::finish`], see [`MasterLink`]); the F407 board profile's
+/// `rc_overlaps` (`links_core::board::LinkProfile::F407`).
+pub const RC_OVERLAPS: bool = false;
+
 /// The RC's end of one bus: the [`RootBus`] the root logic drives, over a [`MasterPort`].
 ///
 /// Two TX banks (double buffering): the RC composes the next frame in the idle one

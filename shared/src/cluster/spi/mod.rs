@@ -45,5 +45,5 @@ mod slave;
 pub use framing::{
     nc_header, rc_header, Bank, Header, PortError, ACK, BANK, CRC16, HEADER, NAK, TRAILER,
 };
-pub use master::{MasterCounters, MasterLink, MasterPort, Select};
+pub use master::{MasterCounters, MasterLink, MasterPort, Select, RC_OVERLAPS};
 pub use slave::{Armed, SlaveBanks, SlaveCounters, SlaveHandle, SlavePort, SlaveShared, SlaveTask};

@@ -1,0 +1,195 @@
+//! `links sweep board`: what the board profile does to the cluster's speed-up. For each
+//! profile and node count: the single frame and the steady state (the still repeated: the
+//! same scene every frame, not a film), with speed-ups against one node of the same
+//! board; then, for the F407, where its bus time goes and what lifting each of its limits
+//! buys (an RC that overlaps, no chip-select set-up and hold, one bus per 8 nodes as the
+//! board is wired, all three).
+
+use crate::sim::cluster::{RunCache, SimConfig, SimError, SimReport};
+use crate::sim::options::board_text;
+use crate::studies::report::table_head;
+use crate::studies::sweep_commands::single_and_steady;
+use links_core::board::BoardProfile;
+use links_core::root::MAX_BUSES;
+
+/// One measured configuration: single frame and steady state, with their speed-ups.
+struct Point {
+    single_s: f64,
+    speedup: f64,
+    steady_s: f64,
+    speedup_steady: f64,
+    report: SimReport,
+}
+
+fn measure(image: &[u8], cfg: &SimConfig) -> Result<Point, SimError> {
+    let (one, one_steady, report, steady_s) = single_and_steady(image, cfg)?;
+    Ok(Point {
+        single_s: report.time_s,
+        speedup: one / report.time_s,
+        steady_s,
+        speedup_steady: one_steady / steady_s,
+        report,
+    })
+}
+
+/// The profiles x node counts table.
+fn profiles_table(
+    image: &[u8],
+    counts: &[u16],
+    cache: &std::sync::Arc<RunCache>,
+    progress: &dyn Fn(&str),
+) -> Result<String, SimError> {
+    let mut t = table_head([
+        "board",
+        "nodes",
+        "single frame (s)",
+        "speed-up",
+        "steady state, repeated still (s/frame)",
+        "speed-up",
+        "bus busy",
+        "RC busy",
+        "exchanges",
+        "bytes clocked",
+    ]);
+    for board in BoardProfile::ALL {
+        for &nodes in counts {
+            progress(&format!("board {}, {nodes} nodes", board.name));
+            let cfg = SimConfig {
+                nodes,
+                cache: Some(cache.clone()),
+                ..SimConfig::for_board(board)
+            };
+            let p = measure(image, &cfg)?;
+            let r = &p.report;
+            t.push_str(&format!(
+                "| {} | {nodes} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% | {} | {} |\n",
+                board.name,
+                p.single_s,
+                p.speedup,
+                p.steady_s,
+                p.speedup_steady,
+                100.0 * r.bus_utilisation(),
+                100.0 * r.rc_busy_s / r.time_s,
+                r.root.exchanges,
+                r.bytes_moved()
+            ));
+        }
+    }
+    Ok(t)
+}
+
+/// Where the F407's bus time goes in one report: handshakes, header and trailer, payload.
+fn bus_split(cfg: &SimConfig, r: &SimReport) -> String {
+    let t = &cfg.timing;
+    let busy: f64 = r.bus.iter().map(|b| b.busy_ps as f64 * 1e-12).sum();
+    let transfers: u64 = r.bus.iter().map(|b| b.exchanges + b.broadcasts).sum();
+    let exchanges: u64 = r.bus.iter().map(|b| b.exchanges).sum();
+    let framing = (transfers * t.header_bytes as u64 + exchanges * t.trailer_bytes as u64) as f64;
+    let byte_s = 8.0 / t.bit_rate_hz;
+    let handshake = transfers as f64 * t.overhead_ns * 1e-9;
+    format!(
+        "{:.1} ms on the wire: {:.1} ms chip-select set-up and hold ({transfers} transfers x {:.0} us), {:.1} ms header and trailer, {:.1} ms frames",
+        busy * 1e3,
+        handshake * 1e3,
+        t.overhead_ns * 1e-3,
+        framing * byte_s * 1e3,
+        (busy - handshake - framing * byte_s) * 1e3
+    )
+}
+
+/// The F407's limits at `nodes` nodes, each lifted in turn.
+fn lifts_table(
+    image: &[u8],
+    nodes: u16,
+    cache: &std::sync::Arc<RunCache>,
+    progress: &dyn Fn(&str),
+) -> Result<String, SimError> {
+    let f407 = SimConfig {
+        nodes,
+        cache: Some(cache.clone()),
+        ..SimConfig::for_board(BoardProfile::F407)
+    };
+    let wired = BoardProfile::F407.buses_for(nodes).min(MAX_BUSES as u16);
+    let mut no_cs = f407.clone();
+    no_cs.timing.overhead_ns = 0.0;
+    let variants = [
+        ("F407 as built (1 bus)", f407.clone()),
+        (
+            "RC overlaps the wire",
+            SimConfig {
+                rc_double_buffer: true,
+                ..f407.clone()
+            },
+        ),
+        ("no chip-select set-up/hold", no_cs.clone()),
+        (
+            "8 nodes per bus (as wired), at most 8 buses",
+            SimConfig {
+                buses: wired,
+                ..f407.clone()
+            },
+        ),
+        (
+            "all three",
+            SimConfig {
+                buses: wired,
+                rc_double_buffer: true,
+                ..no_cs
+            },
+        ),
+    ];
+    let mut t = table_head([
+        "F407 variant",
+        "buses",
+        "single (s)",
+        "speed-up",
+        "steady (s/frame)",
+        "speed-up",
+        "bus busy",
+        "RC busy",
+    ]);
+    let mut split = String::new();
+    for (name, cfg) in variants {
+        progress(&format!("{nodes} nodes, {name}"));
+        let p = measure(image, &cfg)?;
+        let r = &p.report;
+        if split.is_empty() {
+            split = bus_split(&cfg, r);
+        }
+        t.push_str(&format!(
+            "| {name} | {} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% |\n",
+            r.buses,
+            p.single_s,
+            p.speedup,
+            p.steady_s,
+            p.speedup_steady,
+            100.0 * r.bus_utilisation(),
+            100.0 * r.rc_busy_s / r.time_s,
+        ));
+    }
+    Ok(format!(
+        "{nodes} nodes, F407 as built, single frame: {split}\n\n{t}"
+    ))
+}
+
+/// The whole study as Markdown.
+pub fn board_study(
+    image: &[u8],
+    counts: &[u16],
+    lift_at: &[u16],
+    progress: &dyn Fn(&str),
+) -> Result<String, String> {
+    let e = |e: SimError| e.to_string();
+    let cache = RunCache::new();
+    let mut s = String::new();
+    for b in BoardProfile::ALL {
+        s.push_str(&format!("- {}\n", board_text(&SimConfig::for_board(b))));
+    }
+    s.push('\n');
+    s.push_str(&profiles_table(image, counts, &cache, progress).map_err(e)?);
+    for &n in lift_at {
+        s.push('\n');
+        s.push_str(&lifts_table(image, n, &cache, progress).map_err(e)?);
+    }
+    Ok(s)
+}

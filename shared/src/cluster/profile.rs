@@ -1,0 +1,226 @@
+//! The board a cluster is built of, as one value: the SPI link between the RC and its nodes
+//! ([`LinkProfile`]: bit rate, chip-select set-up and hold, the frame's header and trailer,
+//! nodes per bus, whether the RC overlaps the wire with its own work), the node's memory
+//! ([`NodeBoard`]: DMA banks, scene banks), the core and its clock ([`Core`]).
+//!
+//! [`BoardProfile::F407`] is what the firmware builds: `links_core::spi` takes its header
+//! and trailer sizes (and with them the DMA bank size) from it, `rc-fw` its SPI clock,
+//! chip-select timing and nodes per bus, `nc-fw` its memory plan. [`BoardProfile::IDEAL`] is
+//! the idealised link the simulator used before it knew the board (42 MHz, a 4-byte header,
+//! 0.5 µs per transfer, any number of nodes on one bus, an RC that overlaps). The simulator
+//! takes either (`links render --nodes N --board f407|ideal`); the cost-model weights of a
+//! core live in the host's cost model, keyed by [`Core`].
+
+use crate::cluster::board::NodeBoard;
+use crate::cluster::root::MAX_NODES;
+use crate::cluster::spi;
+use crate::cluster::wire::MAX_MESSAGE;
+
+/// The CPU core of a board: it selects the cost-model weights the simulator charges the
+/// node's and the RC's work with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Core {
+    /// Cortex-M4 with the single-precision FPU (STM32F407), rendering in hard-float `f32`.
+    CortexM4F,
+}
+
+impl Core {
+    /// The core's name as printed in summaries.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Core::CortexM4F => "Cortex-M4F",
+        }
+    }
+}
+
+/// The SPI link between the RC and the nodes of one bus.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LinkProfile {
+    /// SPI clock of one bus (bits per second).
+    pub bit_rate_hz: u32,
+    /// Chip-select asserted to the first clock edge (ns), each transfer.
+    pub cs_setup_ns: u32,
+    /// Chip-select held high after a transfer before the next selection (ns).
+    pub cs_hold_ns: u32,
+    /// Bytes of the header phase every transfer starts with.
+    pub header_bytes: u16,
+    /// Bytes of the trailer phase that ends an exchange (broadcasts have none).
+    pub trailer_bytes: u16,
+    /// Nodes one bus drives (one chip-select and one handshake line each).
+    pub nodes_per_bus: u16,
+    /// Whether the RC clocks the wire while it composes the next transfer and decodes the
+    /// last one (DMA double buffering on the RC); `false`: one at a time.
+    pub rc_overlaps: bool,
+}
+
+impl LinkProfile {
+    /// The firmware's link (`rc-fw`, `nc-fw`, `links_core::spi`): SPI1 at 21 MHz (APB2 84 MHz
+    /// / 4: what holds for a full-duplex slave behind the MISO multiplexer), 8 + 15 µs of
+    /// chip-select set-up and hold (the node's EXTI wakes its link task, which drives MISO;
+    /// after the transfer it stops and re-arms its DMA), the 8-byte header (magic, kind,
+    /// length, body CRC-16, header CRC-16) and the 1-byte ACK/NAK trailer, 8 nodes per bus
+    /// (`rc-fw`'s pin table), and an RC that clocks the wire only inside `finish`
+    /// ([`spi::RC_OVERLAPS`]).
+    pub const F407: LinkProfile = LinkProfile {
+        bit_rate_hz: 21_000_000,
+        cs_setup_ns: 8_000,
+        cs_hold_ns: 15_000,
+        header_bytes: 8,
+        trailer_bytes: 1,
+        nodes_per_bus: 8,
+        rc_overlaps: spi::RC_OVERLAPS,
+    };
+
+    /// The simulator's idealised link before the board profile: 42 MHz (SPI1's maximum),
+    /// a 4-byte length header, no trailer, 0.5 µs of handshake per transfer (counted as
+    /// chip-select set-up: about 80 cycles at 168 MHz, an estimate), every node on one bus,
+    /// an RC that overlaps the wire with its work.
+    pub const IDEAL: LinkProfile = LinkProfile {
+        bit_rate_hz: 42_000_000,
+        cs_setup_ns: 500,
+        cs_hold_ns: 0,
+        header_bytes: 4,
+        trailer_bytes: 0,
+        nodes_per_bus: MAX_NODES as u16,
+        rc_overlaps: true,
+    };
+
+    /// Size of one DMA bank: header, the largest frame, trailer, rounded up to a word.
+    pub const fn dma_bank_bytes(&self) -> usize {
+        (self.header_bytes as usize + MAX_MESSAGE + self.trailer_bytes as usize).div_ceil(4) * 4
+    }
+
+    /// Chip-select set-up and hold of one transfer (ns).
+    pub const fn handshake_ns(&self) -> u32 {
+        self.cs_setup_ns + self.cs_hold_ns
+    }
+}
+
+/// One board: its link, its node's memory, its core and clock.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BoardProfile {
+    /// The name the command line knows it by (`--board f407`).
+    pub name: &'static str,
+    pub link: LinkProfile,
+    /// The node's RAM, its link DMA banks and its two scene banks.
+    pub node: NodeBoard,
+    /// The core of the nodes and the RC (the cost model's weights).
+    pub core: Core,
+    /// Core clock of the nodes and the RC (Hz).
+    pub core_clock_hz: u32,
+}
+
+/// The STM32F407's core clock: 8 MHz crystal, PLL to 168 MHz (`links-board`'s clock tree).
+const F407_CORE_CLOCK_HZ: u32 = 168_000_000;
+
+impl BoardProfile {
+    /// What the firmware builds today: STM32F4DISCOVERY boards (STM32F407VG at 168 MHz)
+    /// on the [`LinkProfile::F407`] link, the node's memory plan [`NodeBoard::F407`].
+    pub const F407: BoardProfile = BoardProfile {
+        name: "f407",
+        link: LinkProfile::F407,
+        node: NodeBoard::F407,
+        core: Core::CortexM4F,
+        core_clock_hz: F407_CORE_CLOCK_HZ,
+    };
+
+    /// The simulator's idealised link ([`LinkProfile::IDEAL`]) on the F407's nodes (same
+    /// core, clock and scene banks).
+    pub const IDEAL: BoardProfile = BoardProfile {
+        name: "ideal",
+        link: LinkProfile::IDEAL,
+        node: NodeBoard::F407,
+        core: Core::CortexM4F,
+        core_clock_hz: F407_CORE_CLOCK_HZ,
+    };
+
+    /// Every profile the host knows, by name.
+    pub const ALL: [BoardProfile; 2] = [Self::F407, Self::IDEAL];
+
+    /// The profile called `name` (ASCII case ignored), if known.
+    pub fn named(name: &str) -> Option<BoardProfile> {
+        Self::ALL
+            .into_iter()
+            .find(|b| b.name.eq_ignore_ascii_case(name))
+    }
+
+    /// Size of one link DMA bank on this board.
+    pub const fn dma_bank_bytes(&self) -> usize {
+        self.link.dma_bank_bytes()
+    }
+
+    /// Buses a star of `nodes` nodes needs at [`LinkProfile::nodes_per_bus`] (at least 1).
+    pub const fn buses_for(&self, nodes: u16) -> u16 {
+        let per = if self.link.nodes_per_bus == 0 {
+            1
+        } else {
+            self.link.nodes_per_bus
+        };
+        let b = nodes.div_ceil(per);
+        if b == 0 {
+            1
+        } else {
+            b
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The link code's constants are the F407 profile's.
+    #[test]
+    fn the_spi_link_code_is_built_from_the_f407_profile() {
+        let l = BoardProfile::F407.link;
+        assert_eq!(spi::HEADER, l.header_bytes as usize);
+        assert_eq!(spi::TRAILER, l.trailer_bytes as usize);
+        assert_eq!(spi::BANK, BoardProfile::F407.dma_bank_bytes());
+        assert_eq!(spi::RC_OVERLAPS, l.rc_overlaps);
+        assert_eq!(BoardProfile::F407.node.link_banks, 5 * spi::BANK);
+        // Worked by hand: 8 + 1,576 + 1 = 1,585 bytes, rounded up to 1,588.
+        assert_eq!(BoardProfile::F407.dma_bank_bytes(), 1588);
+        assert_eq!(BoardProfile::IDEAL.dma_bank_bytes(), 1580);
+    }
+
+    #[test]
+    fn the_profiles_hold_the_documented_numbers() {
+        let (f, i) = (BoardProfile::F407, BoardProfile::IDEAL);
+        assert_eq!(
+            (
+                f.link.bit_rate_hz,
+                f.link.handshake_ns(),
+                f.link.nodes_per_bus
+            ),
+            (21_000_000, 23_000, 8)
+        );
+        assert!(!f.link.rc_overlaps && i.link.rc_overlaps);
+        assert_eq!(
+            (
+                i.link.bit_rate_hz,
+                i.link.handshake_ns(),
+                i.link.header_bytes
+            ),
+            (42_000_000, 500, 4)
+        );
+        assert_eq!(i.link.trailer_bytes, 0);
+        assert_eq!(f.core_clock_hz, 168_000_000);
+        assert_eq!((f.node, f.core), (i.node, i.core));
+    }
+
+    #[test]
+    fn profiles_are_found_by_name_and_count_their_buses() {
+        assert_eq!(BoardProfile::named("F407"), Some(BoardProfile::F407));
+        assert_eq!(BoardProfile::named("ideal"), Some(BoardProfile::IDEAL));
+        assert_eq!(BoardProfile::named("f429"), None);
+        let f = BoardProfile::F407;
+        assert_eq!(
+            [0, 1, 8, 9, 64, 256].map(|n| f.buses_for(n)),
+            [1, 1, 1, 2, 8, 32]
+        );
+        assert_eq!(BoardProfile::IDEAL.buses_for(256), 1);
+    }
+}
