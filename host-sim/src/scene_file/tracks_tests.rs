@@ -156,7 +156,10 @@ fn tracks_land_on_their_targets() {
     // A key's angles as written; step scale still 1 before frame 5.
     assert_eq!(arm.transform.rotate_deg, [10.0, 60.0, 0.0]);
     assert_eq!(arm.transform.scale, [1.0; 3]);
-    assert_eq!(film.scene_at(5).unwrap().camera.fov_y_deg > 45.0, true);
+    // The field of view is the key's 55 at frame 4, and stays between its keys after.
+    assert_eq!(s.camera.fov_y_deg, 55.0);
+    let fov = film.scene_at(5).unwrap().camera.fov_y_deg;
+    assert!((45.0..55.0).contains(&fov), "{fov}");
     // Diffuse halfway from (0.8, 0.1, 0.1) to 0.5 (a single number for every channel).
     let red = &s.materials[0];
     assert_eq!(red.diffuse, [0.65, 0.3, 0.3].map(|x: f64| x as f32));

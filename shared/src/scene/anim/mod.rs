@@ -402,7 +402,7 @@ fn sample_rotation(keys: &[Key<[f64; 3]>], interp: Interpolation, t: f64) -> Opt
         let mut q = Quat::from_euler_deg(k.value);
         // Each key on the near side of the previous one: the shorter way round.
         if quats.last().is_some_and(|p| p.value.dot(q) < 0.0) {
-            q = q.neg();
+            q = -q;
         }
         quats.push(Key {
             frame: k.frame,

@@ -11,16 +11,6 @@ pub struct Quat {
 }
 
 impl Quat {
-    /// The Hamilton product `self · o` (rotate by `o` first, then by `self`).
-    pub fn mul(self, o: Quat) -> Quat {
-        Quat {
-            w: self.w * o.w - self.x * o.x - self.y * o.y - self.z * o.z,
-            x: self.w * o.x + self.x * o.w + self.y * o.z - self.z * o.y,
-            y: self.w * o.y - self.x * o.z + self.y * o.w + self.z * o.x,
-            z: self.w * o.z + self.x * o.y - self.y * o.x + self.z * o.w,
-        }
-    }
-
     pub fn dot(self, o: Quat) -> f64 {
         self.w * o.w + self.x * o.x + self.y * o.y + self.z * o.z
     }
@@ -45,11 +35,6 @@ impl Quat {
             y: self.y + o.y,
             z: self.z + o.z,
         }
-    }
-
-    /// The same rotation with the opposite sign (q and -q rotate alike).
-    pub fn neg(self) -> Quat {
-        self.scaled(-1.0)
     }
 
     /// `self / |self|` (the identity for a zero quaternion, which no track produces).
@@ -83,7 +68,7 @@ impl Quat {
                 z: v[2],
             }
         };
-        axis(2).mul(axis(1)).mul(axis(0))
+        axis(2) * axis(1) * axis(0)
     }
 
     /// The rotation matrix of a unit quaternion (rows).
@@ -128,17 +113,40 @@ impl Quat {
         let mut b = b;
         let mut cos = a.dot(b);
         if cos < 0.0 {
-            b = b.neg();
+            b = -b;
             cos = -cos;
         }
         if cos > 1.0 - 1e-9 {
             // Nearly the same rotation: the chord is the arc to within rounding.
-            return a.plus(b.plus(a.neg()).scaled(s)).normalized();
+            return a.plus(b.plus(-a).scaled(s)).normalized();
         }
         let theta = cos.min(1.0).acos();
         let sin = theta.sin();
         let wa = ((1.0 - s) * theta).sin() / sin;
         let wb = (s * theta).sin() / sin;
         a.scaled(wa).plus(b.scaled(wb)).normalized()
+    }
+}
+
+impl core::ops::Mul for Quat {
+    type Output = Quat;
+
+    /// The Hamilton product `self · o` (rotate by `o` first, then by `self`).
+    fn mul(self, o: Quat) -> Quat {
+        Quat {
+            w: self.w * o.w - self.x * o.x - self.y * o.y - self.z * o.z,
+            x: self.w * o.x + self.x * o.w + self.y * o.z - self.z * o.y,
+            y: self.w * o.y - self.x * o.z + self.y * o.w + self.z * o.x,
+            z: self.w * o.z + self.x * o.y - self.y * o.x + self.z * o.w,
+        }
+    }
+}
+
+impl core::ops::Neg for Quat {
+    type Output = Quat;
+
+    /// The same rotation with the opposite sign (q and -q rotate alike).
+    fn neg(self) -> Quat {
+        self.scaled(-1.0)
     }
 }
