@@ -40,6 +40,6 @@ pub use scene::image;
 #[cfg(any(test, feature = "std"))]
 pub use scene::image::fixed as fixed_image;
 #[cfg(feature = "std")]
-pub use scene::{compile as dm, desc};
+pub use scene::{anim, compile as dm, desc};
 pub use trace as render;
 pub use trace::clip;

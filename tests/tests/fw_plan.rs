@@ -26,6 +26,10 @@ fn bundled() -> Vec<(String, usize)> {
         .expect("scenes/")
         .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
         .filter(|n| n.ends_with(".ron"))
+        // Films: each frame is compiled like its still scene (tests/tests/films.rs).
+        .filter(|n| {
+            links_host::scene_file::load_film(&scenes_dir().join(n)).map_or(true, |f| f.is_still())
+        })
         .collect();
     names.sort();
     names

@@ -96,11 +96,9 @@ impl SceneArgs {
             .ok_or_else(|| CliError::Usage("a scene file is required".to_string()))
     }
 
-    /// The scene compiled with the overrides: its SceneImage bytes.
-    pub fn compile(&self) -> Result<Vec<u8>, CliError> {
-        let path = self.path()?;
-        let desc = load_scene(path).map_err(|e| CliError::Scene(e.to_string()))?;
-        let opts = CompileOptions {
+    /// The DM's options these overrides give.
+    pub fn compile_options(&self) -> CompileOptions {
+        CompileOptions {
             width: self.width,
             height: self.height,
             max_depth: self.max_depth,
@@ -108,7 +106,14 @@ impl SceneArgs {
             mesh_hierarchy: Default::default(),
             no_shadows: self.no_shadows,
             leaf_size: self.leaf_size.map(usize::from),
-        };
+        }
+    }
+
+    /// The scene compiled with the overrides: its SceneImage bytes.
+    pub fn compile(&self) -> Result<Vec<u8>, CliError> {
+        let path = self.path()?;
+        let desc = load_scene(path).map_err(|e| CliError::Scene(e.to_string()))?;
+        let opts = self.compile_options();
         let compiled = compile(&desc, &opts)
             .map_err(|e| CliError::Scene(format!("{}: {e}", path.display())))?;
         Ok(compiled.bytes)

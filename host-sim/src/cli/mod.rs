@@ -28,6 +28,7 @@ pub mod chart;
 pub mod check_image;
 pub mod compare;
 pub mod error;
+pub mod film;
 pub mod gen_assets;
 pub mod image_file;
 pub mod info;
@@ -115,6 +116,17 @@ pub enum Cmd {
         #[arg(long, default_value = "scenes/assets")]
         dir: PathBuf,
     },
+}
+
+/// Parses `args` (the program name first, as `std::env::args_os` gives them) and runs the
+/// command: the `links` binary as a library call, for tests.
+pub fn run_from<I, T>(args: I) -> Result<(), CliError>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = Cli::try_parse_from(args).map_err(|e| CliError::Usage(e.to_string()))?;
+    run(cli)
 }
 
 /// Runs one parsed command line.

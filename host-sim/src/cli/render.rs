@@ -11,8 +11,10 @@ use links_core::render::Stats;
 
 use super::args::{image_to_render, PrecisionArg, SceneArgs};
 use super::error::write_file;
+use super::film::{self, FrameRange};
 use super::{node, CliError};
 use crate::cli_cluster;
+use crate::cluster::SimConfig;
 use crate::frame::{encode_png, render_frame};
 use crate::limits;
 use crate::studies::timeline_chart::timeline_svg;
@@ -23,11 +25,16 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Render this compiled SceneImage file (as `info --image` writes) instead of a scene
-    #[arg(long, value_name = "FILE.bin", conflicts_with_all = ["scene", "width", "height", "max_depth", "transparency", "no_shadows"])]
+    #[arg(long, value_name = "FILE.bin", conflicts_with_all = ["scene", "width", "height", "max_depth", "transparency", "no_shadows", "frames"])]
     pub image: Option<PathBuf>,
-    /// Output PNG file
+    /// Output PNG file; with --frames, the directory the frames are written to (created if
+    /// missing)
     #[arg(short, long, default_value = "out.png")]
     pub output: PathBuf,
+    /// Render frames A..B-1 of a film to numbered PNGs in the -o directory, and the film as
+    /// an animated PNG, film.png (a still scene has the one frame 0..1)
+    #[arg(long, value_name = "A..B", value_parser = film::parse_frames)]
+    pub frames: Option<FrameRange>,
     /// Host threads (0 = all cores, at most 256; single-host render only); the image does
     /// not depend on it
     #[arg(long, default_value_t = 0, value_parser = limits::parse_threads)]
@@ -88,14 +95,15 @@ pub struct ClusterArgs {
 
 /// Runs `links render`.
 pub fn run(a: RenderArgs) -> Result<(), CliError> {
-    match a.nodes {
-        Some(nodes) => cluster(&a, nodes),
-        None => host(&a),
+    match (a.frames, a.nodes) {
+        (Some(frames), _) => film::run(&a, frames),
+        (None, Some(nodes)) => cluster(&a, nodes),
+        (None, None) => host(&a),
     }
 }
 
-/// `links render --nodes N`: the frame of a simulated cluster.
-fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
+/// The simulated cluster of `--nodes N` and the cluster options, checked.
+pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, CliError> {
     let c = &a.cluster;
     if !matches!(a.precision, None | Some(PrecisionArg::F32)) {
         return Err(CliError::Usage(
@@ -107,12 +115,6 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
             "--nodes {nodes}: a cluster has 1 to 256 node computers"
         )));
     }
-    let (image, _) = image_to_render(&a.scene, a.image.as_deref(), a.precision, true)?;
-    let what = match &a.image {
-        Some(path) => path.display().to_string(),
-        None => a.scene.path()?.display().to_string(),
-    };
-    node::check_fits(&what, image.len(), &c.node)?;
     let mut cfg = cli_cluster::config(
         *c.board,
         nodes,
@@ -133,6 +135,19 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
     if c.timeline.is_some() {
         cfg.timeline = Some(limits::MAX_TIMELINE_INTERVALS);
     }
+    Ok(cfg)
+}
+
+/// `links render --nodes N`: the frame of a simulated cluster.
+fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
+    let c = &a.cluster;
+    let cfg = cluster_config(a, nodes)?;
+    let (image, _) = image_to_render(&a.scene, a.image.as_deref(), a.precision, true)?;
+    let what = match &a.image {
+        Some(path) => path.display().to_string(),
+        None => a.scene.path()?.display().to_string(),
+    };
+    node::check_fits(&what, image.len(), &c.node)?;
     let start = std::time::Instant::now();
     let r = cli_cluster::render(&image, &cfg)?;
     let rep = &r.report;
@@ -171,7 +186,7 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
 }
 
 /// The progress bar of a host render of `rows` rows (hidden when quiet or not on a terminal).
-fn progress_bar(quiet: bool, rows: u32) -> Result<ProgressBar, CliError> {
+pub(super) fn progress_bar(quiet: bool, rows: u32) -> Result<ProgressBar, CliError> {
     if quiet || !std::io::stderr().is_terminal() {
         return Ok(ProgressBar::hidden());
     }

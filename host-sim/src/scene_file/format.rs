@@ -14,6 +14,7 @@ use links_core::desc;
 use serde::de::{self, Deserializer, MapAccess, Visitor};
 use serde::Deserialize;
 
+use super::tracks::{FramesFile, TrackFile};
 use super::values::{self as v, Coef, ConeAngle, Normals, Num, NumVec, Uvs};
 
 // ---- names that are resolved after the parse ---------------------------------------------------
@@ -64,18 +65,41 @@ pub(super) struct Ref {
     pub id: u32,
 }
 
+/// The next sequence number of a located value (a [`Ref`] or a [`Located`]); fails with
+/// [`REPLAY_MARK`] when this is the one a replay is looking for.
+fn next_ref_id<E: de::Error>() -> Result<u32, E> {
+    let id = NEXT_REF.with(|c| {
+        let id = c.get();
+        c.set(id.wrapping_add(1));
+        id
+    });
+    if FAIL_REF.with(Cell::get) == Some(id) {
+        return Err(de::Error::custom(REPLAY_MARK));
+    }
+    Ok(id)
+}
+
 impl<'de> Deserialize<'de> for Ref {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let text = String::deserialize(d)?;
-        let id = NEXT_REF.with(|c| {
-            let id = c.get();
-            c.set(id.wrapping_add(1));
-            id
-        });
-        if FAIL_REF.with(Cell::get) == Some(id) {
-            return Err(de::Error::custom(REPLAY_MARK));
-        }
+        let id = next_ref_id()?;
         Ok(Ref { text, id })
+    }
+}
+
+/// Any value that may be found wrong after the parse (a track's target, a key's time or
+/// value), numbered like a [`Ref`] so a replay can point at it.
+#[derive(Clone, Debug, PartialEq)]
+pub(super) struct Located<T> {
+    pub value: T,
+    pub id: u32,
+}
+
+impl<'de, T: Deserialize<'de>> Deserialize<'de> for Located<T> {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let value = T::deserialize(d)?;
+        let id = next_ref_id()?;
+        Ok(Located { value, id })
     }
 }
 
@@ -149,6 +173,11 @@ pub(super) struct SceneFile {
     pub lights: Vec<LightFile>,
     #[serde(default)]
     pub root: ClusterFile,
+    /// The film's frames; a scene without them is a still (one frame, 0..1).
+    #[serde(default)]
+    pub frames: Option<FramesFile>,
+    #[serde(default)]
+    pub tracks: Vec<TrackFile>,
 }
 
 fn default_width() -> u32 {
@@ -562,6 +591,9 @@ enum RawNode {
         material: Option<Ref>,
     },
     Blobs {
+        /// For tracks that move the balls (`Ball("name", i, Center)`).
+        #[serde(default)]
+        name: String,
         #[serde(default)]
         kernel: KernelFile,
         #[serde(deserialize_with = "v::threshold")]
@@ -590,6 +622,8 @@ pub(super) enum NodeFile {
     Shape {
         shape: desc::Shape,
         material: Option<Ref>,
+        /// A Blobs shape's name ("" for the rest).
+        name: String,
     },
     Mesh {
         file: Ref,
@@ -687,7 +721,13 @@ impl TryFrom<RawNode> for NodeFile {
     type Error = String;
 
     fn try_from(n: RawNode) -> Result<Self, String> {
-        let shape = |shape, material| Ok(NodeFile::Shape { shape, material });
+        let shape = |shape, material| {
+            Ok(NodeFile::Shape {
+                shape,
+                material,
+                name: String::new(),
+            })
+        };
         match n {
             RawNode::Sphere {
                 center,
@@ -727,11 +767,16 @@ impl TryFrom<RawNode> for NodeFile {
                 material,
             }),
             RawNode::Blobs {
+                name,
                 kernel,
                 threshold,
                 balls,
                 material,
-            } => shape(blobs(kernel, threshold, balls)?, material),
+            } => Ok(NodeFile::Shape {
+                shape: blobs(kernel, threshold, balls)?,
+                material,
+                name,
+            }),
             RawNode::Cluster {
                 name,
                 transform,

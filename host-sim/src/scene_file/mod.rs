@@ -20,13 +20,17 @@ mod locate;
 pub(crate) mod obj;
 mod resolve;
 mod texture;
+mod tracks;
 mod values;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tracks_tests;
 
 use std::path::Path;
 
+use links_core::anim::Film;
 use links_core::desc::SceneDesc;
 
 use crate::limits::{read_bounded, MAX_SCENE_BYTES};
@@ -42,6 +46,20 @@ use format::{RefScope, SceneFile};
 /// [`crate::limits::read_bounded`]: a path that is not a regular file, or a scene, mesh or
 /// texture over its limit in [`crate::limits`], is refused before it is read.
 pub fn load_scene(path: &Path) -> Result<SceneDesc, SceneError> {
+    load_film(path).map(|film| first_frame(&film))
+}
+
+/// The scene of a film's first frame: every track at its first key's value (the loader
+/// checked each key, so this frame always exists).
+fn first_frame(film: &Film) -> SceneDesc {
+    film.scene_at(film.timeline().start)
+        .unwrap_or_else(|_| film.base().clone())
+}
+
+/// Reads a scene file as a film: the scene as written, its frames (a file without `frames`
+/// is a still, the one frame 0..1) and its tracks, every one checked. Otherwise as
+/// [`load_scene`].
+pub fn load_film(path: &Path) -> Result<Film, SceneError> {
     let bytes =
         read_bounded(path, MAX_SCENE_BYTES, "scene file").map_err(|source| SceneError::Io {
             path: path.to_path_buf(),
@@ -62,12 +80,17 @@ pub fn load_scene(path: &Path) -> Result<SceneDesc, SceneError> {
         }
     };
     let base_dir = path.parent().unwrap_or_else(|| Path::new(""));
-    parse_scene(text, &file_name, base_dir)
+    parse_film(text, &file_name, base_dir)
 }
 
 /// Parses and validates scene `text`. `file_name` is used in error messages; relative mesh and
 /// texture paths are resolved against `base_dir`.
 pub fn parse_scene(text: &str, file_name: &str, base_dir: &Path) -> Result<SceneDesc, SceneError> {
+    parse_film(text, file_name, base_dir).map(|film| first_frame(&film))
+}
+
+/// Parses and validates scene `text` as a film (see [`load_film`]).
+pub fn parse_film(text: &str, file_name: &str, base_dir: &Path) -> Result<Film, SceneError> {
     // A byte-order mark is not RON; it is also not a column anybody can see.
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     if let Some((offset, message)) = locate::non_decimal_number(text) {
@@ -80,7 +103,7 @@ pub fn parse_scene(text: &str, file_name: &str, base_dir: &Path) -> Result<Scene
         });
     }
     let file = parse_file(text, file_name, None)?;
-    resolve::Resolver::new(text, file_name, base_dir).scene(file)
+    resolve::Resolver::new(text, file_name, base_dir).film(file)
 }
 
 /// The RON dialect of scene files: `implicit_some` is on, so optional values are written

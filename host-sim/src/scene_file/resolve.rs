@@ -5,10 +5,12 @@ use std::path::{Path, PathBuf};
 
 use crate::limits::{read_bounded, ReadError, MAX_MESH_BYTES, MAX_TEXTURE_BYTES};
 
+use links_core::anim::Film;
 use links_core::desc;
 
 use super::error::SceneError;
 use super::format::{ClusterFile, NodeFile, Ref, SceneFile, REPLAY_MARK};
+use super::tracks::{edge_tracks, Names, TrackScope};
 use super::{obj, parse_file, texture};
 
 pub(super) struct Resolver<'a> {
@@ -21,6 +23,10 @@ pub(super) struct Resolver<'a> {
     default_material: Option<u32>,
     texture_index: HashMap<String, u32>,
     meshes: HashMap<PathBuf, desc::Mesh>,
+    /// Clusters and named Blobs, for tracks.
+    names: Names,
+    /// Per material: whether `specular_edge` and `reflect_edge` were left out (they follow).
+    edge_follows: Vec<(bool, bool)>,
 }
 
 impl<'a> Resolver<'a> {
@@ -34,13 +40,15 @@ impl<'a> Resolver<'a> {
             default_material: None,
             texture_index: HashMap::new(),
             meshes: HashMap::new(),
+            names: Names::default(),
+            edge_follows: Vec::new(),
         }
     }
 
     /// Line and column of `r` in the scene text, found by replaying the parse with `r` primed
     /// to fail (see [`Ref`]).
-    fn locate(&self, r: &Ref) -> (usize, usize) {
-        match parse_file(self.text, self.file, Some(r.id)) {
+    fn locate(&self, id: u32) -> (usize, usize) {
+        match parse_file(self.text, self.file, Some(id)) {
             Err(SceneError::Invalid {
                 line, col, message, ..
             }) if message == REPLAY_MARK => (line, col),
@@ -50,7 +58,12 @@ impl<'a> Resolver<'a> {
     }
 
     fn invalid_at(&self, r: &Ref, message: String) -> SceneError {
-        let (line, col) = self.locate(r);
+        self.invalid_at_id(r.id, message)
+    }
+
+    /// An error at the located value numbered `id` (a [`Ref`] or a `Located`).
+    fn invalid_at_id(&self, id: u32, message: String) -> SceneError {
+        let (line, col) = self.locate(id);
         SceneError::Invalid {
             file: self.file.to_string(),
             line,
@@ -60,7 +73,7 @@ impl<'a> Resolver<'a> {
     }
 
     fn asset_error(&self, r: &Ref, kind: &'static str, path: PathBuf, e: ReadError) -> SceneError {
-        let (line, col) = self.locate(r);
+        let (line, col) = self.locate(r.id);
         SceneError::Asset {
             file: self.file.to_string(),
             line,
@@ -71,7 +84,9 @@ impl<'a> Resolver<'a> {
         }
     }
 
-    pub(super) fn scene(mut self, f: SceneFile) -> Result<desc::SceneDesc, SceneError> {
+    /// The film: the scene as written, its frames and its tracks (a still scene without
+    /// `frames` is the film of one frame, 0..1).
+    pub(super) fn film(mut self, f: SceneFile) -> Result<Film, SceneError> {
         let textures = self.textures(f.textures.0)?;
         for (name, m) in f.materials.0 {
             let map = match m.map {
@@ -84,6 +99,8 @@ impl<'a> Resolver<'a> {
             };
             let index = self.materials.len() as u32;
             self.material_index.insert(name.clone(), index);
+            self.edge_follows
+                .push((m.specular_edge.is_none(), m.reflect_edge.is_none()));
             self.materials.push(desc::Material {
                 name,
                 diffuse: m.diffuse,
@@ -97,8 +114,8 @@ impl<'a> Resolver<'a> {
                 map,
             });
         }
-        let root = self.cluster(f.root, None)?;
-        Ok(desc::SceneDesc {
+        let root = self.cluster(f.root, None, &mut Vec::new())?;
+        let scene = desc::SceneDesc {
             camera: f.camera.0,
             width: f.image.width,
             height: f.image.height,
@@ -106,10 +123,31 @@ impl<'a> Resolver<'a> {
             ambient: f.ambient,
             max_depth: f.max_depth,
             transparency: f.transparency.into(),
-            materials: self.materials,
+            materials: std::mem::take(&mut self.materials),
             textures,
             lights: f.lights.into_iter().map(|l| l.0).collect(),
             root,
+        };
+        let timeline = f.frames.map(|fr| fr.0);
+        let at = |id, message| self.invalid_at_id(id, message);
+        let scope = TrackScope {
+            timeline,
+            names: &self.names,
+            materials: &scene.materials,
+            lights: &scene.lights,
+            at: &at,
+        };
+        let mut tracks = scope.resolve(f.tracks)?;
+        edge_tracks(&mut tracks, &self.edge_follows);
+        let Some(timeline) = timeline else {
+            return Ok(Film::still(scene));
+        };
+        // The loader checked what Film::new checks; its refusal would be a loader bug.
+        Film::new(scene, timeline, tracks).map_err(|e| SceneError::Invalid {
+            file: self.file.to_string(),
+            line: 1,
+            col: 1,
+            message: format!("internal error: the film is inconsistent: {e}"),
         })
     }
 
@@ -166,23 +204,36 @@ impl<'a> Resolver<'a> {
         })
     }
 
+    /// The cluster at `path` (child indices from the root), its name and its named Blobs
+    /// recorded for tracks.
     fn cluster(
         &mut self,
         c: ClusterFile,
         inherited: Option<u32>,
+        path: &mut Vec<u32>,
     ) -> Result<desc::Cluster, SceneError> {
         let inherited = match &c.material {
             Some(r) => Some(self.material(r)?),
             None => inherited,
         };
+        if !c.name.is_empty() {
+            let paths = self.names.clusters.entry(c.name.clone()).or_default();
+            paths.push(path.clone());
+        }
         let mut children = Vec::with_capacity(c.children.len());
-        for child in c.children {
+        for (i, child) in c.children.into_iter().enumerate() {
+            path.push(i as u32);
             children.push(match child {
-                NodeFile::Cluster(sub) => desc::Node::Cluster(self.cluster(sub, inherited)?),
+                NodeFile::Cluster(sub) => desc::Node::Cluster(self.cluster(sub, inherited, path)?),
                 NodeFile::Shape {
                     mut shape,
                     material,
+                    name,
                 } => {
+                    if let (false, desc::Shape::Blobs { balls, .. }) = (name.is_empty(), &shape) {
+                        let found = (path.clone(), balls.len());
+                        self.names.blobs.entry(name).or_default().push(found);
+                    }
                     set_material(
                         &mut shape,
                         self.shape_material(material.as_ref(), inherited)?,
@@ -203,6 +254,7 @@ impl<'a> Resolver<'a> {
                     })
                 }
             });
+            path.pop();
         }
         Ok(desc::Cluster {
             name: c.name,

@@ -1002,9 +1002,18 @@ fn doc_examples() -> Vec<String> {
 #[test]
 fn the_documentation_examples_parse() {
     let blocks = doc_examples();
-    assert_eq!(blocks.len(), 3, "hello, cluster tree, complete example");
+    assert_eq!(
+        blocks.len(),
+        4,
+        "hello, cluster tree, film, complete example"
+    );
     // The complete example is this module's EXAMPLE.
-    assert_eq!(blocks[2], EXAMPLE);
+    assert_eq!(blocks[3], EXAMPLE);
+    let film = parse_film(&blocks[2], "film.ron", Path::new(".")).unwrap();
+    assert_eq!(film.timeline().frames(), 0..48);
+    // Five as written and the specular edge that follows "red"'s specular.
+    assert_eq!(film.tracks().len(), 6);
+    film.scene_at(47).unwrap();
     parse_scene(&blocks[0], "hello.ron", Path::new(".")).unwrap();
     let tree = format!(
         "Scene(camera: (eye: (0, 1, -5), look_at: (0, 1, 0)), {})",

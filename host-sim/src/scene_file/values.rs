@@ -269,14 +269,10 @@ pub(super) use crate::vec3::{cross, length, sub};
 
 /// `v / |v|`, or `None` when `v` has no usable direction (zero, or so small/large that the
 /// length is zero or infinite).
+/// The same function tracks normalise with ([`links_core::anim::unit`]), so a direction a track
+/// produced and the same direction written into a still scene get the same bits.
 pub(super) fn normalize(v: [f64; 3]) -> Option<[f64; 3]> {
-    let len = length(v);
-    if len > 0.0 && len.is_finite() {
-        let n = v.map(|x| x / len);
-        n.iter().all(|x| x.is_finite()).then_some(n)
-    } else {
-        None
-    }
+    links_core::anim::unit(v)
 }
 
 /// Relative tolerance below which a triangle counts as having zero area: |e1 × e2| is compared
@@ -413,6 +409,81 @@ pub(super) fn image_side<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Erro
 
 pub(super) fn max_depth<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
     integer(d, "a maximum ray depth", 0, MAX_DEPTH)
+}
+
+/// Largest frame number a film may name (`frames: (end: ...)`).
+pub(super) const MAX_FRAME: i64 = 1_000_000;
+
+/// A film's first frame, `frames: (start: ...)`.
+pub(super) fn frame_start<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
+    integer(d, "a first frame", 0, MAX_FRAME - 1)
+}
+
+/// One past a film's last frame, `frames: (end: ...)`.
+pub(super) fn frame_end<'de, D: Deserializer<'de>>(d: D) -> Result<u32, D::Error> {
+    integer(d, "an end frame", 1, MAX_FRAME)
+}
+
+/// Frames per second.
+pub(super) fn rate<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    number(d, "frame rate", Check::Positive)
+}
+
+/// A key's time, in frames (fractions allowed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct KeyTime(pub f64);
+
+impl<'de> Deserialize<'de> for KeyTime {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        number(d, "key time", Check::Finite).map(KeyTime)
+    }
+}
+
+/// A key's value as written: a number or a 3-vector, each number finite and within the f32
+/// range; what it must be beyond that depends on the track's target (checked on resolving).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum KeyValue {
+    Number(f64),
+    Vector([f64; 3]),
+}
+
+struct KeyValueVisitor;
+
+impl<'de> Visitor<'de> for KeyValueVisitor {
+    type Value = KeyValue;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("a key value: a number or a 3-tuple (x, y, z)")
+    }
+
+    fn visit_f64<E: de::Error>(self, v: f64) -> Result<KeyValue, E> {
+        check_number(v, "key value", Check::Finite)
+            .map(KeyValue::Number)
+            .map_err(de::Error::custom)
+    }
+
+    fn visit_i64<E: de::Error>(self, v: i64) -> Result<KeyValue, E> {
+        self.visit_f64(v as f64)
+    }
+
+    fn visit_u64<E: de::Error>(self, v: u64) -> Result<KeyValue, E> {
+        self.visit_f64(v as f64)
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, seq: A) -> Result<KeyValue, A::Error> {
+        let inner = VectorVisitor::<3> {
+            what: "key value",
+            check: Check::Finite,
+            splat: false,
+        };
+        inner.visit_seq(seq).map(KeyValue::Vector)
+    }
+}
+
+impl<'de> Deserialize<'de> for KeyValue {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(KeyValueVisitor)
+    }
 }
 
 // ---- newtypes for values inside an `Option` ---------------------------------------------------

@@ -41,6 +41,8 @@ pub fn bundled_images(
         .map_err(|e| ChartError::Io(format!("{}: {e}", dir.display())))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "ron"))
+        // Films (scenes with frames) are their still scenes plus tracks: charted as stills.
+        .filter(|p| crate::scene_file::load_film(p).map_or(true, |f| f.is_still()))
         .collect();
     paths.sort();
     let mut out = Vec::new();
