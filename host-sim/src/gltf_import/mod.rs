@@ -285,3 +285,6 @@ impl Importer<'_> {
         Ok(t)
     }
 }
+
+#[cfg(test)]
+mod tests;
