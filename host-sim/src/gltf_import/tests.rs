@@ -24,7 +24,7 @@ fn b64(bytes: &[u8]) -> String {
             s.push(A[(n >> (18 - 6 * k) & 63) as usize] as char);
         }
     }
-    while s.len() % 4 != 0 {
+    while !s.len().is_multiple_of(4) {
         s.push('=');
     }
     s
@@ -278,11 +278,11 @@ fn converted(dir: &Path) -> (PathBuf, PathBuf) {
     // GLB: the buffer's uri removed (the BIN chunk), chunks padded to 4 bytes.
     let uri_key = text[..start].rfind(",\n").expect("comma before uri");
     let mut json = format!("{}{}", &text[..uri_key], &text[end + 1..]).into_bytes();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let mut bin4 = bin.clone();
-    while bin4.len() % 4 != 0 {
+    while !bin4.len().is_multiple_of(4) {
         bin4.push(0);
     }
     let total = 12 + 8 + json.len() + 8 + bin4.len();
