@@ -4,6 +4,7 @@
 
 pub mod cli;
 pub mod gen;
+pub mod gltf_import;
 pub mod limits;
 pub mod png_codec;
 pub mod qemu_node;

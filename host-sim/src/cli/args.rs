@@ -10,8 +10,10 @@ use links_core::dm::{compile, CompileOptions};
 use super::CliError;
 use crate::cli_image;
 use crate::frame::Precision;
+use crate::gltf_import;
 use crate::limits;
 use crate::scene_file::load_scene;
+use links_core::desc::SceneDesc;
 
 /// `--precision`: the number type of a render.
 #[derive(Clone, Copy, ValueEnum)]
@@ -51,7 +53,7 @@ impl From<TransparencyArg> for TransparencyMode {
 /// A scene file and the settings the command line may override.
 #[derive(clap::Args)]
 pub struct SceneArgs {
-    /// Scene file (.ron)
+    /// Scene file (.ron), or a glTF 2.0 model (.gltf, .glb)
     #[arg(required = true)]
     pub scene: Option<PathBuf>,
     /// Image width in pixels, 1..=4096 (default: the scene's)
@@ -112,11 +114,25 @@ impl SceneArgs {
     /// The scene compiled with the overrides: its SceneImage bytes.
     pub fn compile(&self) -> Result<Vec<u8>, CliError> {
         let path = self.path()?;
-        let desc = load_scene(path).map_err(|e| CliError::Scene(e.to_string()))?;
+        let desc = load_desc(path)?;
         let opts = self.compile_options();
         let compiled = compile(&desc, &opts)
             .map_err(|e| CliError::Scene(format!("{}: {e}", path.display())))?;
         Ok(compiled.bytes)
+    }
+}
+
+/// The scene at `path`: a scene file, or a glTF model (`.gltf`/`.glb`) whose import warnings
+/// are printed on stderr.
+pub fn load_desc(path: &Path) -> Result<SceneDesc, CliError> {
+    if gltf_import::is_gltf_path(path) {
+        let imported = gltf_import::import(path).map_err(|e| CliError::Scene(e.to_string()))?;
+        for w in &imported.warnings {
+            eprintln!("{}: warning: {w}", path.display());
+        }
+        Ok(imported.scene)
+    } else {
+        load_scene(path).map_err(|e| CliError::Scene(e.to_string()))
     }
 }
 

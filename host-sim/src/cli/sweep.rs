@@ -12,7 +12,6 @@ use super::CliError;
 use crate::ablation::{run_ablation, AblationConfig};
 use crate::cli_cluster;
 use crate::limits;
-use crate::scene_file::load_scene;
 
 /// The sweeps `links sweep` runs.
 #[derive(Subcommand)]
@@ -140,7 +139,7 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
 
 /// `links sweep ablation`: the table on stdout, the report into `output`.
 fn ablation(scene: &Path, cfg: &AblationConfig, output: &Path) -> Result<(), CliError> {
-    let desc = load_scene(scene).map_err(|e| CliError::Scene(e.to_string()))?;
+    let desc = super::args::load_desc(scene)?;
     let report = run_ablation(&desc, cfg, &|step| eprintln!("rendering {step} ..."))
         .map_err(|e| CliError::Failed(format!("{}: {e}", scene.display())))?;
     let command = std::env::args().skip(1).collect::<Vec<_>>().join(" ");

@@ -19,7 +19,7 @@ mod format;
 mod locate;
 pub(crate) mod obj;
 mod resolve;
-mod texture;
+pub(crate) mod texture;
 mod tracks;
 mod values;
 

@@ -12,7 +12,7 @@ use crate::limits::MAX_TEXTURE_DECODE_BYTES;
 /// Decodes a PNG into RGB8, top row first. Palette and low-bit-depth images are expanded,
 /// 16-bit samples are cut to 8 bits, grey is replicated into R, G and B, alpha is dropped
 /// (not composited). Only the first frame of an animated PNG is used.
-pub(super) fn decode_png(bytes: &[u8], file: &str, name: &str) -> Result<Texture, SceneError> {
+pub(crate) fn decode_png(bytes: &[u8], file: &str, name: &str) -> Result<Texture, SceneError> {
     let err = |message: String| SceneError::Png {
         file: file.to_string(),
         message,
