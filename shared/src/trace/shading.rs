@@ -63,8 +63,6 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         let view = -ray.dir;
         let mut c = self.local_shade(&surf, &m, view);
 
-        let entering = surf.ng.dot(ray.dir) < T::ZERO;
-        let n = if entering { surf.ns } else { -surf.ns };
         let can_recurse =
             depth < self.camera.max_depth && depth < MAX_DEPTH_LIMIT && self.secondary_left >= 2;
         if can_recurse {
@@ -73,6 +71,16 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             // taking minutes per pixel; past it, rays end as at the depth cap.
             self.secondary_left -= 2;
         }
+        // A material that neither reflects nor transmits (both reflection coefficients
+        // exactly zero, so the Schlick blend below is zero) needs none of what follows.
+        if m.reflect == T::ZERO
+            && m.reflect_edge == T::ZERO
+            && m.transmit.max_component() <= T::ZERO
+        {
+            return c;
+        }
+        let entering = surf.ng.dot(ray.dir) < T::ZERO;
+        let n = if entering { surf.ns } else { -surf.ns };
         let cos_v = n.dot(view).clamp01();
 
         let rc = schlick(m.reflect, m.reflect_edge, cos_v);
