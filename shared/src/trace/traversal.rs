@@ -5,7 +5,7 @@
 
 use super::tracer::{Tracer, TracerState};
 use crate::geom::{Aabb, Ray, RayInv, SlabSpan};
-use crate::image::{BlobGroupRec, Leaf, MapTarget, SceneView, ShapeKind, ShapeRef, NONE};
+use crate::image::{BlobGroupRec, Leaf, MapTarget, NodeRef, SceneView, ShapeKind, ShapeRef, NONE};
 use crate::num::Real;
 use crate::shape::blob::{Ball, BlobGroup, BlobStats};
 use crate::shape::boxshape::BoxHit;
@@ -163,6 +163,44 @@ impl<T: Real> Nearest<T> {
     }
 }
 
+/// The slab test of a node's box, decoding its axes in `order` and stopping at the first
+/// that empties the interval: where the ray enters the box, as [`Aabb::entry`] on the
+/// decoded box answers (slabs clip in any order to the same interval).
+#[inline(always)]
+fn box_entry<T: Real>(
+    node: &NodeRef<'_>,
+    order: [usize; 3],
+    ray: &Ray<T>,
+    inv: &RayInv<T>,
+    t_max: T,
+) -> Option<T> {
+    let mut span = SlabSpan::new(t_max);
+    for axis in order {
+        let (lo, hi) = node.span::<T>(axis);
+        if !span.clip(lo, hi, ray.origin[axis], inv.inv_dir[axis]) {
+            return None;
+        }
+    }
+    Some(span.t0)
+}
+
+/// [`box_entry`] as a yes or no.
+#[inline(always)]
+fn box_hit<T: Real>(
+    node: &NodeRef<'_>,
+    order: [usize; 3],
+    ray: &Ray<T>,
+    inv: &RayInv<T>,
+    t_max: T,
+) -> bool {
+    box_entry(node, order, ray, inv, t_max).is_some()
+}
+
+/// The order walks decode a box's axes in: depth (view z) first, where most boxes a
+/// secondary or shadow ray misses are told apart (photo1-d0 on the M4F: 7,181 instructions
+/// per pixel in x, y, z order, 7,287 y first, 7,048 in this order).
+const WALK_AXES: [usize; 3] = [2, 1, 0];
+
 impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// The primary ray's nearest hit among the Y-clipped leaves (and, with X clipping, only
     /// those whose rectangle contains column `x`), each behind its own box test.
@@ -209,20 +247,8 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// answer is the full slab test's (slabs clip in any order to the same interval).
     #[inline(always)]
     fn leaf_box_hit(&self, leaf: u32, ray: &Ray<T>, probe: &Probe<T>, t_max: T) -> bool {
-        let mut span = SlabSpan::new(t_max);
-        let (lo, hi) = self.scene.node_span::<T>(leaf, 2);
-        if !span.clip(lo, hi, ray.origin.z, probe.inv.inv_dir.z) {
-            return false;
-        }
-        let mut axis = 0;
-        while axis < 2 {
-            let (lo, hi) = self.scene.node_span::<T>(leaf, axis);
-            if !span.clip(lo, hi, ray.origin[axis], probe.inv.inv_dir[axis]) {
-                return false;
-            }
-            axis += 1;
-        }
-        true
+        let node = self.scene.node_ref(leaf);
+        box_hit(&node, [2, 0, 1], ray, &probe.inv, t_max)
     }
 
     /// Nearest shape along `ray` in (0, t_max): walk the node tree nearest-first, skipping
@@ -256,27 +282,30 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             if near.beyond(t_in) {
                 continue;
             }
-            let node = self.scene.node::<T>(i);
-            if let Some(l) = node.leaf {
+            let node = self.scene.node_ref(i);
+            if let Some(l) = node.leaf() {
                 self.offer(&mut near, l, i, &probe);
                 continue;
             }
             // Test the children's boxes; visit the nearest first so later ones can be pruned.
             let mut nk = 0;
             let mut c = i + 1;
-            while c < node.skip {
-                let child = self.scene.node::<T>(c);
+            let end = node.skip(i);
+            while c < end {
+                let child = self.scene.node_ref(c);
                 self.stats.box_tests += 1;
-                if let Some(t) = probe.entry(&child.bounds, near.limit()) {
+                let entry = box_entry(&child, WALK_AXES, &probe.ray, &probe.inv, near.limit());
+                if let Some(t) = entry {
                     if nk < ORDERED_FANOUT && sp + nk < TRAVERSAL_STACK {
                         self.state.borrow_mut().walk.kids[nk] = (c, t);
                         nk += 1;
                     } else {
                         // No room to order it: walk its subtree in place.
-                        self.walk_hit_subtree(c, child.leaf, child.skip, &probe, &mut near);
+                        let (leaf, skip) = (child.leaf(), child.skip(c));
+                        self.walk_hit_subtree(c, leaf, skip, &probe, &mut near);
                     }
                 }
-                c = child.skip;
+                c = child.skip(c);
             }
             // Push farthest first (insertion sort of at most ORDERED_FANOUT entries).
             let kids = &mut self.state.borrow_mut().walk.kids;
@@ -393,15 +422,17 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         let mut transparent = false;
         let mut i = 0;
         while i < n {
-            let node = self.scene.node::<T>(i);
+            // The box is decoded one axis at a time and the leaf only past it: most nodes
+            // a shadow ray visits are missed on their first or second axis.
+            let node = self.scene.node_ref(i);
             if self.techniques.bounding_boxes {
                 self.stats.box_tests += 1;
-                if !probe.hits(&node.bounds, t_max) {
-                    i = node.skip;
+                if !box_hit(&node, WALK_AXES, &probe.ray, &probe.inv, t_max) {
+                    i = node.skip(i);
                     continue;
                 }
             }
-            if let Some(l) = node.leaf {
+            if let Some(l) = node.leaf() {
                 if l.kind == ShapeKind::Triangle {
                     // One material for the whole leaf: its first hit decides it.
                     if let Some(k) = self.first_triangle_hit(l, probe, t_max) {
@@ -446,12 +477,16 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     }
 
     /// Whether a hit surface lets no light through (no transmission, no transmission map).
-    fn is_opaque(&self, h: &Hit<T>) -> bool {
+    fn is_opaque(&mut self, h: &Hit<T>) -> bool {
         self.material_is_opaque(self.material_of(h))
     }
 
-    fn material_is_opaque(&self, material: u32) -> bool {
-        let m = self.scene.material::<T>(material);
+    fn material_is_opaque(&mut self, material: u32) -> bool {
+        let m = self
+            .state
+            .borrow_mut()
+            .records
+            .material(&self.scene, material);
         let mapped = m.texture != NONE && m.target == MapTarget::Transmit;
         m.transmit.max_component() <= T::ZERO && !mapped
     }

@@ -123,3 +123,54 @@ fn records_out_of_range_read_as_zeros_not_other_bytes() {
         Some(HEADER_SIZE..HEADER_SIZE + CAMERA_SIZE)
     );
 }
+
+/// A node decoded a part at a time ([`NodeRef`]) gives what the whole decode gives, for
+/// every node of a DM-built tree (clusters and leaves, boxes on the grid).
+#[cfg(feature = "std")]
+#[test]
+fn a_node_decoded_part_by_part_equals_the_whole_decode() {
+    use crate::desc::{Camera, Node, Shape};
+    use crate::dm::{compile, CompileOptions};
+    let camera = Camera {
+        eye: [0.0, 1.0, -6.0],
+        look_at: [0.0; 3],
+        up: [0.0, 1.0, 0.0],
+        fov_y_deg: 45.0,
+    };
+    let shapes = (0..40)
+        .map(|k| {
+            let x = k as f64 * 0.37 - 7.0;
+            let z = (k % 7) as f64 * 0.9;
+            Node::Shape(Shape::Triangle {
+                v: [[x, -1.0, z], [x + 0.5, 0.2, z + 0.3], [x, 1.3, z - 0.4]],
+                normals: None,
+                uv: None,
+                material: 0,
+            })
+        })
+        .collect();
+    let desc = crate::testkit::scene::scene_desc(camera, 32, 24, shapes);
+    let bytes = compile(&desc, &CompileOptions::default())
+        .expect("compiles")
+        .bytes;
+    let view = SceneView::new(&bytes).expect("valid");
+    assert!(view.node_count() > 10);
+    for i in 0..view.node_count() {
+        let (whole, part) = (view.node::<f32>(i), view.node_ref(i));
+        for axis in 0..3 {
+            let (lo, hi) = part.span::<f32>(axis);
+            assert_eq!(
+                lo.to_bits(),
+                whole.bounds.min[axis].to_bits(),
+                "node {i} axis {axis}"
+            );
+            assert_eq!(
+                hi.to_bits(),
+                whole.bounds.max[axis].to_bits(),
+                "node {i} axis {axis}"
+            );
+        }
+        assert_eq!(part.leaf(), whole.leaf, "node {i}");
+        assert_eq!(part.skip(i), whole.skip, "node {i}");
+    }
+}

@@ -80,6 +80,49 @@ static ZERO_RECORD: [u8; 128] = [0; 128];
 /// in place the loads alone).
 pub(super) struct Record<'b, const N: usize>(pub(super) &'b [u8; N]);
 
+/// One node record, decoded a part at a time: a traversal that rejects a node on one axis of
+/// its box decodes neither the other axes nor its leaf. Every part is decoded exactly as
+/// [`SceneView::node`] decodes it.
+#[derive(Clone, Copy)]
+pub struct NodeRef<'a> {
+    r: &'a [u8; NODE_SIZE],
+    grid: Grid,
+}
+
+impl NodeRef<'_> {
+    /// The box along `axis` (0..=2; larger reads as 2): (`min`, `max`).
+    #[inline(always)]
+    pub fn span<T: Real>(&self, axis: usize) -> (T, T) {
+        let k = axis.min(2);
+        let r = Record(self.r);
+        let g = &self.grid;
+        let c = |q: u16| {
+            T::from_stored(g.origin[k]) + T::from_i32(q as i16 as i32) * T::from_stored(g.step[k])
+        };
+        (c(r.h(node::LO + 2 * k)), c(r.h(node::HI + 2 * k)))
+    }
+
+    /// The leaf's primitives (`None` for a cluster).
+    #[inline(always)]
+    pub fn leaf(&self) -> Option<Leaf> {
+        Leaf::decode(
+            self.r[node::INFO],
+            Record(self.r).h(node::INDEX),
+            self.r[node::MATERIAL],
+        )
+    }
+
+    /// The first node after this one's subtree, this node being node `i`.
+    #[inline(always)]
+    pub fn skip(&self, i: u32) -> u32 {
+        if self.r[node::INFO] != 0 {
+            i + 1
+        } else {
+            Record(self.r).h(node::INDEX) as u32
+        }
+    }
+}
+
 impl<const N: usize> Record<'_, N> {
     #[inline(always)]
     pub(super) fn u(&self, o: usize) -> u32 {
@@ -335,18 +378,13 @@ impl<'a> SceneView<'a> {
         }
     }
 
-    /// Node `i`'s box along one axis (`min`, `max`), decoded exactly as [`Self::node`] does,
-    /// without the other two axes.
-    #[inline]
-    pub fn node_span<T: Real>(&self, i: u32, axis: usize) -> (T, T) {
-        use node::*;
-        let r = self.record::<NODE_SIZE>(Section::Nodes, i);
-        let g = &self.grid;
-        let k = axis.min(2);
-        let c = |q: u16| {
-            T::from_stored(g.origin[k]) + T::from_i32(q as i16 as i32) * T::from_stored(g.step[k])
-        };
-        (c(r.h(LO + 2 * k)), c(r.h(HI + 2 * k)))
+    /// Node `i`'s record, to decode a part at a time ([`NodeRef`]).
+    #[inline(always)]
+    pub fn node_ref(&self, i: u32) -> NodeRef<'a> {
+        NodeRef {
+            r: self.record::<NODE_SIZE>(Section::Nodes, i).0,
+            grid: self.grid,
+        }
     }
 
     /// The skip index of node `i` (first node after its subtree), without decoding its box.
