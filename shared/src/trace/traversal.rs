@@ -231,7 +231,13 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 self.state.borrow_mut().clip.leaves()[k]
             };
             self.stats.box_tests += 1;
-            if !self.leaf_box_hit(leaf, ray, &probe, near.limit()) {
+            // The slab test depth (view z) first: the leaf's screen rectangle already holds
+            // the pixel, so x and y rarely reject it, while a leaf behind the nearest hit so
+            // far is rejected by z alone, before its x and y are decoded. One node at a time:
+            // a node table kept across the loop's calls cost more in spilled registers than
+            // it saved (photo1-noshadow +36 instructions per pixel).
+            let node = self.scene.node_ref(leaf);
+            if !box_hit(&node, [2, 0, 1], &probe.ray, &probe.inv, near.limit()) {
                 continue;
             }
             if let Some(l) = self.scene.node_leaf(leaf) {
@@ -239,16 +245,6 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             }
         }
         near.hit
-    }
-
-    /// The slab test of a clipped leaf's box, depth (view z) first: the leaf's screen
-    /// rectangle already holds the pixel, so x and y rarely reject it, while a leaf behind
-    /// the nearest hit so far is rejected by z alone, before its x and y are decoded. The
-    /// answer is the full slab test's (slabs clip in any order to the same interval).
-    #[inline(always)]
-    fn leaf_box_hit(&self, leaf: u32, ray: &Ray<T>, probe: &Probe<T>, t_max: T) -> bool {
-        let node = self.scene.node_ref(leaf);
-        box_hit(&node, [2, 0, 1], ray, &probe.inv, t_max)
     }
 
     /// Nearest shape along `ray` in (0, t_max): walk the node tree nearest-first, skipping
@@ -259,6 +255,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     }
 
     /// [`Self::closest_hit`], for a primary ray when `eye` is given.
+    #[inline(never)]
     pub(super) fn closest_hit_from(
         &mut self,
         ray: &Ray<T>,
@@ -269,6 +266,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         if !self.techniques.bounding_boxes {
             return self.closest_hit_plain(&probe, t_max);
         }
+        let nodes = self.scene.node_table();
         let mut near = Nearest::new(t_max);
         // The walk's stack and child list live in the tracer (a walk never nests in another),
         // so no call zeroes them: that cost 6% of the glass scene on the M4F.
@@ -282,7 +280,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             if near.beyond(t_in) {
                 continue;
             }
-            let node = self.scene.node_ref(i);
+            let node = nodes.get(i);
             if let Some(l) = node.leaf() {
                 self.offer(&mut near, l, i, &probe);
                 continue;
@@ -292,7 +290,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             let mut c = i + 1;
             let end = node.skip(i);
             while c < end {
-                let child = self.scene.node_ref(c);
+                let child = nodes.get(c);
                 self.stats.box_tests += 1;
                 let entry = box_entry(&child, WALK_AXES, &probe.ray, &probe.inv, near.limit());
                 if let Some(t) = entry {
@@ -418,13 +416,13 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// way. Which opaque shape is found first depends on the order of the walk, whether
     /// one is found does not.
     pub(super) fn any_opaque(&mut self, probe: &Probe<T>, t_max: T) -> (Option<Blocker>, bool) {
-        let n = self.scene.node_count();
+        let nodes = self.scene.node_table();
         let mut transparent = false;
         let mut i = 0;
-        while i < n {
+        while i < nodes.len() {
             // The box is decoded one axis at a time and the leaf only past it: most nodes
             // a shadow ray visits are missed on their first or second axis.
-            let node = self.scene.node_ref(i);
+            let node = nodes.get(i);
             if self.techniques.bounding_boxes {
                 self.stats.box_tests += 1;
                 if !box_hit(&node, WALK_AXES, &probe.ray, &probe.inv, t_max) {

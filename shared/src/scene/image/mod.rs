@@ -25,7 +25,7 @@ pub mod view;
 pub mod writer;
 
 pub use layout::*;
-pub use view::{NodeRef, SceneView};
+pub use view::{NodeRef, NodeTable, SceneView};
 
 /// Why bytes are not a usable SceneImage.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

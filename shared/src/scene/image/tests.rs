@@ -155,8 +155,10 @@ fn a_node_decoded_part_by_part_equals_the_whole_decode() {
         .bytes;
     let view = SceneView::new(&bytes).expect("valid");
     assert!(view.node_count() > 10);
+    let table = view.node_table();
+    assert_eq!(table.len(), view.node_count());
     for i in 0..view.node_count() {
-        let (whole, part) = (view.node::<f32>(i), view.node_ref(i));
+        let (whole, part) = (view.node::<f32>(i), table.get(i));
         for axis in 0..3 {
             let (lo, hi) = part.span::<f32>(axis);
             assert_eq!(
