@@ -2,6 +2,7 @@
 //! scheduling policy, node deaths and link faults, and the one-line fault summary. Thin glue
 //! over [`crate::sim::cluster`]; every number is virtual time.
 
+use crate::sim::cluster::relay::Topology;
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
 use links_core::board::BoardProfile;
@@ -70,6 +71,79 @@ pub fn board_text(cfg: &SimConfig) -> String {
         } else {
             "serial"
         }
+    )
+}
+
+/// A `--topology` value: `buildable` (what the board can be wired as: a relay tree when
+/// one bus cannot hold the nodes), `star` (every node on the RC's `--buses` buses) or `relay`
+/// (a relay tree whatever the count).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TopologyArg {
+    Buildable,
+    Star,
+    Relay,
+}
+
+impl FromStr for TopologyArg {
+    type Err = OptionError;
+
+    fn from_str(s: &str) -> Result<Self, OptionError> {
+        match s {
+            "buildable" => Ok(TopologyArg::Buildable),
+            "star" => Ok(TopologyArg::Star),
+            "relay" => Ok(TopologyArg::Relay),
+            _ => Err(OptionError::UnknownTopology(s.into())),
+        }
+    }
+}
+
+impl TopologyArg {
+    /// The topology for `nodes` nodes on `board`; a relay tree has as many relays per
+    /// parent as the board has nodes per bus (at most [`links_core::root::MAX_BUSES`]).
+    pub fn topology(self, board: &BoardProfile, nodes: u16) -> Topology {
+        let fanout = board
+            .link
+            .nodes_per_bus
+            .min(links_core::root::MAX_BUSES as u16);
+        match self {
+            TopologyArg::Buildable => Topology::buildable(board, nodes),
+            TopologyArg::Star => Topology::Star,
+            TopologyArg::Relay => Topology::RelayTree { fanout },
+        }
+    }
+}
+
+/// The topology in words, as summaries print it: `star, 1 bus` or `relay tree: 8 relays
+/// x 8 nodes, 1 level`.
+pub fn topology_text(cfg: &SimConfig) -> String {
+    match cfg.tree() {
+        None => format!("star, {} bus(es)", cfg.buses),
+        Some(Err(e)) => e.to_string(),
+        Some(Ok(t)) => format!(
+            "relay tree: {} relays x {} nodes, {} level(s){}",
+            t.leaves,
+            cfg.profile.link.nodes_per_bus,
+            t.levels(),
+            if t.mids > 0 {
+                format!(" ({} mid relays)", t.mids)
+            } else {
+                String::new()
+            }
+        ),
+    }
+}
+
+/// The relay tree's share of the run, for the render's stats line ("" for a star): the
+/// RC figure before it is the mean leaf relay's; the root's link and CPU busy fractions.
+pub fn tree_summary(r: &SimReport) -> String {
+    let Some(t) = &r.tree else {
+        return String::new();
+    };
+    let root_link = t.links.first().map_or(0, |l| l.busy_ps) as f64 * 1e-12;
+    format!(
+        " per relay; root link busy {:.1}%, root busy {:.1}%",
+        100.0 * root_link / r.time_s,
+        100.0 * t.root_busy_s / r.time_s
     )
 }
 
@@ -149,6 +223,8 @@ pub fn parse_deaths(s: &str) -> Result<Vec<NodeDeath>, OptionError> {
 #[derive(Clone, Debug, PartialEq)]
 pub enum OptionError {
     UnknownPolicy(String),
+    /// `--topology` with no such topology.
+    UnknownTopology(String),
     /// `--board NAME` with no such profile.
     UnknownBoard(String),
     /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
@@ -179,6 +255,10 @@ impl fmt::Display for OptionError {
             OptionError::UnknownPolicy(s) => write!(
                 f,
                 "unknown policy '{s}' (expected decreasing, static, fixed=N or fixed-rect=N)"
+            ),
+            OptionError::UnknownTopology(s) => write!(
+                f,
+                "unknown topology '{s}' (expected buildable, star or relay)"
             ),
             OptionError::UnknownBoard(s) => {
                 let known: Vec<&str> = BoardProfile::ALL.iter().map(|b| b.name).collect();
@@ -300,11 +380,13 @@ pub fn config(
     buses: u16,
     bit_rate_mhz: Option<f64>,
     policy: Policy,
+    topology: TopologyArg,
 ) -> SimConfig {
     let mut cfg = SimConfig {
         nodes,
         buses,
         policy,
+        topology: topology.topology(&board, nodes),
         ..SimConfig::for_board(board)
     };
     if let Some(mhz) = bit_rate_mhz {
