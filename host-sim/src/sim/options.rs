@@ -108,7 +108,10 @@ impl TopologyArg {
         match self {
             TopologyArg::Buildable => Topology::buildable(board, nodes),
             TopologyArg::Star => Topology::Star,
-            TopologyArg::Relay => Topology::RelayTree { fanout },
+            TopologyArg::Relay => Topology::RelayTree {
+                fanout,
+                batch: true,
+            },
         }
     }
 }

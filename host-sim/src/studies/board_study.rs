@@ -193,9 +193,22 @@ fn topology_table(
         ("(a) one RC, SPI1/2/3 (3 buses)", star(3)),
         ("(b) one bus of buffered segments", star(1)),
         (
-            "(c) relay tree",
+            "(c) relay tree, one exchange per node frame",
             SimConfig {
-                topology: Topology::RelayTree { fanout: 8 },
+                topology: Topology::RelayTree {
+                    fanout: 8,
+                    batch: false,
+                },
+                ..star(1)
+            },
+        ),
+        (
+            "(c) relay tree, batched (buildable)",
+            SimConfig {
+                topology: Topology::RelayTree {
+                    fanout: 8,
+                    batch: true,
+                },
                 ..star(1)
             },
         ),

@@ -171,7 +171,7 @@ impl SimConfig {
     pub fn tree(&self) -> Option<Result<TreeShape, relay::TreeError>> {
         match self.topology {
             Topology::Star => None,
-            Topology::RelayTree { fanout } => Some(TreeShape::of(
+            Topology::RelayTree { fanout, .. } => Some(TreeShape::of(
                 self.nodes,
                 self.profile.link.nodes_per_bus,
                 fanout,

@@ -17,7 +17,10 @@
 //!   the root as an exchange whose down half is the relay's reply (full duplex: the longer
 //!   of the two); the root's CPU decodes it and composes the reply
 //!   ([`super::rccost::RcCost`]). A frame is complete when the root has taken the last of
-//!   its node frames (the pixel collector snoops the root's link).
+//!   its node frames (the pixel collector snoops the root's link). With batching (the
+//!   buildable tree's default) the frames a relay gathered while its parent's link was busy
+//!   go up in one exchange (one chip-select set-up and hold, header and trailer), up to
+//!   [`BATCH_BYTES`] each way; the parent serves its relays in the order they asked.
 //! - **Not charged:** the latency of the root's scheduling decision. The relays answer their
 //!   nodes from the one job table (`links_core::root::RootState`) as if it were local (the
 //!   root keeps each relay a queue of jobs ahead); the root link's time is charged, its
@@ -28,8 +31,8 @@ use super::rccost::RcCost;
 use super::star::BusTiming;
 use links_core::board::BoardProfile;
 use links_core::root::RcWork;
-use links_core::wire::{self, Down};
-use std::collections::HashMap;
+use links_core::wire::{self, Down, MAX_MESSAGE};
+use std::collections::{HashMap, VecDeque};
 use std::fmt;
 
 /// How the nodes are wired to the root.
@@ -39,8 +42,9 @@ pub enum Topology {
     #[default]
     Star,
     /// A tree of relay RCs: one leaf relay per `nodes_per_bus` nodes, `fanout` relays on
-    /// each parent's link.
-    RelayTree { fanout: u16 },
+    /// each parent's link; `batch`: a relay forwards the node frames waiting for its
+    /// parent's link in one exchange (one chip-select handshake), up to [`BATCH_BYTES`].
+    RelayTree { fanout: u16, batch: bool },
 }
 
 impl Topology {
@@ -51,7 +55,10 @@ impl Topology {
         if nodes <= per_bus {
             Topology::Star
         } else {
-            Topology::RelayTree { fanout: per_bus }
+            Topology::RelayTree {
+                fanout: per_bus,
+                batch: true,
+            }
         }
     }
 }
@@ -152,9 +159,11 @@ impl TreeShape {
 pub struct TreeLink {
     pub busy_until: Ps,
     pub busy_ps: Ps,
-    /// Scene broadcasts and forwarded exchanges.
+    /// Scene broadcasts and forwarded exchanges (a batch of node frames is one).
     pub broadcasts: u64,
     pub exchanges: u64,
+    /// Node frames the exchanges carried up.
+    pub frames_up: u64,
     pub clocked_bytes: u64,
 }
 
@@ -168,35 +177,41 @@ pub struct TreeReport {
     pub root_busy_s: f64,
 }
 
-/// The relay tree in virtual time: its links' schedules, the root's CPU, when each scene
-/// piece reached the far end of each link.
-pub struct Relays {
+/// Most bytes of node frames one forwarded exchange carries each way: eight node frames.
+pub const BATCH_BYTES: usize = 8 * MAX_MESSAGE;
+
+/// Node frames a relay has gathered for its parent's link, not on the wire yet.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Batch {
+    /// The relay (its number among the link's children).
+    child: usize,
+    /// When its last frame reached the relay.
+    ready: Ps,
+    up: usize,
+    down: usize,
+    frames: u64,
+    /// The root's CPU time to take them.
+    work: Ps,
+}
+
+/// The links between RCs and the root's CPU: schedules, and the batches waiting.
+#[derive(Clone, Debug)]
+struct Wires {
     shape: TreeShape,
     timing: BusTiming,
-    cost: RcCost,
+    /// Whether a relay gathers the node frames that wait for its parent's link into one
+    /// exchange (`false`: one exchange per node frame).
+    batch: bool,
     links: Vec<TreeLink>,
-    /// (link, frame, chunk offset or `None` for `SceneEnd`) -> arrival at that link's far end.
-    arrived: HashMap<(usize, u16, Option<u32>), Ps>,
+    /// Per link, the batches waiting for it in the order their relays asked.
+    waiting: Vec<VecDeque<Batch>>,
     root_cpu_free: Ps,
     root_busy: Ps,
-    /// When the root has taken every node frame forwarded so far.
+    /// When the root has taken every node frame put on the links so far.
     taken_up_to: Ps,
 }
 
-impl Relays {
-    pub fn new(shape: TreeShape, timing: BusTiming, cost: RcCost) -> Self {
-        Self {
-            shape,
-            timing,
-            cost,
-            links: vec![TreeLink::default(); shape.links()],
-            arrived: HashMap::new(),
-            root_cpu_free: 0,
-            root_busy: 0,
-            taken_up_to: 0,
-        }
-    }
-
+impl Wires {
     /// Put a transfer of `body` bytes on `link` no earlier than `at`; its end.
     fn claim(&mut self, link: usize, at: Ps, body: usize, exchange: bool) -> Ps {
         let d = self.timing.duration_ps(body, exchange);
@@ -213,6 +228,87 @@ impl Relays {
         start + d
     }
 
+    /// Node frames `b` wait for `link`: with the relay's frames already waiting if it
+    /// batches and they fit, otherwise behind everything waiting.
+    fn enqueue(&mut self, link: usize, b: Batch) {
+        let q = &mut self.waiting[link];
+        let joined = self.batch
+            && q.iter_mut()
+                .find(|w| w.child == b.child)
+                .filter(|w| w.up + b.up <= BATCH_BYTES && w.down + b.down <= BATCH_BYTES)
+                .map(|w| {
+                    w.ready = w.ready.max(b.ready);
+                    w.up += b.up;
+                    w.down += b.down;
+                    w.frames += b.frames;
+                    w.work += b.work;
+                })
+                .is_some();
+        if !joined {
+            q.push_back(b);
+        }
+    }
+
+    /// Put on the wire every waiting batch that starts by `t`: the mid relays' links
+    /// first (what they deliver waits for the root's), then the root's (the root's CPU
+    /// takes what it delivers).
+    fn commit_until(&mut self, t: Ps) {
+        for link in (1..self.links.len()).chain(std::iter::once(0)) {
+            while let Some(b) = self.waiting[link].front().copied() {
+                let start = b.ready.max(self.links[link].busy_until);
+                if start > t {
+                    break;
+                }
+                self.waiting[link].pop_front();
+                let end = self.claim(link, start, b.up.max(b.down), true);
+                self.links[link].frames_up += b.frames;
+                if link == 0 {
+                    let done = end.max(self.root_cpu_free) + b.work;
+                    self.root_cpu_free = done;
+                    self.root_busy += b.work;
+                    self.taken_up_to = self.taken_up_to.max(done);
+                } else {
+                    let up = Batch {
+                        child: link - 1,
+                        ready: end,
+                        ..b
+                    };
+                    self.enqueue(0, up);
+                }
+            }
+        }
+    }
+}
+
+/// The relay tree in virtual time: its links' schedules, the root's CPU, when each scene
+/// piece reached the far end of each link.
+pub struct Relays {
+    wires: Wires,
+    cost: RcCost,
+    /// (link, frame, chunk offset or `None` for `SceneEnd`) -> arrival at that link's far end.
+    arrived: HashMap<(usize, u16, Option<u32>), Ps>,
+}
+
+impl Relays {
+    /// The tree `shape` on links of `timing`, the root's CPU costing `cost`; `batch`: a
+    /// relay gathers the node frames waiting for its parent's link into one exchange.
+    pub fn new(shape: TreeShape, batch: bool, timing: BusTiming, cost: RcCost) -> Self {
+        Self {
+            wires: Wires {
+                shape,
+                timing,
+                batch,
+                links: vec![TreeLink::default(); shape.links()],
+                waiting: vec![VecDeque::new(); shape.links()],
+                root_cpu_free: 0,
+                root_busy: 0,
+                taken_up_to: 0,
+            },
+            cost,
+            arrived: HashMap::new(),
+        }
+    }
+
     /// When leaf relay `leaf` holds the broadcast `frame` it wants to send at `now`: a scene
     /// chunk or `SceneEnd` once it has crossed every link from the root; anything else (the
     /// relay's own `Wake` and `Stop`) at once.
@@ -222,12 +318,13 @@ impl Relays {
             Ok(Down::SceneEnd { frame, .. }) => (frame, None),
             _ => return now,
         };
+        self.wires.commit_until(now);
         let mut t = now;
-        for link in self.shape.path_down(leaf) {
+        for link in self.wires.shape.path_down(leaf) {
             t = match self.arrived.get(&(link, key.0, key.1)) {
                 Some(&a) => t.max(a),
                 None => {
-                    let end = self.claim(link, t, frame.len(), false);
+                    let end = self.wires.claim(link, t, frame.len(), false);
                     self.arrived.insert((link, key.0, key.1), end);
                     end
                 }
@@ -236,33 +333,48 @@ impl Relays {
         t
     }
 
-    /// Leaf relay `leaf` took node frame `up` (and replied `down_len` bytes) at `at`: forward
-    /// it to the root, which decodes it and composes the reply.
+    /// Leaf relay `leaf` took node frame `up` (and replied `down_len` bytes) at `at`: it
+    /// forwards it to the root (through its mid relay, if any), whose CPU decodes it and
+    /// composes the reply.
     pub fn forward_up(&mut self, leaf: usize, up: &[u8], down_len: usize, at: Ps) {
-        let mut t = at;
-        for link in self.shape.path_up(leaf) {
-            t = self.claim(link, t, up.len().max(down_len), true);
-        }
         let work = self.cost.duration_ps(&RcWork::Decode { frame: up }, false)
             + self
                 .cost
                 .duration_ps(&RcWork::Encode { bytes: down_len }, false);
-        let end = t.max(self.root_cpu_free) + work;
-        self.root_cpu_free = end;
-        self.root_busy += work;
-        self.taken_up_to = self.taken_up_to.max(end);
+        self.wires.commit_until(at);
+        let shape = self.wires.shape;
+        let link = shape.path_up(leaf).next().unwrap_or(0);
+        let child = if link == 0 {
+            leaf
+        } else {
+            leaf % shape.fanout as usize
+        };
+        let b = Batch {
+            child,
+            ready: at,
+            up: up.len(),
+            down: down_len,
+            frames: 1,
+            work,
+        };
+        self.wires.enqueue(link, b);
     }
 
-    /// When the root has taken every node frame forwarded so far.
+    /// When the root will have taken every node frame forwarded so far.
     pub fn taken_up_to(&self) -> Ps {
-        self.taken_up_to
+        let mut w = self.wires.clone();
+        w.commit_until(Ps::MAX);
+        w.taken_up_to
     }
 
+    /// The links' traffic and the root's busy time, every forwarded frame taken.
     pub fn report(&self) -> TreeReport {
+        let mut w = self.wires.clone();
+        w.commit_until(Ps::MAX);
         TreeReport {
-            shape: self.shape,
-            links: self.links.clone(),
-            root_busy_s: self.root_busy as f64 * 1e-12,
+            shape: w.shape,
+            links: w.links,
+            root_busy_s: w.root_busy as f64 * 1e-12,
         }
     }
 }
@@ -291,7 +403,10 @@ mod tests {
         assert_eq!(Topology::buildable(&BoardProfile::F407, 8), Topology::Star);
         assert_eq!(
             Topology::buildable(&BoardProfile::F407, 64),
-            Topology::RelayTree { fanout: 8 }
+            Topology::RelayTree {
+                fanout: 8,
+                batch: true
+            }
         );
         assert_eq!(
             Topology::buildable(&BoardProfile::IDEAL, 256),
@@ -311,7 +426,7 @@ mod tests {
             trailer_bytes: 0,
         };
         let shape = TreeShape::of(256, 8, 8).unwrap();
-        let mut r = Relays::new(shape, timing, RcCost::FREE);
+        let mut r = Relays::new(shape, false, timing, RcCost::FREE);
         let mut buf = [0u8; 256];
         let msg = Down::Scene {
             frame: 0,

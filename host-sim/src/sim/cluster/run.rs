@@ -324,8 +324,8 @@ fn build_star(clock: &SharedClock, cfg: &SimConfig, fm: &Rc<RefCell<FrameMemory>
     let snoop = (cfg.collect == Collect::Snoop).then(|| fm.clone());
     let buses = cfg.node_buses();
     let star = Star::new(clock, cfg.nodes, buses, cfg.timing, cfg.faults, snoop);
-    if let Some(Ok(shape)) = cfg.tree() {
-        let relays = Relays::new(shape, cfg.timing, cfg.rc_cost);
+    if let (Some(Ok(shape)), Topology::RelayTree { batch, .. }) = (cfg.tree(), cfg.topology) {
+        let relays = Relays::new(shape, batch, cfg.timing, cfg.rc_cost);
         star.borrow_mut().set_relays(relays);
     }
     for d in &cfg.deaths {
