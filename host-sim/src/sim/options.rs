@@ -446,7 +446,8 @@ mod tests {
             e.contains("unknown board 'f429'") && e.contains("f407, ideal"),
             "{e}"
         );
-        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING);
+        let star = TopologyArg::Star;
+        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING, star);
         assert_eq!(f.timing.bit_rate_hz, 21e6);
         assert_eq!((f.timing.header_bytes, f.timing.trailer_bytes), (8, 1));
         assert_eq!(f.timing.overhead_ns, 23_000.0);
@@ -455,12 +456,43 @@ mod tests {
         let text = board_text(&f);
         assert!(text.starts_with("board f407: 21 MHz, 23.0 us"), "{text}");
         assert!(topology_note(&f).contains("drives 8"));
-        let i = config(BoardProfile::IDEAL, 256, 1, Some(10.0), Policy::DECREASING);
+        let i = config(
+            BoardProfile::IDEAL,
+            256,
+            1,
+            Some(10.0),
+            Policy::DECREASING,
+            star,
+        );
         assert_eq!((i.timing.bit_rate_hz, i.timing.overhead_ns), (10e6, 500.0));
         assert!(i.rc_double_buffer && i.overloaded_bus().is_none());
         assert_eq!(topology_note(&i), "");
-        let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING);
+        let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
         assert_eq!(eight.overloaded_bus(), None);
+    }
+
+    #[test]
+    fn topologies_parse_and_the_buildable_one_fits_the_board() {
+        assert_eq!("relay".parse(), Ok(TopologyArg::Relay));
+        let e = "ring".parse::<TopologyArg>().unwrap_err().to_string();
+        assert!(e.contains("unknown topology 'ring'"), "{e}");
+        let b = TopologyArg::Buildable;
+        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING, b);
+        assert_eq!(f.overloaded_bus(), None);
+        assert_eq!(topology_note(&f), "");
+        assert_eq!(
+            topology_text(&f),
+            "relay tree: 8 relays x 8 nodes, 1 level(s)"
+        );
+        let f = config(BoardProfile::F407, 256, 1, None, Policy::DECREASING, b);
+        assert_eq!(
+            topology_text(&f),
+            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays)"
+        );
+        let f = config(BoardProfile::F407, 8, 1, None, Policy::DECREASING, b);
+        assert_eq!(topology_text(&f), "star, 1 bus(es)");
+        let i = config(BoardProfile::IDEAL, 256, 1, None, Policy::DECREASING, b);
+        assert_eq!(i.topology, Topology::Star);
     }
 
     #[test]
@@ -495,7 +527,15 @@ mod tests {
 
     #[test]
     fn fault_options_are_checked_and_set() {
-        let mut cfg = config(BoardProfile::IDEAL, 8, 1, Some(42.0), Policy::DECREASING);
+        let star = TopologyArg::Star;
+        let mut cfg = config(
+            BoardProfile::IDEAL,
+            8,
+            1,
+            Some(42.0),
+            Policy::DECREASING,
+            star,
+        );
         let args = FaultArgs {
             kills: vec!["2@0.1".into(), "5-7@0.2".into()],
             ber_down: 1e-4,
