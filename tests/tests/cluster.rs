@@ -6,7 +6,8 @@ use links_core::board::BoardProfile;
 use links_core::node::NodeConfig;
 use links_core::sched::{Policy, Split};
 use links_core::wire::{self, Down, SCENE_CHUNK};
-use links_host::cluster::star::{BroadcastDrop, Faults, NodeDeath};
+use links_host::cluster::relay::{Topology, TreeShape};
+use links_host::cluster::star::{BroadcastDrop, Faults, NodeDeath, Noise};
 use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimError, SimReport};
 
 use links_tests::{bundled_image as image, host_reference as reference};
@@ -83,6 +84,114 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
         assert_eq!(px, 64 * 60);
         assert!(r.time_s > 0.0);
     }
+}
+
+/// The relay tree (the F407's buildable topology): frames bit-identical to the single-node
+/// render at every node count (one and two levels of relays), policy, with and without
+/// batching, under bit errors and a node death; every node frame crosses every link up to
+/// the root exactly once, every scene piece every link down exactly once.
+#[test]
+fn relay_tree_frames_are_bit_identical_and_every_frame_crosses_each_link_once() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let policies = [
+        Policy::DECREASING,
+        Policy::Static { shape: Split::Rect },
+        Policy::Fixed {
+            divisions: 100,
+            shape: Split::Span,
+        },
+    ];
+    let pieces = img.len().div_ceil(SCENE_CHUNK) as u64 + 1;
+    let counts = [9u16, 16, 64, 65, 200, 256];
+    for (i, (nodes, batch)) in counts
+        .iter()
+        .flat_map(|&n| [(n, true), (n, false)])
+        .enumerate()
+    {
+        let policy = policies[i % policies.len()];
+        let cfg = SimConfig {
+            nodes,
+            policy,
+            topology: Topology::RelayTree { fanout: 8, batch },
+            node: NodeConfig { rle: i % 2 == 0 },
+            ..SimConfig::for_board(BoardProfile::F407)
+        };
+        let what = format!("{nodes} nodes, batch {batch}, {policy:?}");
+        let r = run(&img, cfg);
+        assert!(r.frames[0] == want, "{what}");
+        assert_eq!(r.root.pixels, 64 * 60, "{what}");
+        let shape = TreeShape::of(nodes, 8, 8).unwrap();
+        assert_eq!(r.buses, shape.leaves, "{what}");
+        assert_eq!(r.buses, nodes.div_ceil(8), "{what}");
+        let tree = r.tree.as_ref().expect("a relay tree reports its links");
+        assert_eq!(tree.links.len(), 1 + shape.mids as usize, "{what}");
+        let exchanges: u64 = r.bus.iter().map(|b| b.exchanges).sum();
+        assert_eq!(tree.links[0].frames_up, exchanges, "{what}");
+        let mid_frames: u64 = tree.links[1..].iter().map(|l| l.frames_up).sum();
+        assert_eq!(mid_frames, if shape.mids > 0 { exchanges } else { 0 });
+        for l in &tree.links {
+            assert_eq!(l.broadcasts, pieces, "{what}");
+            if batch {
+                assert!(l.exchanges <= l.frames_up, "{what}");
+            } else {
+                assert_eq!(l.exchanges, l.frames_up, "{what}");
+            }
+        }
+        // Every leaf bus carries the scene pieces and its Stop.
+        assert!(r.bus.iter().all(|b| b.broadcasts == pieces + 1), "{what}");
+        assert!(tree.root_busy_s > 0.0 && r.time_s > 0.0);
+    }
+    // Bit errors both ways and a node that dies mid-frame, two levels of relays.
+    let base = SimConfig {
+        nodes: 72,
+        topology: Topology::buildable(&BoardProfile::F407, 72),
+        ..SimConfig::for_board(BoardProfile::F407)
+    };
+    let t0 = run(&img, base.clone()).time_s;
+    let r = run(
+        &img,
+        SimConfig {
+            noise: Noise {
+                ber_down: 1e-5,
+                ber_up: 1e-5,
+                drop_broadcast: 0.0,
+                seed: 9,
+            },
+            deaths: vec![NodeDeath {
+                node: 70,
+                at_s: t0 / 2.0,
+            }],
+            node_timeout_s: t0 / 4.0,
+            ..base
+        },
+    );
+    assert!(r.frames[0] == want);
+    assert_eq!(r.tree.as_ref().map(|t| t.shape.mids), Some(2));
+    let corrupted: u64 = r.bus.iter().map(|b| b.corrupted()).sum();
+    assert!(corrupted > 0, "the noise hit nothing");
+}
+
+/// The buildable topology is a star while one bus holds every node, a relay tree otherwise;
+/// the idealised link's one bus holds 256.
+#[test]
+fn the_buildable_topology_keeps_every_bus_within_the_board() {
+    for nodes in [1u16, 8, 9, 64, 256] {
+        let f = SimConfig::buildable(BoardProfile::F407, nodes);
+        assert_eq!(f.overloaded_bus(), None, "{nodes}");
+        assert_eq!(
+            f.node_buses(),
+            if nodes <= 8 { 1 } else { nodes.div_ceil(8) }
+        );
+        assert_eq!(f.tree().is_some(), nodes > 8);
+        let i = SimConfig::buildable(BoardProfile::IDEAL, nodes);
+        assert_eq!((i.topology, i.node_buses()), (Topology::Star, 1));
+    }
+    // The library's default star of one bus overloads the F407's at 64 nodes.
+    assert_eq!(
+        SimConfig::for_board(BoardProfile::F407).overloaded_bus(),
+        Some(64)
+    );
 }
 
 #[test]

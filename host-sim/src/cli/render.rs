@@ -65,7 +65,13 @@ pub struct ClusterArgs {
     /// scene bank is refused before the run
     #[arg(long, default_value = nc_fw::plan::BOARD.name, value_parser = node::parse_node)]
     pub node: NodeBoard,
-    /// SPI buses from the root computer (cluster only)
+    /// How the nodes are wired (cluster only): buildable (what the board can be built as:
+    /// one bus while it holds every node, otherwise a tree of relay RCs, one per bus of
+    /// nodes; the ideal board's one bus holds 256), star (the RC drives --buses buses
+    /// itself) or relay (a relay tree whatever the count)
+    #[arg(long, default_value = "buildable", value_parser = |s: &str| s.parse::<cli_cluster::TopologyArg>())]
+    pub topology: cli_cluster::TopologyArg,
+    /// SPI buses from the root computer of a star (cluster only)
     #[arg(long, default_value_t = 1)]
     pub buses: u16,
     /// SPI bit rate in MHz, 0.001..=10000 (cluster only; default: the board's)
@@ -121,6 +127,7 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
         c.buses,
         c.bit_rate_mhz,
         cli_cluster::parse_policy(&c.policy)?,
+        c.topology,
     );
     if !(c.dm_ms.is_finite() && c.dm_ms >= 0.0 && c.timeout_ms.is_finite() && c.timeout_ms > 0.0) {
         return Err(CliError::Usage(
@@ -163,19 +170,20 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
     }
     if !a.quiet {
         eprintln!(
-            "{}: {}x{} on {nodes} simulated nodes ({} bus(es), {}; {}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered), {} bytes moved{}{} | host {:.2} s",
+            "{}: {}x{} on {nodes} simulated nodes ({}, {}; {}): {:.4} s virtual, speed-up {:.2}x vs 1 node ({:.3} s) | bus busy {:.1}%, RC busy {:.1}% ({}-buffered){}, {} bytes moved{}{} | host {:.2} s",
             a.output.display(),
             rep.width,
             rep.height,
-            c.buses,
+            cli_cluster::topology_text(&cfg),
             cli_cluster::board_text(&cfg),
             c.policy,
             rep.time_s,
             r.speedup,
             r.one_node_s,
             100.0 * rep.bus_utilisation(),
-            100.0 * rep.rc_busy_s / rep.time_s,
+            100.0 * rep.rc_utilisation(),
             if cfg.rc_double_buffer { "double" } else { "single" },
+            cli_cluster::tree_summary(rep),
             rep.bytes_moved(),
             cli_cluster::fault_summary(rep),
             cli_cluster::topology_note(&cfg),

@@ -2,6 +2,7 @@
 //! scheduling policy, node deaths and link faults, and the one-line fault summary. Thin glue
 //! over [`crate::sim::cluster`]; every number is virtual time.
 
+use crate::sim::cluster::relay::Topology;
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
 use links_core::board::BoardProfile;
@@ -70,6 +71,82 @@ pub fn board_text(cfg: &SimConfig) -> String {
         } else {
             "serial"
         }
+    )
+}
+
+/// A `--topology` value: `buildable` (what the board can be wired as: a relay tree when
+/// one bus cannot hold the nodes), `star` (every node on the RC's `--buses` buses) or `relay`
+/// (a relay tree whatever the count).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TopologyArg {
+    Buildable,
+    Star,
+    Relay,
+}
+
+impl FromStr for TopologyArg {
+    type Err = OptionError;
+
+    fn from_str(s: &str) -> Result<Self, OptionError> {
+        match s {
+            "buildable" => Ok(TopologyArg::Buildable),
+            "star" => Ok(TopologyArg::Star),
+            "relay" => Ok(TopologyArg::Relay),
+            _ => Err(OptionError::UnknownTopology(s.into())),
+        }
+    }
+}
+
+impl TopologyArg {
+    /// The topology for `nodes` nodes on `board`; a relay tree has as many relays per
+    /// parent as the board has nodes per bus (at most [`links_core::root::MAX_BUSES`]).
+    pub fn topology(self, board: &BoardProfile, nodes: u16) -> Topology {
+        let fanout = board
+            .link
+            .nodes_per_bus
+            .min(links_core::root::MAX_BUSES as u16);
+        match self {
+            TopologyArg::Buildable => Topology::buildable(board, nodes),
+            TopologyArg::Star => Topology::Star,
+            TopologyArg::Relay => Topology::RelayTree {
+                fanout,
+                batch: true,
+            },
+        }
+    }
+}
+
+/// The topology in words, as summaries print it: `star, 1 bus` or `relay tree: 8 relays
+/// x 8 nodes, 1 level`.
+pub fn topology_text(cfg: &SimConfig) -> String {
+    match cfg.tree() {
+        None => format!("star, {} bus(es)", cfg.buses),
+        Some(Err(e)) => e.to_string(),
+        Some(Ok(t)) => format!(
+            "relay tree: {} relays x {} nodes, {} level(s){}",
+            t.leaves,
+            cfg.profile.link.nodes_per_bus,
+            t.levels(),
+            if t.mids > 0 {
+                format!(" ({} mid relays)", t.mids)
+            } else {
+                String::new()
+            }
+        ),
+    }
+}
+
+/// The relay tree's share of the run, for the render's stats line ("" for a star): the
+/// RC figure before it is the mean leaf relay's; the root's link and CPU busy fractions.
+pub fn tree_summary(r: &SimReport) -> String {
+    let Some(t) = &r.tree else {
+        return String::new();
+    };
+    let root_link = t.links.first().map_or(0, |l| l.busy_ps) as f64 * 1e-12;
+    format!(
+        " per relay; root link busy {:.1}%, root busy {:.1}%",
+        100.0 * root_link / r.time_s,
+        100.0 * t.root_busy_s / r.time_s
     )
 }
 
@@ -149,6 +226,8 @@ pub fn parse_deaths(s: &str) -> Result<Vec<NodeDeath>, OptionError> {
 #[derive(Clone, Debug, PartialEq)]
 pub enum OptionError {
     UnknownPolicy(String),
+    /// `--topology` with no such topology.
+    UnknownTopology(String),
     /// `--board NAME` with no such profile.
     UnknownBoard(String),
     /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
@@ -179,6 +258,10 @@ impl fmt::Display for OptionError {
             OptionError::UnknownPolicy(s) => write!(
                 f,
                 "unknown policy '{s}' (expected decreasing, static, fixed=N or fixed-rect=N)"
+            ),
+            OptionError::UnknownTopology(s) => write!(
+                f,
+                "unknown topology '{s}' (expected buildable, star or relay)"
             ),
             OptionError::UnknownBoard(s) => {
                 let known: Vec<&str> = BoardProfile::ALL.iter().map(|b| b.name).collect();
@@ -300,11 +383,13 @@ pub fn config(
     buses: u16,
     bit_rate_mhz: Option<f64>,
     policy: Policy,
+    topology: TopologyArg,
 ) -> SimConfig {
     let mut cfg = SimConfig {
         nodes,
         buses,
         policy,
+        topology: topology.topology(&board, nodes),
         ..SimConfig::for_board(board)
     };
     if let Some(mhz) = bit_rate_mhz {
@@ -361,7 +446,8 @@ mod tests {
             e.contains("unknown board 'f429'") && e.contains("f407, ideal"),
             "{e}"
         );
-        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING);
+        let star = TopologyArg::Star;
+        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING, star);
         assert_eq!(f.timing.bit_rate_hz, 21e6);
         assert_eq!((f.timing.header_bytes, f.timing.trailer_bytes), (8, 1));
         assert_eq!(f.timing.overhead_ns, 23_000.0);
@@ -370,12 +456,43 @@ mod tests {
         let text = board_text(&f);
         assert!(text.starts_with("board f407: 21 MHz, 23.0 us"), "{text}");
         assert!(topology_note(&f).contains("drives 8"));
-        let i = config(BoardProfile::IDEAL, 256, 1, Some(10.0), Policy::DECREASING);
+        let i = config(
+            BoardProfile::IDEAL,
+            256,
+            1,
+            Some(10.0),
+            Policy::DECREASING,
+            star,
+        );
         assert_eq!((i.timing.bit_rate_hz, i.timing.overhead_ns), (10e6, 500.0));
         assert!(i.rc_double_buffer && i.overloaded_bus().is_none());
         assert_eq!(topology_note(&i), "");
-        let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING);
+        let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
         assert_eq!(eight.overloaded_bus(), None);
+    }
+
+    #[test]
+    fn topologies_parse_and_the_buildable_one_fits_the_board() {
+        assert_eq!("relay".parse(), Ok(TopologyArg::Relay));
+        let e = "ring".parse::<TopologyArg>().unwrap_err().to_string();
+        assert!(e.contains("unknown topology 'ring'"), "{e}");
+        let b = TopologyArg::Buildable;
+        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING, b);
+        assert_eq!(f.overloaded_bus(), None);
+        assert_eq!(topology_note(&f), "");
+        assert_eq!(
+            topology_text(&f),
+            "relay tree: 8 relays x 8 nodes, 1 level(s)"
+        );
+        let f = config(BoardProfile::F407, 256, 1, None, Policy::DECREASING, b);
+        assert_eq!(
+            topology_text(&f),
+            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays)"
+        );
+        let f = config(BoardProfile::F407, 8, 1, None, Policy::DECREASING, b);
+        assert_eq!(topology_text(&f), "star, 1 bus(es)");
+        let i = config(BoardProfile::IDEAL, 256, 1, None, Policy::DECREASING, b);
+        assert_eq!(i.topology, Topology::Star);
     }
 
     #[test]
@@ -410,7 +527,15 @@ mod tests {
 
     #[test]
     fn fault_options_are_checked_and_set() {
-        let mut cfg = config(BoardProfile::IDEAL, 8, 1, Some(42.0), Policy::DECREASING);
+        let star = TopologyArg::Star;
+        let mut cfg = config(
+            BoardProfile::IDEAL,
+            8,
+            1,
+            Some(42.0),
+            Policy::DECREASING,
+            star,
+        );
         let args = FaultArgs {
             kills: vec!["2@0.1".into(), "5-7@0.2".into()],
             ber_down: 1e-4,

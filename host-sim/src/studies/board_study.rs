@@ -5,8 +5,9 @@
 //! buys (an RC that overlaps, no chip-select set-up and hold, one bus per 8 nodes as the
 //! board is wired, all three).
 
+use crate::sim::cluster::relay::Topology;
 use crate::sim::cluster::{RunCache, SimConfig, SimError, SimReport};
-use crate::sim::options::board_text;
+use crate::sim::options::{board_text, topology_text};
 use crate::studies::report::table_head;
 use crate::studies::sweep_commands::single_and_steady;
 use links_core::board::BoardProfile;
@@ -42,6 +43,7 @@ fn profiles_table(
     let mut t = table_head([
         "board",
         "nodes",
+        "topology (buildable)",
         "single frame (s)",
         "speed-up",
         "steady state, repeated still (s/frame)",
@@ -55,21 +57,21 @@ fn profiles_table(
         for &nodes in counts {
             progress(&format!("board {}, {nodes} nodes", board.name));
             let cfg = SimConfig {
-                nodes,
                 cache: Some(cache.clone()),
-                ..SimConfig::for_board(board)
+                ..SimConfig::buildable(board, nodes)
             };
             let p = measure(image, &cfg)?;
             let r = &p.report;
             t.push_str(&format!(
-                "| {} | {nodes} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% | {} | {} |\n",
+                "| {} | {nodes} | {} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% | {} | {} |\n",
                 board.name,
+                topology_text(&cfg),
                 p.single_s,
                 p.speedup,
                 p.steady_s,
                 p.speedup_steady,
                 100.0 * r.bus_utilisation(),
-                100.0 * r.rc_busy_s / r.time_s,
+                100.0 * r.rc_utilisation(),
                 r.root.exchanges,
                 r.bytes_moved()
             ));
@@ -113,7 +115,7 @@ fn lifts_table(
     let mut no_cs = f407.clone();
     no_cs.timing.overhead_ns = 0.0;
     let variants = [
-        ("F407 as built (1 bus)", f407.clone()),
+        ("F407, one bus (a star)", f407.clone()),
         (
             "RC overlaps the wire",
             SimConfig {
@@ -168,8 +170,87 @@ fn lifts_table(
         ));
     }
     Ok(format!(
-        "{nodes} nodes, F407 as built, single frame: {split}\n\n{t}"
+        "{nodes} nodes, F407 star of one bus, single frame: {split}\n\n{t}"
     ))
+}
+
+/// The F407's ways to `nodes` nodes (docs/hardware.md, "Reaching 64 and 256 nodes"): one
+/// RC driving its three SPI buses, one bus of buffered segments (the same bit rate), a
+/// tree of relay RCs, and for comparison one RC with 8 buses (no F407 has them).
+fn topology_table(
+    image: &[u8],
+    nodes: u16,
+    cache: &std::sync::Arc<RunCache>,
+    progress: &dyn Fn(&str),
+) -> Result<String, SimError> {
+    let star = |buses| SimConfig {
+        nodes,
+        buses,
+        cache: Some(cache.clone()),
+        ..SimConfig::for_board(BoardProfile::F407)
+    };
+    let variants = [
+        ("(a) one RC, SPI1/2/3 (3 buses)", star(3)),
+        ("(b) one bus of buffered segments", star(1)),
+        (
+            "(c) relay tree, one exchange per node frame",
+            SimConfig {
+                topology: Topology::RelayTree {
+                    fanout: 8,
+                    batch: false,
+                },
+                ..star(1)
+            },
+        ),
+        (
+            "(c) relay tree, batched (buildable)",
+            SimConfig {
+                topology: Topology::RelayTree {
+                    fanout: 8,
+                    batch: true,
+                },
+                ..star(1)
+            },
+        ),
+        ("one RC with 8 buses (not an F407)", star(8)),
+    ];
+    let mut t = table_head([
+        "topology",
+        "nodes per bus",
+        "single (s)",
+        "speed-up",
+        "steady (s/frame)",
+        "speed-up",
+        "busiest bus",
+        "RC busy (per RC)",
+        "root link busy",
+        "root busy",
+    ]);
+    for (name, cfg) in variants {
+        progress(&format!("{nodes} nodes, {name}"));
+        let p = measure(image, &cfg)?;
+        let r = &p.report;
+        let (link, root) = match &r.tree {
+            Some(tr) => (
+                tr.links.first().map_or(0, |l| l.busy_ps) as f64 * 1e-12 / r.time_s,
+                tr.root_busy_s / r.time_s,
+            ),
+            None => (0.0, r.rc_busy_s / r.time_s),
+        };
+        t.push_str(&format!(
+            "| {name} | {} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% | {:.1}% | {:.1}% |\n",
+            nodes.div_ceil(r.buses.max(1)),
+            p.single_s,
+            p.speedup,
+            p.steady_s,
+            p.speedup_steady,
+            100.0 * r.bus_utilisation(),
+            100.0 * r.rc_utilisation(),
+            100.0 * link,
+            100.0 * root,
+        ));
+    }
+    Ok(format!("{nodes} nodes on the F407, by topology:\n\n{t}"))
 }
 
 /// The whole study as Markdown.
@@ -190,6 +271,8 @@ pub fn board_study(
     for &n in lift_at {
         s.push('\n');
         s.push_str(&lifts_table(image, n, &cache, progress).map_err(e)?);
+        s.push('\n');
+        s.push_str(&topology_table(image, n, &cache, progress).map_err(e)?);
     }
     Ok(s)
 }

@@ -291,6 +291,7 @@ pub(crate) fn single_and_steady(
 ) -> Result<(f64, f64, SimReport, f64), SimError> {
     let one_cfg = SimConfig {
         nodes: 1,
+        topology: crate::sim::cluster::relay::Topology::Star,
         ..cfg.clone()
     };
     let one = simulate_frame(image, &one_cfg)?.time_s;

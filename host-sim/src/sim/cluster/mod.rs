@@ -6,6 +6,8 @@
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
+//! - [`relay`]: the topology: a star, or a tree of relay RCs (the links between RCs, the
+//!   root's CPU, scene broadcasts stored and forwarded).
 //! - `run`: one simulation stage by stage ([`simulate`], [`simulate_frame`],
 //!   [`render_cluster`]).
 //!
@@ -20,6 +22,7 @@ pub mod dm;
 pub mod exec;
 pub mod framemem;
 pub mod rccost;
+pub mod relay;
 mod run;
 pub mod star;
 pub mod timeline;
@@ -41,6 +44,7 @@ use links_core::root::{RootConfig, RootError, RootReport};
 use links_core::sched::Policy;
 use links_core::wire::{self, Job};
 use rccost::RcCost;
+use relay::{Topology, TreeReport, TreeShape};
 use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, Noise};
 use std::collections::HashMap;
 use std::fmt;
@@ -66,8 +70,12 @@ pub struct SimConfig {
     pub profile: BoardProfile,
     /// Node computers (1..=256).
     pub nodes: u16,
-    /// SPI buses from the RC (1..=8); nodes are split evenly across them.
+    /// SPI buses from the RC (1..=8) of a [`Topology::Star`]; nodes are split evenly
+    /// across them. A relay tree has one bus per leaf relay instead.
     pub buses: u16,
+    /// How the nodes are wired to the root. [`SimConfig::for_board`]: a star of `buses`
+    /// buses; [`SimConfig::buildable`]: what the board can be built as.
+    pub topology: Topology,
     pub policy: Policy,
     pub timing: BusTiming,
     /// Node core clock (Hz).
@@ -126,6 +134,7 @@ impl SimConfig {
             profile,
             nodes: 64,
             buses: 1,
+            topology: Topology::Star,
             policy: Policy::DECREASING,
             timing: BusTiming::of(&profile.link),
             clock_hz: profile.core_clock_hz as f64,
@@ -148,11 +157,42 @@ impl SimConfig {
         }
     }
 
+    /// `nodes` nodes on `profile` as the board can be built: a star of one bus while it
+    /// holds them all, a relay tree otherwise ([`Topology::buildable`]).
+    pub fn buildable(profile: BoardProfile, nodes: u16) -> Self {
+        Self {
+            nodes,
+            topology: Topology::buildable(&profile, nodes),
+            ..Self::for_board(profile)
+        }
+    }
+
+    /// The relay tree's shape, if the topology is one (an error if it cannot be built).
+    pub fn tree(&self) -> Option<Result<TreeShape, relay::TreeError>> {
+        match self.topology {
+            Topology::Star => None,
+            Topology::RelayTree { fanout, .. } => Some(TreeShape::of(
+                self.nodes,
+                self.profile.link.nodes_per_bus,
+                fanout,
+            )),
+        }
+    }
+
+    /// The buses the nodes sit on: the star's, or one per leaf relay.
+    pub fn node_buses(&self) -> u16 {
+        match self.tree() {
+            Some(Ok(t)) => t.leaves,
+            _ => self.buses,
+        }
+    }
+
     /// Nodes on the busiest bus, if more than the profile's link drives
     /// ([`links_core::board::LinkProfile::nodes_per_bus`]): a star the board cannot be
-    /// wired as yet.
+    /// wired as.
     pub fn overloaded_bus(&self) -> Option<u16> {
-        let per_bus = self.nodes.div_ceil(self.buses.clamp(1, self.nodes.max(1)));
+        let buses = self.node_buses().clamp(1, self.nodes.max(1));
+        let per_bus = self.nodes.div_ceil(buses);
         (per_bus > self.profile.link.nodes_per_bus).then_some(per_bus)
     }
 }
@@ -187,6 +227,9 @@ pub struct SimReport {
     pub stats: Stats,
     /// The event log, if [`SimConfig::timeline`] asked for one.
     pub timeline: Option<Timeline>,
+    /// The relay tree's links and root, if the topology is one. `rc_busy_s` is then the
+    /// leaf relays' CPU time summed.
+    pub tree: Option<TreeReport>,
 }
 
 impl SimReport {
@@ -210,6 +253,15 @@ impl SimReport {
             [t] => *t,
             [first, .., last] => (last - first) / (self.frame_done_s.len() - 1) as f64,
         }
+    }
+    /// Busy fraction of one RC's CPU: the star's RC, or the mean leaf relay.
+    pub fn rc_utilisation(&self) -> f64 {
+        let rcs = if self.tree.is_some() {
+            self.buses.max(1)
+        } else {
+            1
+        };
+        self.rc_busy_s / (rcs as f64 * self.time_s)
     }
     /// Node efficiency: compute time over nodes x elapsed time.
     pub fn efficiency(&self) -> f64 {

@@ -5,6 +5,7 @@
 use super::exec::{self, Delay, ExecError, Ps, SharedClock, Task};
 use super::framemem::{self, FrameMemory, ViaRoot};
 use super::rccost::RcClock;
+use super::relay::{Relays, Topology};
 use super::star::{SharedStar, SimBus, SimNodeLink, Star};
 use super::timeline::{SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
@@ -216,7 +217,8 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
             kept.push(fm.borrow().read(f, width, height));
         }
     };
-    let res = run_frames(&clock, &mut tasks, &root, &bus_results, keep);
+    let taken = || star.borrow().relays().map_or(0, |r| r.taken_up_to());
+    let res = run_frames(&clock, &mut tasks, (&root, &bus_results), taken, keep);
     drop(tasks);
     let done_at = res.map_err(|cause| {
         SimError::Unfinished(Box::new(unfinished(cause, &root.borrow(), cfg, frames)))
@@ -234,6 +236,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     }
     let root_report = root.borrow().report();
     let bus = star.borrow().counters();
+    let tree = star.borrow().relays().map(|r| r.report());
     let time_ps = done_at.last().copied().unwrap_or(0);
     drop(star);
     let timeline = log.map(|l| l.borrow().clone());
@@ -255,6 +258,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         frames: kept,
         stats,
         timeline,
+        tree,
     })
 }
 
@@ -263,11 +267,15 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
     if cfg.nodes == 0 || cfg.nodes as usize > links_core::root::MAX_NODES {
         return Err(SimError::Config(format!("{} nodes (1 to 256)", cfg.nodes)));
     }
-    if cfg.buses == 0 || cfg.buses as usize > MAX_BUSES {
-        return Err(SimError::Config(format!(
-            "{} buses (1 to {MAX_BUSES})",
-            cfg.buses
-        )));
+    match cfg.tree() {
+        None if cfg.buses == 0 || cfg.buses as usize > MAX_BUSES => {
+            return Err(SimError::Config(format!(
+                "{} buses (1 to {MAX_BUSES})",
+                cfg.buses
+            )));
+        }
+        Some(Err(e)) => return Err(SimError::Config(e.to_string())),
+        _ => {}
     }
     if !(cfg.clock_hz > 0.0 && cfg.timing.bit_rate_hz > 0.0) {
         return Err(SimError::Config(
@@ -314,7 +322,12 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
 /// The SPI star with the configuration's faults: deaths, dropped broadcasts, bit errors.
 fn build_star(clock: &SharedClock, cfg: &SimConfig, fm: &Rc<RefCell<FrameMemory>>) -> SharedStar {
     let snoop = (cfg.collect == Collect::Snoop).then(|| fm.clone());
-    let star = Star::new(clock, cfg.nodes, cfg.buses, cfg.timing, cfg.faults, snoop);
+    let buses = cfg.node_buses();
+    let star = Star::new(clock, cfg.nodes, buses, cfg.timing, cfg.faults, snoop);
+    if let (Some(Ok(shape)), Topology::RelayTree { batch, .. }) = (cfg.tree(), cfg.topology) {
+        let relays = Relays::new(shape, batch, cfg.timing, cfg.rc_cost);
+        star.borrow_mut().set_relays(relays);
+    }
     for d in &cfg.deaths {
         star.borrow_mut()
             .kill_at(d.node, (d.at_s * 1e12).round() as Ps);
@@ -334,7 +347,8 @@ type RootShared<'a, S> = (
     &'a dm::DmStage<'a, S>,
 );
 
-/// The RC: one task per bus, sharing one CPU ([`RcClock`]).
+/// The RC: one task per bus, sharing one CPU ([`RcClock`]); under a relay tree each bus is
+/// a leaf relay's, with a CPU of its own.
 fn bus_tasks<'a, S: AsRef<[u8]>>(
     cfg: &SimConfig,
     clock: &SharedClock,
@@ -345,13 +359,18 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
     let rc_cpu_free = Rc::new(Cell::new(0 as Ps));
     let buses = star.borrow().bus_count();
     let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
+    let relays = cfg.topology != Topology::Star;
     for b in 0..buses {
         let star = star.clone();
         let rc_clock = RcClock {
             clock: clock.clone(),
             cost: cfg.rc_cost,
             sink_pixels: cfg.collect == Collect::ViaRoot,
-            cpu_free: rc_cpu_free.clone(),
+            cpu_free: if relays {
+                Rc::new(Cell::new(0))
+            } else {
+                rc_cpu_free.clone()
+            },
             busy: rc_busy.clone(),
             timeline: log.clone(),
         };
@@ -409,14 +428,21 @@ fn node_tasks<'a>(
     tasks
 }
 
+/// What the RC's state and its bus tasks' results, as [`run_frames`] watches them.
+type Watched<'a> = (
+    &'a RefCell<RootState>,
+    &'a RefCell<Vec<Option<Result<RootReport, RootError>>>>,
+);
+
 /// Run the tasks in virtual time until every bus has finished: the time each frame completed
-/// (`keep` is called with the frame as it does). Stops after 100 000 s of virtual time, or
-/// when no new result arrives over 200 000 executor passes.
+/// (`keep` is called with the frame as it does), or, under a relay tree, the later time the
+/// root had taken every node frame forwarded until then (`taken`). Stops after 100 000 s of
+/// virtual time, or when no new result arrives over 200 000 executor passes.
 fn run_frames(
     clock: &SharedClock,
     tasks: &mut [Option<Task<'_>>],
-    root: &RefCell<RootState>,
-    bus_results: &RefCell<Vec<Option<Result<RootReport, RootError>>>>,
+    (root, bus_results): Watched<'_>,
+    taken: impl Fn() -> Ps,
     mut keep: impl FnMut(u16),
 ) -> Result<Vec<Ps>, ExecError> {
     let mut done_at: Vec<Ps> = Vec::new();
@@ -431,7 +457,7 @@ fn run_frames(
             let complete = root.borrow().frames_complete() as usize;
             while done_at.len() < complete {
                 let f = done_at.len() as u16;
-                done_at.push(now);
+                done_at.push(now.max(taken()));
                 keep(f);
             }
             let accepted = root.borrow().report().accepted;
@@ -515,6 +541,7 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
             &SimConfig {
                 nodes: 1,
                 buses: 1,
+                topology: Topology::Star,
                 keep_frames: false,
                 deaths: Vec::new(),
                 ..cfg

@@ -9,6 +9,7 @@
 
 use super::exec::{PollFn, Ps, SharedClock};
 use super::framemem::FrameMemory;
+use super::relay::Relays;
 use super::timeline::SharedTimeline;
 use links_core::board::{BoardProfile, LinkProfile};
 use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
@@ -318,6 +319,8 @@ pub struct Star {
     noise: NoiseGen,
     /// Where every transfer is logged, if a timeline is recorded.
     timeline: Option<SharedTimeline>,
+    /// The relay tree above the buses (bus `b` is leaf relay `b`'s), if the topology is one.
+    relays: Option<Relays>,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -365,6 +368,7 @@ impl Star {
             drops: Vec::new(),
             noise: NoiseGen::new(Noise::default()),
             timeline: None,
+            relays: None,
         }))
     }
 
@@ -376,6 +380,16 @@ impl Star {
     /// Log every transfer from now on into `log`.
     pub fn set_timeline(&mut self, log: SharedTimeline) {
         self.timeline = Some(log);
+    }
+
+    /// Put a relay tree above the buses: bus `b` is leaf relay `b`'s.
+    pub fn set_relays(&mut self, relays: Relays) {
+        self.relays = Some(relays);
+    }
+
+    /// The relay tree, if there is one.
+    pub fn relays(&self) -> Option<&Relays> {
+        self.relays.as_ref()
     }
 
     /// A node loses some broadcasts (fault injection).
@@ -456,6 +470,9 @@ impl Star {
                 c.down_bytes += t.down.len() as u64;
                 if let Some(fm) = &self.snoop {
                     fm.borrow_mut().snoop(&t.up);
+                }
+                if let Some(r) = &mut self.relays {
+                    r.forward_up(bus, &t.up, t.down.len(), t.end);
                 }
                 self.nodes[node as usize]
                     .inbox
@@ -614,15 +631,15 @@ impl SimBus {
     }
 
     /// Claim the bus for a transfer of `body` bytes to `node` (an exchange) or every node
-    /// (`None`, a broadcast); returns its end time.
-    fn claim(&self, body: usize, node: Option<NodeId>) -> Ps {
+    /// (`None`, a broadcast), starting no earlier than `ready`; returns its end time.
+    fn claim(&self, body: usize, node: Option<NodeId>, ready: Ps) -> Ps {
         let mut s = self.star.borrow_mut();
         let now = self.clock.borrow().now;
         let exchange = node.is_some();
         let d = s.timing.duration_ps(body, exchange);
         let clocked = s.timing.clocked_bytes(body, exchange);
         let b = &mut s.buses[self.bus];
-        let start = now.max(b.busy_until);
+        let start = now.max(b.busy_until).max(ready);
         b.busy_until = start + d;
         b.counters.busy_ps += d;
         b.counters.clocked_bytes += clocked;
@@ -684,7 +701,13 @@ impl RootBus for SimBus {
                 Transfer::Broadcast => (None, Vec::new()),
             }
         };
-        let end = self.claim(down.len().max(up.len()), node);
+        // Under a relay tree a scene piece goes out once it has reached this leaf relay.
+        let now = self.clock.borrow().now;
+        let ready = match (&mut self.star.borrow_mut().relays, node) {
+            (Some(r), None) => r.broadcast_ready(self.bus, &down, now),
+            _ => now,
+        };
+        let end = self.claim(down.len().max(up.len()), node, ready);
         self.clock.borrow_mut().at(end);
         let mut s = self.star.borrow_mut();
         s.buses[self.bus].inflight = Some(Inflight {
