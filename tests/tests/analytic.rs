@@ -738,3 +738,42 @@ fn nesting_deeper_than_the_depth_cap_stays_bright_and_bounded() {
     };
     assert_eq!(deep, pixel::<f64>(&img, 5, 5));
 }
+
+/// Eq. 2.1's ambient term with a material's own ambient colour `arc`: with no lights a
+/// surface is `arc x ambient` (not `drc x ambient`). Ambient (0.3, 0.3, 0.3) and arc
+/// (0.2, 0.5, 0.9) give (0.06, 0.15, 0.27) x 255 = (15.3, 38.25, 68.85) -> (15, 38, 69); the
+/// sphere beside it, without an ambient colour, is drc (0.8) x 0.3 x 255 = 61.2 -> 61.
+#[test]
+fn a_materials_own_ambient_colour_replaces_diffuse_in_the_ambient_term() {
+    let sphere = |x: f64, material: u32| Shape::Ellipsoid {
+        center: [x, 0.0, -10.0],
+        radii: [2.0; 3],
+        rotate_deg: [0.0; 3],
+        cut: None,
+        material,
+    };
+    let (w, h) = (40, 20);
+    let mut s = scene(w, h, 30.0, vec![sphere(-2.5, 0), sphere(2.5, 1)]);
+    s.lights.clear();
+    s.ambient = [0.3; 3];
+    s.background = [0.0; 3];
+    s.materials = vec![
+        Material {
+            ambient: Some([0.2, 0.5, 0.9]),
+            ..matte("own", [0.8; 3])
+        },
+        matte("plain", [0.8; 3]),
+    ];
+    let img = image_of(&s);
+    let fixed = links_core::fixed_image::to_fixed(&img).unwrap().bytes;
+    // Pixel columns 12 and 27 look at the two spheres' centres (x = -2.5, 2.5 at z = 10).
+    for (x, want) in [(12, [15, 38, 69]), (27, [61, 61, 61]), (0, [0, 0, 0])] {
+        assert_eq!(pixel::<f32>(&img, x, 10), want, "f32 pixel ({x}, 10)");
+        assert_eq!(pixel::<f64>(&img, x, 10), want, "f64 pixel ({x}, 10)");
+        assert_eq!(
+            pixel::<links_core::num::Fx>(&fixed, x, 10),
+            want,
+            "Q16.16 pixel ({x}, 10)"
+        );
+    }
+}

@@ -481,6 +481,7 @@ fn seed_images() -> Vec<Vec<u8>> {
                 ][(j + k) % 3],
                 no_shadows: j == 2,
                 leaf_size: Some([4, 1, 31][(j + 2 * k) % 3]),
+                aa: Some([1, 2, 3][j]),
             };
             let img = compile(&desc, &opts)
                 .unwrap_or_else(|e| panic!("{}: {e}", path.display()))

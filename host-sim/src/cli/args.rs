@@ -75,6 +75,10 @@ pub struct SceneArgs {
     /// smaller SceneImage and test more triangles per ray
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=31))]
     pub leaf_size: Option<u8>,
+    /// Anti-aliasing: N x N primary rays per pixel on a regular sub-pixel grid, averaged
+    /// (traced on the nodes), 1..=8 (default 1: one ray through each pixel's centre)
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub aa: Option<u8>,
 }
 
 impl SceneArgs {
@@ -88,6 +92,7 @@ impl SceneArgs {
             transparency: None,
             no_shadows: false,
             leaf_size: None,
+            aa: None,
         }
     }
 
@@ -108,6 +113,7 @@ impl SceneArgs {
             mesh_hierarchy: Default::default(),
             no_shadows: self.no_shadows,
             leaf_size: self.leaf_size.map(usize::from),
+            aa: self.aa.map(u32::from),
         }
     }
 

@@ -86,8 +86,9 @@ pub struct ClusterArgs {
     #[command(flatten)]
     pub faults: cli_cluster::FaultArgs,
     /// How long the RC waits for a silent node holding work before re-issuing it, in ms
-    #[arg(long, default_value_t = 500.0)]
-    pub timeout_ms: f64,
+    /// (default 500, times N² with --aa N: a pixel is N² rays)
+    #[arg(long)]
+    pub timeout_ms: Option<f64>,
     /// A single-buffered RC: it composes, clocks and decodes one transfer at a time
     /// (default: as the board does; cluster only)
     #[arg(long)]
@@ -107,6 +108,10 @@ pub fn run(a: RenderArgs) -> Result<(), CliError> {
         (None, None) => host(&a),
     }
 }
+
+/// The RC's time-out for a silent node holding work without `--timeout-ms`, at one ray per
+/// pixel (ms).
+const DEFAULT_TIMEOUT_MS: f64 = 500.0;
 
 /// The simulated cluster of `--nodes N` and the cluster options, checked.
 pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, CliError> {
@@ -129,14 +134,16 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
         cli_cluster::parse_policy(&c.policy)?,
         c.topology,
     );
-    if !(c.dm_ms.is_finite() && c.dm_ms >= 0.0 && c.timeout_ms.is_finite() && c.timeout_ms > 0.0) {
+    let samples = f64::from(a.scene.aa.unwrap_or(1)).powi(2);
+    let timeout_ms = c.timeout_ms.unwrap_or(DEFAULT_TIMEOUT_MS * samples);
+    if !(c.dm_ms.is_finite() && c.dm_ms >= 0.0 && timeout_ms.is_finite() && timeout_ms > 0.0) {
         return Err(CliError::Usage(
             "--dm-ms must be >= 0 and --timeout-ms > 0".into(),
         ));
     }
     cfg.board = c.node;
     cfg.dm_s_per_frame = c.dm_ms * 1e-3;
-    cfg.node_timeout_s = c.timeout_ms * 1e-3;
+    cfg.node_timeout_s = timeout_ms * 1e-3;
     cfg.rc_double_buffer = cfg.rc_double_buffer && !c.rc_single_buffer;
     cli_cluster::apply_faults(&mut cfg, &c.faults)?;
     if c.timeline.is_some() {

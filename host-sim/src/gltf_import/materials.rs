@@ -10,6 +10,8 @@
 //! - `transmit = c·t·(1 - m)`, where `t` is KHR_materials_transmission's factor, raised to
 //!   `1 - alpha` for alphaMode BLEND
 //! - `ior` = KHR_materials_ior (glTF's default 1.5)
+//! - `ambient`: none (glTF has no ambient coefficient; occlusion maps and emission are not
+//!   ambient reflection), so the ambient term uses `diffuse`
 
 use links_core::desc::{MapTarget, Material, TextureMap};
 
@@ -66,6 +68,9 @@ pub fn eq21_terms(name: &str, p: &Pbr) -> Material {
             .ior
             .filter(|v| v.is_finite() && *v >= 1.0)
             .unwrap_or(GLTF_DEFAULT_IOR),
+        // glTF has no ambient coefficient (occlusion maps and emission are other things):
+        // the ambient term uses the diffuse colour.
+        ambient: None,
         map: None,
     }
 }

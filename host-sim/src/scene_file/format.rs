@@ -316,6 +316,9 @@ pub(super) struct MaterialFile {
     pub transmit: [f32; 3],
     #[serde(default = "default_ior", deserialize_with = "v::ior")]
     pub ior: f32,
+    /// `arc`, the ambient reflection colour; defaults to the diffuse colour.
+    #[serde(default)]
+    pub ambient: Option<v::Rgb01>,
     #[serde(default)]
     pub map: Option<MapFile>,
 }

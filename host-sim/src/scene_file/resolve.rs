@@ -111,6 +111,7 @@ impl<'a> Resolver<'a> {
                 reflect_edge: m.reflect_edge.map_or(m.reflect, |c| c.0),
                 transmit: m.transmit,
                 ior: m.ior,
+                ambient: m.ambient.map(|a| a.0),
                 map,
             });
         }

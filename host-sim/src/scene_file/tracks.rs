@@ -90,6 +90,7 @@ pub(super) enum MaterialPropFile {
     ReflectEdge,
     Transmit,
     Ior,
+    Ambient,
 }
 
 #[derive(Clone, Copy, Debug, Deserialize)]
@@ -236,7 +237,9 @@ fn value_rule(target: &Target) -> ValueRule {
             LightProperty::Color => rule("colour channel", false, true, Check::NonNegative),
         },
         Target::Material { property, .. } => match property {
-            M::Diffuse | M::Transmit => rule("colour channel", false, true, Check::Unit),
+            M::Diffuse | M::Transmit | M::Ambient => {
+                rule("colour channel", false, true, Check::Unit)
+            }
             M::Specular | M::SpecularEdge | M::Reflect | M::ReflectEdge => {
                 rule("coefficient", true, false, Check::Unit)
             }
@@ -402,6 +405,7 @@ impl TrackScope<'_> {
             F::ReflectEdge => P::ReflectEdge,
             F::Transmit => P::Transmit,
             F::Ior => P::Ior,
+            F::Ambient => P::Ambient,
         };
         Ok(Target::Material {
             index: index as u32,

@@ -267,3 +267,40 @@ fn tracks_without_frames_and_ambiguous_names_are_refused() {
         "{e}"
     );
 }
+
+/// A material's `ambient` is read as a colour (a number is grey), defaults to none, and a
+/// track drives it like `diffuse`.
+#[test]
+fn material_ambient_parses_and_a_track_drives_it() {
+    let text = r#"Scene(
+    camera: (eye: (0, 0, 0), look_at: (0, 0, 1)),
+    materials: {
+        "lit": (diffuse: 0.5, ambient: (0.2, 0.4, 0.6)),
+        "grey": (ambient: 0.25),
+        "plain": (),
+    },
+    root: (name: "world", children: [ Sphere(center: (0, 0, 5), radius: 1, material: "lit") ]),
+    frames: (start: 0, end: 5),
+    tracks: [ Track(target: Material("plain", Ambient), keys: [(0, (0, 0, 0)), (4, 0.8)]) ],
+)"#;
+    let film = parse_film(text, "a.ron", Path::new(".")).unwrap();
+    let s = film.scene_at(0).unwrap();
+    assert_eq!(s.materials[0].ambient, Some([0.2, 0.4, 0.6]));
+    assert_eq!(s.materials[1].ambient, Some([0.25; 3]));
+    assert_eq!(
+        film.scene_at(2).unwrap().materials[2].ambient,
+        Some([0.4; 3])
+    );
+    assert_eq!(s.materials[2].ambient, Some([0.0; 3]));
+    let still = text.replace("frames: (start: 0, end: 5),", "").replace(
+        "tracks: [ Track(target: Material(\"plain\", Ambient), keys: [(0, (0, 0, 0)), (4, 0.8)]) ],",
+        "",
+    );
+    let s = parse_scene(&still, "s.ron", Path::new(".")).unwrap();
+    assert_eq!(s.materials[2].ambient, None);
+    let bad = still.replace("ambient: 0.25", "ambient: 1.5");
+    let e = parse_scene(&bad, "s.ron", Path::new(".")).unwrap_err();
+    let (_, line, _) = e.location().unwrap();
+    assert_eq!(line, 5, "{e}");
+    assert!(e.to_string().contains("colour coefficient"), "{e}");
+}

@@ -498,6 +498,17 @@ impl<'de> Deserialize<'de> for Coef {
     }
 }
 
+/// An optional reflectance per channel (a material's `ambient`): a number or `(r, g, b)`,
+/// each in [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Rgb01(pub [f32; 3]);
+
+impl<'de> Deserialize<'de> for Rgb01 {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        rgb01(d).map(Rgb01)
+    }
+}
+
 /// An optional cone angle (a spot light's `inner`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(super) struct ConeAngle(pub f64);

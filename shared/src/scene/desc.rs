@@ -56,7 +56,7 @@ pub struct TextureMap {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
     pub name: String,
-    /// `drc`: diffuse reflection colour (also scales the ambient term).
+    /// `drc`: diffuse reflection colour (also scales the ambient term unless `ambient` is set).
     pub diffuse: [f32; 3],
     /// `src(θ)` at normal incidence.
     pub specular: f32,
@@ -72,6 +72,10 @@ pub struct Material {
     pub transmit: [f32; 3],
     /// Index of refraction of the material (the outside is taken as air, 1.0).
     pub ior: f32,
+    /// `arc`: the ambient reflection colour, used instead of `diffuse` in eq. 2.1's ambient
+    /// term (a diffuse texture map scales it as it scales `diffuse`); `None`: the diffuse
+    /// colour, as in the paper.
+    pub ambient: Option<[f32; 3]>,
     pub map: Option<TextureMap>,
 }
 
@@ -87,6 +91,7 @@ impl Default for Material {
             reflect_edge: 0.0,
             transmit: [0.0, 0.0, 0.0],
             ior: 1.0,
+            ambient: None,
             map: None,
         }
     }

@@ -25,7 +25,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         } else {
             surf.ns
         };
-        let mut c = m.diffuse.mul_elem(self.camera.ambient);
+        let mut c = m.ambient.mul_elem(self.camera.ambient);
         for i in 0..self.scene.light_count() {
             let Some((ldir, dist, ls)) = self.light_at(i, surf.p) else {
                 continue;

@@ -12,6 +12,8 @@ use core::borrow::BorrowMut;
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Mat<T> {
     pub(super) diffuse: Vec3<T>,
+    /// The ambient reflection colour: the material's own, else the diffuse colour.
+    pub(super) ambient: Vec3<T>,
     pub(super) specular: T,
     pub(super) specular_edge: T,
     pub(super) shininess: T,
@@ -31,6 +33,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             .material(&self.scene, surf.material);
         let mut out = Mat {
             diffuse: m.diffuse,
+            ambient: m.ambient.unwrap_or(m.diffuse),
             specular: m.specular,
             specular_edge: m.specular_edge,
             shininess: m.shininess,
@@ -46,7 +49,10 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 + texel.y * T::from_f32(0.587)
                 + texel.z * T::from_f32(0.114);
             match m.target {
-                MapTarget::Diffuse => out.diffuse = out.diffuse.mul_elem(texel),
+                MapTarget::Diffuse => {
+                    out.diffuse = out.diffuse.mul_elem(texel);
+                    out.ambient = out.ambient.mul_elem(texel);
+                }
                 MapTarget::Specular => {
                     out.specular *= lum;
                     out.specular_edge *= lum;

@@ -217,30 +217,56 @@ impl<'a, T: Real, S: BorrowMut<TracerState<T>>> Tracer<'a, T, S> {
         &self.camera
     }
 
-    /// The direction from the eye through the centre of pixel (x, y), before normalising.
+    /// The direction from the eye through the point (x + ox, y + oy) of the screen (pixel
+    /// (x, y)'s centre at ox = oy = ½), before normalising.
     #[inline]
-    fn eye_direction(&self, x: u32, y: u32) -> Vec3<T> {
+    fn eye_direction(&self, x: u32, y: u32, ox: T, oy: T) -> Vec3<T> {
         let f = &self.camera;
-        let half = T::HALF;
-        let dx = f.x0 + (T::from_i32(x as i32) + half) * f.dx;
-        let dy = f.y0 - (T::from_i32(y as i32) + half) * f.dy;
+        let dx = f.x0 + (T::from_i32(x as i32) + ox) * f.dx;
+        let dy = f.y0 - (T::from_i32(y as i32) + oy) * f.dy;
         Vec3::new(dx, dy, f.dz)
     }
 
     /// The primary ray through the centre of pixel (x, y): from the eye at the origin.
     pub fn primary_ray(&self, x: u32, y: u32) -> Ray<T> {
-        Ray::new(Vec3::zero(), self.eye_direction(x, y).normalize())
+        Ray::new(
+            Vec3::zero(),
+            self.eye_direction(x, y, T::HALF, T::HALF).normalize(),
+        )
     }
 
-    /// Colour of the primary ray through pixel (x, y), linear RGB.
+    /// Colour of pixel (x, y), linear RGB: its primary ray's, or with anti-aliasing
+    /// (camera `aa` = N > 1) the mean of the N x N rays through the centres of its
+    /// sub-pixels, (x + (i + ½)/N, y + (j + ½)/N), summed row by row with each clamped to
+    /// [0, 1] (as the frame memory would hold it).
     pub fn pixel(&mut self, x: u32, y: u32) -> Vec3<T> {
+        let n = self.camera.aa.min(crate::image::camera::MAX_AA) as i32;
+        if n <= 1 {
+            return self.sample(x, y, T::HALF, T::HALF);
+        }
+        let twice_n = T::from_i32(2 * n);
+        let mut sum = Vec3::zero();
+        for j in 0..n {
+            let oy = T::from_i32(2 * j + 1) / twice_n;
+            for i in 0..n {
+                let ox = T::from_i32(2 * i + 1) / twice_n;
+                let c = self.sample(x, y, ox, oy);
+                sum = sum + Vec3::new(c.x.clamp01(), c.y.clamp01(), c.z.clamp01());
+            }
+        }
+        sum * (T::ONE / T::from_i32(n * n))
+    }
+
+    /// Colour of the primary ray through (x + ox, y + oy), a point of pixel (x, y) (0 < ox,
+    /// oy < 1: the ray lies in the pixel's row and column, which its clipping lists cover).
+    fn sample(&mut self, x: u32, y: u32, ox: T, oy: T) -> Vec3<T> {
         self.stats.primary_rays += 1;
         self.secondary_left = SECONDARY_RAYS_PER_PIXEL;
-        let d = self.eye_direction(x, y);
+        let d = self.eye_direction(x, y, ox, oy);
         // Fixed point keeps the sheared test (its products of two coordinates would leave
         // the format's range in the edge planes).
         let (ray, eye) = if T::ABSOLUTE_ROUNDING {
-            (self.primary_ray(x, y), None)
+            (Ray::new(Vec3::zero(), d.normalize()), None)
         } else {
             // What `normalize` computes, with the length kept for the edge-plane test.
             let len = d.length();

@@ -81,6 +81,8 @@ pub enum MaterialProperty {
     ReflectEdge,
     Transmit,
     Ior,
+    /// The ambient reflection colour `arc` (a material without one gets it at every frame).
+    Ambient,
 }
 
 /// What a track drives. Clusters and blob groups are found by their child indices from the
@@ -529,6 +531,7 @@ fn apply_material(
     match property {
         P::Diffuse => m.diffuse = rgb(value)?,
         P::Transmit => m.transmit = rgb(value)?,
+        P::Ambient => m.ambient = Some(rgb(value)?),
         P::Specular => m.specular = number(value)? as f32,
         P::SpecularEdge => m.specular_edge = number(value)? as f32,
         P::Shininess => m.shininess = number(value)? as f32,

@@ -48,7 +48,36 @@ impl Dm<'_> {
         Ok(())
     }
 
-    pub(super) fn material(&mut self, m: &desc::Material) -> Result<(), DmError> {
+    /// Every material, then the ambient records of those with their own ambient colour
+    /// (see [`material::OWN_AMBIENT`]): material `i` keeps record `i`, so leaves and shapes
+    /// name materials as before, and a scene without ambient colours gets the same bytes.
+    pub(super) fn materials(&mut self) -> Result<(), DmError> {
+        let d = self.desc;
+        let mut next_ambient = d.materials.len();
+        for m in &d.materials {
+            let ambient = match m.ambient {
+                Some(_) => {
+                    let at = u16::try_from(next_ambient).map_err(|_| DmError::TooLarge {
+                        what: format!("{} materials with ambient records", next_ambient),
+                    })?;
+                    next_ambient += 1;
+                    Some(at)
+                }
+                None => None,
+            };
+            self.material(m, ambient)?;
+        }
+        for a in d.materials.iter().filter_map(|m| m.ambient) {
+            self.w
+                .push(Section::Materials)
+                .1
+                .fs(material::DIFFUSE, &a)
+                .u(material::TEXTURE, NONE);
+        }
+        Ok(())
+    }
+
+    fn material(&mut self, m: &desc::Material, ambient: Option<u16>) -> Result<(), DmError> {
         let (tex, target, scale) = match &m.map {
             Some(map) => {
                 if map.texture as usize >= self.desc.textures.len() {
@@ -56,9 +85,14 @@ impl Dm<'_> {
                         what: format!("material '{}' uses missing texture {}", m.name, map.texture),
                     });
                 }
-                (map.texture, map.target as u32, map.scale)
+                (map.texture, map.target as u8, map.scale)
             }
             None => (NONE, 0, [1.0, 1.0]),
+        };
+        let flags = if ambient.is_some() {
+            material::OWN_AMBIENT
+        } else {
+            0
         };
         self.w
             .push(Section::Materials)
@@ -72,7 +106,9 @@ impl Dm<'_> {
             .fs(material::TRANSMIT, &m.transmit)
             .f(material::IOR, m.ior)
             .u(material::TEXTURE, tex)
-            .u(material::TARGET, target)
+            .b(material::TARGET, target)
+            .b(material::FLAGS, flags)
+            .h(material::AMBIENT, ambient.unwrap_or(0))
             .fs(material::SCALE, &scale);
         Ok(())
     }

@@ -60,6 +60,8 @@ pub struct CompileOptions {
     pub no_shadows: bool,
     /// Most triangles in one leaf (1..=31; `None`: [`MESH_LEAF_SIZE`]).
     pub leaf_size: Option<usize>,
+    /// Anti-aliasing: N x N primary rays per pixel (1..=[`camera::MAX_AA`]; `None`: 1).
+    pub aa: Option<u32>,
 }
 
 /// The hierarchy the DM builds inside each mesh cluster.
@@ -202,15 +204,20 @@ impl Dm<'_> {
             )));
         }
         let mode = self.opts.transparency.unwrap_or(d.transparency);
+        let aa = self.opts.aa.unwrap_or(1);
+        if !(1..=camera::MAX_AA).contains(&aa) {
+            return Err(DmError::BadSetting(format!(
+                "anti-aliasing {aa} out of range 1..={}",
+                camera::MAX_AA
+            )));
+        }
 
         let view = self.camera(width, height, max_depth, mode)?;
         self.check_material_count()?;
 
         self.textures()?;
         // The texel section must keep later sections aligned: the writer pads.
-        for m in &d.materials {
-            self.material(m)?;
-        }
+        self.materials()?;
         for l in &d.lights {
             self.light(l, &view)?;
         }

@@ -442,3 +442,89 @@ fn values_beyond_f32_after_the_transforms_are_rejected() {
     }];
     compile(&s, &CompileOptions::default()).unwrap();
 }
+
+/// Materials with their own ambient colour keep their indices and point at ambient records
+/// written after every material: 64 bytes per such material, none for the others, and the
+/// view decodes each material's ambient (or none) back.
+#[test]
+fn ambient_colours_add_one_record_each_after_the_materials() {
+    let sphere = |material| {
+        Node::Shape(Shape::Ellipsoid {
+            center: [0.0; 3],
+            radii: [1.0; 3],
+            rotate_deg: [0.0; 3],
+            cut: None,
+            material,
+        })
+    };
+    let mut desc = scene(vec![sphere(0), sphere(1), sphere(2)]);
+    let m = |d: f32| Material {
+        diffuse: [d; 3],
+        ..Material::default()
+    };
+    desc.materials = vec![m(0.1), m(0.2), m(0.3)];
+    let plain = compile(&desc, &CompileOptions::default()).unwrap().bytes;
+    desc.materials[0].ambient = Some([0.25, 0.5, 0.75]);
+    desc.materials[2].ambient = Some([1.0, 0.0, 0.5]);
+    let with = compile(&desc, &CompileOptions::default()).unwrap().bytes;
+    assert_eq!(with.len(), plain.len() + 2 * material::SIZE);
+    let v = SceneView::new(&with).unwrap();
+    assert_eq!(v.count(Section::Materials), 5);
+    let amb = |i| v.material::<f32>(i).ambient.map(|a| [a.x, a.y, a.z]);
+    assert_eq!(amb(0), Some([0.25, 0.5, 0.75]));
+    assert_eq!(amb(1), None);
+    assert_eq!(amb(2), Some([1.0, 0.0, 0.5]));
+    assert_eq!(v.material::<f32>(2).diffuse.x, 0.3);
+    // The same scene without ambient colours is the image it always was: no flags set.
+    let p = SceneView::new(&plain).unwrap();
+    for i in 0..3 {
+        assert!(p.material::<f32>(i).ambient.is_none());
+    }
+    // The Q16.16 rewrite converts the ambient records' colours.
+    let fixed = crate::fixed_image::to_fixed(&with).unwrap().bytes;
+    let f = SceneView::new(&fixed).unwrap();
+    let a = f.material::<crate::num::Fx>(0).ambient.unwrap();
+    use crate::num::Real;
+    assert_eq!(
+        [a.x.to_f32(), a.y.to_f32(), a.z.to_f32()],
+        [0.25, 0.5, 0.75]
+    );
+}
+
+/// An ambient index past the Materials section, or one without the flag, or an unknown flag
+/// bit, is a bad reference.
+#[test]
+fn bad_ambient_references_are_rejected() {
+    let mut desc = scene(vec![Node::Shape(Shape::Ellipsoid {
+        center: [0.0; 3],
+        radii: [1.0; 3],
+        rotate_deg: [0.0; 3],
+        cut: None,
+        material: 0,
+    })]);
+    desc.materials[0].ambient = Some([0.5; 3]);
+    let img = compile(&desc, &CompileOptions::default()).unwrap().bytes;
+    let v = SceneView::new(&img).unwrap();
+    let at = v.record_range(Section::Materials, 0).unwrap().start;
+    assert_eq!(img[at + material::FLAGS], material::OWN_AMBIENT);
+    assert_eq!(img[at + material::AMBIENT], 1);
+    for (field, value) in [
+        (material::AMBIENT, 2u8),
+        (material::FLAGS, 0),
+        (material::FLAGS, 3),
+        (material::TARGET, 4),
+    ] {
+        let mut bad = img.clone();
+        bad[at + field] = value;
+        assert!(
+            matches!(
+                SceneView::new(&bad),
+                Err(crate::image::ImageError::BadReference {
+                    section: 1,
+                    record: 0
+                })
+            ),
+            "field {field} = {value} accepted"
+        );
+    }
+}

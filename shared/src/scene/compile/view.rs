@@ -13,6 +13,10 @@ pub(super) struct Projection {
     pub(super) dy: f64,
     pub(super) width: u32,
     pub(super) height: u32,
+    /// The first and last sub-sample offset within a pixel: ½ and ½ with one sample per
+    /// pixel, 1/(2N) and 1 - 1/(2N) with N x N (primary rays pass through x + offset).
+    pub(super) sample_lo: f64,
+    pub(super) sample_hi: f64,
 }
 
 /// Slack in pixels added around projected extents, far above the rounding of a primary
@@ -54,9 +58,12 @@ impl Projection {
             sy0 = sy0.min(sy);
             sy1 = sy1.max(sy);
         }
-        let lo = |v: f64, n: u32| ((v - 0.5 - RECT_SLACK_PX).ceil().max(0.0)).min(n as f64) as i64;
+        // Pixel x holds the extent [s0, s1] when one of its rays, through x + o for o in
+        // [sample_lo, sample_hi], can fall inside it: x in [s0 - sample_hi, s1 - sample_lo].
+        let (o_lo, o_hi) = (self.sample_lo, self.sample_hi);
+        let lo = |v: f64, n: u32| ((v - o_hi - RECT_SLACK_PX).ceil().max(0.0)).min(n as f64) as i64;
         let hi = |v: f64, n: u32| {
-            ((v - 0.5 + RECT_SLACK_PX).floor().min(n as f64 - 1.0)).max(-1.0) as i64
+            ((v - o_lo + RECT_SLACK_PX).floor().min(n as f64 - 1.0)).max(-1.0) as i64
         };
         let (xl, xh) = (lo(sx0, self.width), hi(sx1, self.width));
         let (yl, yh) = (lo(sy0, self.height), hi(sy1, self.height));
@@ -116,6 +123,8 @@ impl Dm<'_> {
             )));
         }
 
+        // Validated by `run` (1..=MAX_AA).
+        let aa = self.opts.aa.unwrap_or(1).clamp(1, camera::MAX_AA);
         // Camera record: pixel centres on the z = 1 plane.
         let tan_half = (cam.fov_y_deg.to_radians() * 0.5).tan();
         let dy = 2.0 * tan_half / height as f64;
@@ -129,9 +138,12 @@ impl Dm<'_> {
             dy: f64::from(dy as f32),
             width,
             height,
+            sample_lo: 0.5 / f64::from(aa),
+            sample_hi: 1.0 - 0.5 / f64::from(aa),
         };
         let flags = u32::from(mode == TransparencyMode::NonRefractive)
-            | (u32::from(self.opts.no_shadows) << 1);
+            | (u32::from(self.opts.no_shadows) << 1)
+            | ((aa - 1) << camera::AA_SHIFT);
         self.w
             .push(Section::Camera)
             .1

@@ -208,7 +208,9 @@ pub mod camera {
     pub const AMBIENT: usize = 36;
     /// max_depth u.
     pub const MAX_DEPTH: usize = 48;
-    /// flags u: [`NON_REFRACTIVE`] (transparency without refraction everywhere), [`NO_SHADOWS`].
+    /// flags u: [`NON_REFRACTIVE`] (transparency without refraction everywhere),
+    /// [`NO_SHADOWS`]; bits [`AA_SHIFT`].. hold the anti-aliasing grid side N minus one
+    /// (0 = one sample per pixel, up to [`MAX_AA`] - 1: N x N sub-pixel samples).
     pub const FLAGS: usize = 52;
     /// dz f: the z of every primary direction (1 in f32 images; the fixed-point rewrite
     /// scales x0, y0, dx, dy and dz by one power of two so a pixel step keeps its precision).
@@ -223,6 +225,12 @@ pub mod camera {
     pub const NON_REFRACTIVE: u32 = 1;
     pub const NO_SHADOWS: u32 = 2;
     pub const MAX_RECT_SHIFT: u32 = 8;
+    pub const AA_SHIFT: u32 = 8;
+    pub const AA_MASK: u32 = 0xff << AA_SHIFT;
+    /// Largest anti-aliasing grid side (N x N samples per pixel).
+    pub const MAX_AA: u32 = 8;
+    /// Every flag bit a valid camera may set.
+    pub const KNOWN_FLAGS: u32 = NON_REFRACTIVE | NO_SHADOWS | AA_MASK;
     #[rustfmt::skip]
     pub const WORDS: [Word; SIZE / 4] = [
         U, U, D, D, D, D, P, P, P, P, P, P, U, U, D, Lo, Lo, Lo, G, G, G, U,
@@ -242,12 +250,24 @@ pub mod material {
     /// transmit f[3], ior f.
     pub const TRANSMIT: usize = 32;
     pub const IOR: usize = 44;
-    /// texture u ([`super::NONE`] for none), target u (what the texture maps: 0 diffuse,
-    /// 1 specular, 2 reflect, 3 transmit), scale f[2] (texture repeats per unit of uv).
+    /// texture u ([`super::NONE`] for none), target b (what the texture maps: 0 diffuse,
+    /// 1 specular, 2 reflect, 3 transmit), flags b ([`OWN_AMBIENT`]), ambient h (see
+    /// below), scale f[2] (texture repeats per unit of uv).
     pub const TEXTURE: usize = 48;
     pub const TARGET: usize = 52;
+    pub const FLAGS: usize = 53;
+    pub const AMBIENT: usize = 54;
     pub const SCALE: usize = 56;
     pub const SIZE: usize = 4 * 16;
+    /// The material has its own ambient reflection colour (`arc`, used instead of the
+    /// diffuse colour in eq. 2.1's ambient term): the first three words ([`DIFFUSE`]) of
+    /// Materials record `ambient`, an *ambient record* written after every material (its
+    /// other fields zero, its texture [`super::NONE`]). Without the flag `ambient` is 0 and
+    /// the ambient term uses the diffuse colour, so a scene that gives no material an
+    /// ambient colour has exactly the bytes it had before the field existed.
+    pub const OWN_AMBIENT: u8 = 1;
+    /// The highest target value (3, transmit).
+    pub const MAX_TARGET: u8 = 3;
     pub const WORDS: [Word; SIZE / 4] = [P, P, P, P, P, P, P, P, P, P, P, P, U, U, P, P];
 }
 

@@ -136,6 +136,9 @@ pub struct Camera<T> {
     pub non_refractive: bool,
     /// No shadow rays: every light reaches every surface facing it.
     pub no_shadows: bool,
+    /// Anti-aliasing grid side N (1..=[`camera::MAX_AA`]): each pixel is the mean of N x N
+    /// primary rays through the centres of an N x N grid of sub-pixels.
+    pub aa: u32,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -156,6 +159,9 @@ pub struct Material<T> {
     pub reflect_edge: T,
     pub transmit: Vec3<T>,
     pub ior: T,
+    /// `arc`, the ambient reflection colour, when the material has its own (else the
+    /// ambient term uses the diffuse colour).
+    pub ambient: Option<Vec3<T>>,
     pub texture: u32,
     pub target: MapTarget,
     pub scale: [T; 2],

@@ -164,6 +164,8 @@ impl SceneView<'_> {
             || !side.contains(&camera.width)
             || !side.contains(&camera.height)
             || self.u(self.rec(Section::Camera, 0) + camera::RECT_SHIFT) > camera::MAX_RECT_SHIFT
+            || self.u(self.rec(Section::Camera, 0) + camera::FLAGS) & !camera::KNOWN_FLAGS != 0
+            || !(1..=camera::MAX_AA).contains(&camera.aa)
         {
             return Err(bad_value(Section::Camera, 0));
         }
@@ -172,11 +174,22 @@ impl SceneView<'_> {
 
     fn check_materials_and_lights(&self) -> Result<(), ImageError> {
         let ntex = self.count(Section::Textures);
-        for i in 0..self.count(Section::Materials) {
-            let at = self.rec(Section::Materials, i);
-            let tex = self.u(at + material::TEXTURE);
-            let target = self.u(at + material::TARGET);
-            if (tex != NONE && tex >= ntex) || target > 3 {
+        let nmat = self.count(Section::Materials);
+        for i in 0..nmat {
+            use material::*;
+            let r = self.record::<MATERIAL_SIZE>(Section::Materials, i);
+            let tex = r.u(TEXTURE);
+            let (target, flags, ambient) = (r.0[TARGET], r.0[FLAGS], r.h(AMBIENT));
+            let ambient_ok = if flags & OWN_AMBIENT != 0 {
+                (ambient as u32) < nmat
+            } else {
+                ambient == 0
+            };
+            if (tex != NONE && tex >= ntex)
+                || target > MAX_TARGET
+                || flags & !OWN_AMBIENT != 0
+                || !ambient_ok
+            {
                 return Err(bad(Section::Materials, i));
             }
         }

@@ -294,6 +294,7 @@ impl<'a> SceneView<'a> {
             max_depth: self.u(at + MAX_DEPTH),
             non_refractive: self.u(at + FLAGS) & NON_REFRACTIVE != 0,
             no_shadows: self.u(at + FLAGS) & NO_SHADOWS != 0,
+            aa: ((self.u(at + FLAGS) & AA_MASK) >> AA_SHIFT) + 1,
         }
     }
 
@@ -310,8 +311,14 @@ impl<'a> SceneView<'a> {
             reflect_edge: r.f(REFLECT_EDGE),
             transmit: r.v3(TRANSMIT),
             ior: r.f(IOR),
+            ambient: if r.0[FLAGS] & OWN_AMBIENT != 0 {
+                let a = self.record::<SIZE>(Section::Materials, r.h(AMBIENT) as u32);
+                Some(a.v3(DIFFUSE))
+            } else {
+                None
+            },
             texture: r.u(TEXTURE),
-            target: match r.u(TARGET) {
+            target: match r.0[TARGET] {
                 1 => MapTarget::Specular,
                 2 => MapTarget::Reflect,
                 3 => MapTarget::Transmit,
