@@ -11,6 +11,7 @@ use std::time::Instant;
 use links_core::anim::Film;
 use links_core::dm::CompileOptions;
 
+use super::args::load_film_any;
 use super::error::write_file;
 use super::render::{cluster_config, RenderArgs};
 use super::{node, CliError};
@@ -18,7 +19,6 @@ use crate::cli_cluster;
 use crate::cluster::SimConfig;
 use crate::frame::{encode_png, render_frame, Precision};
 use crate::png_codec::ApngWriter;
-use crate::scene_file::load_film;
 
 /// `--frames A..B`: frames `start..end`, end excluded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,7 +58,7 @@ pub const FILM_FILE_NAME: &str = "film.png";
 /// Runs `links render --frames`.
 pub fn run(a: &RenderArgs, range: FrameRange) -> Result<(), CliError> {
     let path = a.scene.path()?;
-    let film = load_film(path).map_err(|e| CliError::Scene(e.to_string()))?;
+    let film = load_film_any(path)?;
     check_range(&film, range, path)?;
     let cluster = match a.nodes {
         Some(nodes) => Some(cluster_config(a, nodes)?),
