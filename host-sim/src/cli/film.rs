@@ -304,7 +304,7 @@ pub fn film_summary(run: &FilmRun, images: &FilmImages, nodes: u16) -> String {
     let rep = &run.report;
     format!(
         "film on {nodes} simulated nodes ({}): {} frames in {:.4} s virtual | steady state {:.4} s/frame, \
-         1 node {:.4} s/frame, speed-up {:.2}x | DM {:.3} ms/frame on the {} (cost model) | \
+         1 node {:.4} s/frame, speed-up {:.2}x | DM {:.3} ms/frame ({}) | \
          broadcast {:.0} B/frame (scene image {:.0} B mean)",
         rep.profile.name,
         rep.frame_done_s.len(),
@@ -313,7 +313,11 @@ pub fn film_summary(run: &FilmRun, images: &FilmImages, nodes: u16) -> String {
         run.one_node_steady_s(),
         run.speedup(),
         run.dm_s_per_frame() * 1e3,
-        run.machine.name,
+        if run.fixed_dm {
+            "--dm-ms"
+        } else {
+            run.machine.name
+        },
         run.broadcast_bytes_per_frame(),
         images.mean_bytes()
     )

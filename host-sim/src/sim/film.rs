@@ -89,6 +89,8 @@ pub struct FilmRun {
     /// The same film on one node (no faults): its report.
     pub one_node: SimReport,
     pub machine: DmMachine,
+    /// The DM's time was the fixed `dm_s_per_frame`, not the model's.
+    pub fixed_dm: bool,
     /// The DM's time for each frame (s).
     pub dm_s: Vec<f64>,
 }
@@ -123,17 +125,22 @@ impl FilmRun {
 }
 
 /// Simulates `film` on `cfg`'s cluster with the DM on `machine` (`cfg.dm_frame_s` is set
-/// from the film's DM costs), and the same on one node for the speed-up.
+/// from the film's DM costs; a fixed `cfg.dm_s_per_frame` > 0 replaces the model), and the
+/// same on one node for the speed-up.
 pub fn simulate_film(
     film: &FilmImages,
     cfg: &SimConfig,
     machine: DmMachine,
 ) -> Result<FilmRun, SimError> {
-    let dm_s: Vec<f64> = film
-        .dm_instructions
-        .iter()
-        .map(|&i| machine.seconds(i))
-        .collect();
+    let fixed_dm = cfg.dm_s_per_frame > 0.0;
+    let dm_s: Vec<f64> = if fixed_dm {
+        vec![cfg.dm_s_per_frame; film.images.len()]
+    } else {
+        film.dm_instructions
+            .iter()
+            .map(|&i| machine.seconds(i))
+            .collect()
+    };
     let cache = cfg.cache.clone().unwrap_or_default();
     let cfg = SimConfig {
         dm_frame_s: dm_s.clone(),
@@ -154,6 +161,7 @@ pub fn simulate_film(
         report,
         one_node,
         machine,
+        fixed_dm,
         dm_s,
     })
 }

@@ -79,7 +79,7 @@ pub struct DmMachine {
 impl DmMachine {
     /// The PC (the DM of `links upload`): an assumed, modest 10⁹ instructions per second.
     pub const PC: DmMachine = DmMachine {
-        name: "PC (1e9 instructions/s)",
+        name: "PC at 1e9 instructions/s, cost model",
         instructions_per_s: 1e9,
     };
 
