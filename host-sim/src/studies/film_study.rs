@@ -12,7 +12,7 @@ use links_core::board::BoardProfile;
 use links_core::dm::CompileOptions;
 
 use crate::cluster::dmcost::{DmCost, DmMachine};
-use crate::cluster::{steady_state_interval, RunCache, SimConfig};
+use crate::cluster::{steady_state_interval, RunCache, SimConfig, SimError};
 use crate::sim::film::{compile_film, dm_model_note, simulate_film, FilmError};
 
 /// One board's row.
@@ -58,7 +58,13 @@ pub fn film_points(
         };
         let run = simulate_film(&images, &cfg, DmMachine::PC).map_err(FilmError::Sim)?;
         progress(&format!("simulating frame 0 repeated on {}", board.name));
-        let still = steady_state_interval(&images.images[0], &cfg, 8).map_err(FilmError::Sim)?;
+        let first = images
+            .images
+            .first()
+            .ok_or(FilmError::Sim(SimError::Config(
+                "the film has no frames in the range".into(),
+            )))?;
+        let still = steady_state_interval(first, &cfg, 8).map_err(FilmError::Sim)?;
         let one = SimConfig {
             nodes: 1,
             ..cfg.clone()
