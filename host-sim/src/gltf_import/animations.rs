@@ -16,12 +16,16 @@ use std::collections::HashMap;
 use gltf::accessor::{DataType, Dimensions};
 use gltf::animation::util::ReadOutputs;
 use gltf::animation::{Interpolation as GltfInterpolation, Property};
-use links_core::anim::{Interpolation, Key, Keys, Target, Timeline, Track, TransformProperty};
-use links_core::desc::{Cluster, Node};
+use links_core::anim::{
+    track_value, Interpolation, Key, Keys, Target, Timeline, Track, TransformProperty, Value,
+};
+use links_core::desc::{Cluster, Node, Shape};
 
 use super::buffers::check_accessor;
 use super::error::GltfError;
-use super::transform::{matrix_to_euler_deg, quat_to_matrix};
+use super::transform::{
+    apply_point, matrix_to_euler_deg, mul, quat_to_matrix, transform_matrix, Mat4, IDENTITY,
+};
 use super::warning::Warning;
 use super::Importer;
 
@@ -29,6 +33,8 @@ use super::Importer;
 pub const DEFAULT_RATE: f64 = 24.0;
 /// The most frames an imported animation may span.
 pub const MAX_FRAMES: f64 = 1_000_000.0;
+/// Frames sampled (evenly, and the last) for the box the animation sweeps.
+pub const SWEEP_SAMPLES: usize = 48;
 
 /// The imported animation: its frames and tracks (no tracks: a still, [`Timeline::STILL`]).
 #[derive(Clone, Debug, PartialEq)]
@@ -79,6 +85,81 @@ fn cluster_at<'c>(root: &'c Cluster, path: &[u32]) -> Option<&'c Cluster> {
         }
     }
     Some(c)
+}
+
+/// The world box of every mesh over the animation (`None` without tracks): the default
+/// camera frames it, so what moves stays in the picture. Sampled at [`SWEEP_SAMPLES`] frames
+/// spread evenly over the film, and its last, with each mesh's local box corners.
+pub fn swept_bounds(root: &Cluster, anim: &Animation) -> Option<([f64; 3], [f64; 3])> {
+    if anim.tracks.is_empty() {
+        return None;
+    }
+    let frames = anim.timeline.frames();
+    let step = (frames.len().div_ceil(SWEEP_SAMPLES)).max(1);
+    let last = frames.end.saturating_sub(1);
+    let mut posed = root.clone();
+    let mut bounds = None;
+    for f in frames.step_by(step).chain(std::iter::once(last)) {
+        for track in &anim.tracks {
+            let value = track_value(track, f64::from(f));
+            if let (Target::Cluster { path, property }, Some(Value::Vector(v))) =
+                (&track.target, value)
+            {
+                if let Some(t) = cluster_at_mut(&mut posed, path).map(|c| &mut c.transform) {
+                    match property {
+                        TransformProperty::Translate => t.translate = v,
+                        TransformProperty::Rotate => t.rotate_deg = v,
+                        TransformProperty::Scale => t.scale = v,
+                    }
+                }
+            }
+        }
+        include_meshes(&posed, &IDENTITY, &mut bounds);
+    }
+    bounds
+}
+
+fn cluster_at_mut<'c>(root: &'c mut Cluster, path: &[u32]) -> Option<&'c mut Cluster> {
+    let mut c = root;
+    for &i in path {
+        match c.children.get_mut(i as usize)? {
+            Node::Cluster(sub) => c = sub,
+            Node::Shape(_) => return None,
+        }
+    }
+    Some(c)
+}
+
+/// Grows `bounds` by the world corners of every mesh's local box under `c`.
+fn include_meshes(c: &Cluster, parent: &Mat4, bounds: &mut Option<([f64; 3], [f64; 3])>) {
+    let here = mul(parent, &transform_matrix(&c.transform));
+    for child in &c.children {
+        match child {
+            Node::Cluster(sub) => include_meshes(sub, &here, bounds),
+            Node::Shape(Shape::Mesh { mesh, .. }) => {
+                let Some(&first) = mesh.positions.first() else {
+                    continue;
+                };
+                let (mut lo, mut hi) = (first, first);
+                for p in &mesh.positions {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(p[k]);
+                        hi[k] = hi[k].max(p[k]);
+                    }
+                }
+                for corner in 0..8 {
+                    let p = [0, 1, 2].map(|k| if corner >> k & 1 == 0 { lo[k] } else { hi[k] });
+                    let w = apply_point(&here, p);
+                    let (blo, bhi) = bounds.get_or_insert((w, w));
+                    for k in 0..3 {
+                        blo[k] = blo[k].min(w[k]);
+                        bhi[k] = bhi[k].max(w[k]);
+                    }
+                }
+            }
+            Node::Shape(_) => {}
+        }
+    }
 }
 
 /// One channel read: its property, interpolation and keys in seconds.

@@ -275,3 +275,29 @@ fn malformed_channels_give_a_clear_error() {
         );
     }
 }
+
+#[test]
+fn the_default_camera_frames_what_the_animation_sweeps() {
+    let imp = import(&box_animated()).expect("imports");
+    // Rest: y from -0.5 to 0.5; the inner box rises by 2.52: the swept box's centre is
+    // about 2.52 / 2 higher than the rest box's (0).
+    let look = imp.scene.camera.look_at;
+    assert!(look[1] > 1.0 && look[1] < 1.6, "{look:?}");
+    // At frame 40 (1.67 s) the inner box is at the top, turning: its purple is in the picture.
+    let film = imp.film().expect("a film");
+    let opts = CompileOptions {
+        width: Some(40),
+        height: Some(38),
+        ..Default::default()
+    };
+    let image = film.compile_frame(40, &opts).expect("compiles").bytes;
+    let rgb = crate::frame::render_frame(&image, crate::frame::Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    // Inner (purple, red ~ blue > green) against outer (blue, red < green).
+    let purple = rgb
+        .chunks_exact(3)
+        .filter(|p| u32::from(p[0]) > u32::from(p[1]) + 20)
+        .count();
+    assert!(purple > 20, "{purple} purple pixels");
+}

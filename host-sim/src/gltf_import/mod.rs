@@ -195,9 +195,13 @@ impl Importer<'_> {
                 message: "the scene has no triangles".into(),
             });
         }
+        let animation = self.animations(&animations::node_paths(&scene, &root))?;
+        if let Some((lo, hi)) = animations::swept_bounds(&root, &animation) {
+            world.include(lo);
+            world.include(hi);
+        }
         let (camera, width, height) = self.camera(&world);
         let lights = self.lights(&world, &camera);
-        let animation = self.animations(&animations::node_paths(&scene, &root))?;
         Ok(Imported {
             animation,
             scene: SceneDesc {
