@@ -12,7 +12,8 @@ use crate::cli_image;
 use crate::frame::Precision;
 use crate::gltf_import;
 use crate::limits;
-use crate::scene_file::load_scene;
+use crate::scene_file::{load_film, load_scene};
+use links_core::anim::Film;
 use links_core::desc::SceneDesc;
 
 /// `--precision`: the number type of a render.
@@ -129,16 +130,30 @@ impl SceneArgs {
 }
 
 /// The scene at `path`: a scene file, or a glTF model (`.gltf`/`.glb`) whose import warnings
-/// are printed on stderr.
+/// are printed on stderr. For a film, its first frame.
 pub fn load_desc(path: &Path) -> Result<SceneDesc, CliError> {
+    if gltf_import::is_gltf_path(path) {
+        let film = load_film_any(path)?;
+        film.scene_at(film.timeline().start)
+            .map_err(|e| CliError::Scene(format!("{}: {e}", path.display())))
+    } else {
+        load_scene(path).map_err(|e| CliError::Scene(e.to_string()))
+    }
+}
+
+/// The film at `path`: a scene file's frames and tracks, or a glTF model's animations as
+/// tracks (import warnings printed on stderr).
+pub fn load_film_any(path: &Path) -> Result<Film, CliError> {
     if gltf_import::is_gltf_path(path) {
         let imported = gltf_import::import(path).map_err(|e| CliError::Scene(e.to_string()))?;
         for w in &imported.warnings {
             eprintln!("{}: warning: {w}", path.display());
         }
-        Ok(imported.scene)
+        imported
+            .film()
+            .map_err(|e| CliError::Scene(format!("{}: {e}", path.display())))
     } else {
-        load_scene(path).map_err(|e| CliError::Scene(e.to_string()))
+        load_film(path).map_err(|e| CliError::Scene(e.to_string()))
     }
 }
 

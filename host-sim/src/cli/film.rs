@@ -11,14 +11,15 @@ use std::time::Instant;
 use links_core::anim::Film;
 use links_core::dm::CompileOptions;
 
+use super::args::load_film_any;
 use super::error::write_file;
 use super::render::{cluster_config, RenderArgs};
 use super::{node, CliError};
-use crate::cli_cluster;
+use crate::cluster::dmcost::{DmCost, DmMachine};
 use crate::cluster::SimConfig;
 use crate::frame::{encode_png, render_frame, Precision};
 use crate::png_codec::ApngWriter;
-use crate::scene_file::load_film;
+use crate::sim::film::{compile_film, simulate_film, FilmImages, FilmRun};
 
 /// `--frames A..B`: frames `start..end`, end excluded.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -58,7 +59,7 @@ pub const FILM_FILE_NAME: &str = "film.png";
 /// Runs `links render --frames`.
 pub fn run(a: &RenderArgs, range: FrameRange) -> Result<(), CliError> {
     let path = a.scene.path()?;
-    let film = load_film(path).map_err(|e| CliError::Scene(e.to_string()))?;
+    let film = load_film_any(path)?;
     check_range(&film, range, path)?;
     let cluster = match a.nodes {
         Some(nodes) => Some(cluster_config(a, nodes)?),
@@ -133,38 +134,87 @@ struct Picture {
     note: String,
 }
 
+/// Writes the frames as they come: a PNG each, the animated PNG, a line per frame.
+struct Output<'a> {
+    dir: &'a Path,
+    film_path: PathBuf,
+    count: u32,
+    rate: f64,
+    apng: Option<ApngWriter<BufWriter<File>>>,
+    quiet: bool,
+}
+
+impl Output<'_> {
+    fn push(&mut self, k: usize, frame: u32, pic: &Picture, secs: f64) -> Result<(), CliError> {
+        let out = self.dir.join(frame_file_name(frame));
+        let png = encode_png(pic.width, pic.height, &pic.rgb).map_err(CliError::failed)?;
+        write_file(&out, png)?;
+        let writer = match self.apng.as_mut() {
+            Some(w) => w,
+            None => {
+                let file =
+                    File::create(&self.film_path).map_err(CliError::write(&self.film_path))?;
+                let w = ApngWriter::new(
+                    BufWriter::new(file),
+                    pic.width,
+                    pic.height,
+                    self.count,
+                    self.rate,
+                )
+                .map_err(apng_error(&self.film_path))?;
+                self.apng.insert(w)
+            }
+        };
+        writer
+            .frame(&pic.rgb)
+            .map_err(apng_error(&self.film_path))?;
+        if !self.quiet {
+            eprintln!(
+                "frame {frame} ({}/{}): {} {}x{} {} | {secs:.2} s",
+                k + 1,
+                self.count,
+                out.display(),
+                pic.width,
+                pic.height,
+                pic.note,
+            );
+        }
+        Ok(())
+    }
+
+    fn finish(self) -> Result<(), CliError> {
+        match self.apng {
+            Some(w) => w.finish().map_err(apng_error(&self.film_path)),
+            None => Ok(()),
+        }
+    }
+}
+
 impl Job<'_> {
     fn render(&self, range: FrameRange, dir: &Path) -> Result<(), CliError> {
         let start = Instant::now();
         let count = range.end - range.start;
-        let film_path = dir.join(FILM_FILE_NAME);
-        let mut apng: Option<ApngWriter<BufWriter<File>>> = None;
-        for (k, frame) in (range.start..range.end).enumerate() {
-            let t0 = Instant::now();
-            let pic = self.frame(frame)?;
-            let out = dir.join(frame_file_name(frame));
-            let png = encode_png(pic.width, pic.height, &pic.rgb).map_err(CliError::failed)?;
-            write_file(&out, png)?;
-            let writer = match apng.as_mut() {
-                Some(w) => w,
-                None => apng.insert(self.apng(&film_path, &pic, count)?),
-            };
-            writer.frame(&pic.rgb).map_err(apng_error(&film_path))?;
-            if !self.quiet {
-                eprintln!(
-                    "frame {frame} ({}/{count}): {} {}x{} {} | {:.2} s",
-                    k + 1,
-                    out.display(),
-                    pic.width,
-                    pic.height,
-                    pic.note,
-                    t0.elapsed().as_secs_f64()
-                );
+        let mut out = Output {
+            dir,
+            film_path: dir.join(FILM_FILE_NAME),
+            count,
+            rate: self.film.timeline().rate,
+            apng: None,
+            quiet: self.quiet,
+        };
+        let summary = match &self.cluster {
+            Some(cfg) => Some(self.render_on_cluster(range, cfg, &mut out)?),
+            None => {
+                for (k, frame) in (range.start..range.end).enumerate() {
+                    let t0 = Instant::now();
+                    let pic = self.host_frame(frame)?;
+                    out.push(k, frame, &pic, t0.elapsed().as_secs_f64())?;
+                }
+                None
             }
-        }
-        if let Some(w) = apng {
-            w.finish().map_err(apng_error(&film_path))?;
-        }
+        };
+        let film_path = out.film_path.clone();
+        out.finish()?;
         if !self.quiet {
             let secs = start.elapsed().as_secs_f64();
             eprintln!(
@@ -176,73 +226,101 @@ impl Job<'_> {
                 film_path.display(),
                 self.film.timeline().rate
             );
+            if let Some(s) = summary {
+                eprintln!("{s}");
+            }
         }
         Ok(())
     }
 
-    /// The animated PNG, started with the first frame's size.
-    fn apng(
-        &self,
-        path: &Path,
-        first: &Picture,
-        count: u32,
-    ) -> Result<ApngWriter<BufWriter<File>>, CliError> {
-        let file = File::create(path).map_err(CliError::write(path))?;
-        let rate = self.film.timeline().rate;
-        ApngWriter::new(BufWriter::new(file), first.width, first.height, count, rate)
-            .map_err(apng_error(path))
-    }
-
-    /// Frame `frame`: compiled by the DM, rendered on the host or the simulated cluster.
-    fn frame(&self, frame: u32) -> Result<Picture, CliError> {
+    /// Frame `frame`: compiled by the DM, rendered on the host's threads.
+    fn host_frame(&self, frame: u32) -> Result<Picture, CliError> {
         let image = self
             .film
             .compile_frame(frame, &self.opts)
             .map_err(|e| CliError::Scene(format!("{}: {e}", self.path.display())))?
             .bytes;
-        match &self.cluster {
-            Some(cfg) => self.cluster_frame(frame, &image, cfg),
-            None => {
-                let f = render_frame(&image, self.precision, self.threads, &|| {})
-                    .map_err(CliError::failed)?;
-                Ok(Picture {
-                    width: f.width,
-                    height: f.height,
-                    rgb: f.rgb,
-                    note: format!("{}, scene image {} B", self.precision.name(), image.len()),
-                })
-            }
-        }
-    }
-
-    fn cluster_frame(
-        &self,
-        frame: u32,
-        image: &[u8],
-        cfg: &SimConfig,
-    ) -> Result<Picture, CliError> {
-        let what = format!("{} frame {frame}", self.path.display());
-        node::check_fits(&what, image.len(), &self.node)?;
-        let r = cli_cluster::render(image, cfg).map_err(CliError::Failed)?;
-        let rep = r.report;
-        let rgb = rep
-            .frames
-            .into_iter()
-            .next()
-            .ok_or_else(|| CliError::Failed("the simulation kept no frame".into()))?;
+        let f =
+            render_frame(&image, self.precision, self.threads, &|| {}).map_err(CliError::failed)?;
         Ok(Picture {
-            width: rep.width,
-            height: rep.height,
-            rgb,
-            note: format!(
-                "on {} simulated nodes: {:.4} s virtual, speed-up {:.2}x, scene image {} B",
-                cfg.nodes,
-                rep.time_s,
-                r.speedup,
-                image.len()
-            ),
+            width: f.width,
+            height: f.height,
+            rgb: f.rgb,
+            note: format!("{}, scene image {} B", self.precision.name(), image.len()),
         })
     }
+
+    /// The whole range on the simulated cluster in ONE simulation (the DM pipeline: frame
+    /// n+1's scene is broadcast into the nodes' other bank while frame n renders); returns
+    /// the film's summary line.
+    fn render_on_cluster(
+        &self,
+        range: FrameRange,
+        cfg: &SimConfig,
+        out: &mut Output<'_>,
+    ) -> Result<String, CliError> {
+        let t0 = Instant::now();
+        let images = compile_film(
+            self.film,
+            range.start..range.end,
+            &self.opts,
+            &DmCost::ESTIMATE,
+        )
+        .map_err(|e| CliError::Scene(format!("{}: {e}", self.path.display())))?;
+        for (k, image) in images.images.iter().enumerate() {
+            let what = format!("{} frame {}", self.path.display(), range.start as usize + k);
+            node::check_fits(&what, image.len(), &self.node)?;
+        }
+        let cfg = SimConfig {
+            keep_frames: true,
+            ..cfg.clone()
+        };
+        let run = simulate_film(&images, &cfg, DmMachine::PC)
+            .map_err(|e| CliError::Failed(e.to_string()))?;
+        let secs = t0.elapsed().as_secs_f64() / f64::from(range.end - range.start);
+        let rep = &run.report;
+        for (k, rgb) in rep.frames.iter().enumerate() {
+            let pic = Picture {
+                width: rep.width,
+                height: rep.height,
+                rgb: rgb.clone(),
+                note: format!(
+                    "on {} simulated nodes: done at {:.4} s virtual, scene image {} B, DM {:.3} ms",
+                    cfg.nodes,
+                    rep.frame_done_s.get(k).copied().unwrap_or(0.0),
+                    images.images.get(k).map_or(0, Vec::len),
+                    run.dm_s.get(k).copied().unwrap_or(0.0) * 1e3
+                ),
+            };
+            out.push(k, range.start + k as u32, &pic, secs)?;
+        }
+        Ok(film_summary(&run, &images, cfg.nodes))
+    }
+}
+
+/// The film's line: frames, virtual time, steady state and speed-up, DM and broadcast per
+/// frame.
+pub fn film_summary(run: &FilmRun, images: &FilmImages, nodes: u16) -> String {
+    let rep = &run.report;
+    format!(
+        "film on {nodes} simulated nodes ({}): {} frames in {:.4} s virtual | steady state {:.4} s/frame, \
+         1 node {:.4} s/frame, speed-up {:.2}x | DM {:.3} ms/frame ({}) | \
+         broadcast {:.0} B/frame (scene image {:.0} B mean)",
+        rep.profile.name,
+        rep.frame_done_s.len(),
+        rep.time_s,
+        run.steady_s(),
+        run.one_node_steady_s(),
+        run.speedup(),
+        run.dm_s_per_frame() * 1e3,
+        if run.fixed_dm {
+            "--dm-ms"
+        } else {
+            run.machine.name
+        },
+        run.broadcast_bytes_per_frame(),
+        images.mean_bytes()
+    )
 }
 
 fn apng_error(path: &Path) -> impl Fn(png::EncodingError) -> CliError + '_ {

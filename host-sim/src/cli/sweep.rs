@@ -66,6 +66,23 @@ pub enum SweepCmd {
         #[arg(long, value_delimiter = ',', default_value = "64,256")]
         lift_at: Vec<u16>,
     },
+    /// A film's DM pipeline on f407 and ideal: one simulation of all its frames (frame n+1
+    /// broadcast while frame n renders), steady-state speed-up against one node, the DM's
+    /// time (cost model) and the broadcast bytes per frame; the repeated still beside it
+    Film {
+        /// Film: scene file (.ron) with frames, or an animated glTF
+        scene: PathBuf,
+        /// Frames A..B (B excluded)
+        #[arg(long, default_value = "0..16", value_parser = super::film::parse_frames)]
+        frames: super::film::FrameRange,
+        #[arg(long, default_value_t = 512, value_parser = limits::parse_image_side)]
+        width: u32,
+        #[arg(long, default_value_t = 480, value_parser = limits::parse_image_side)]
+        height: u32,
+        /// Node computers (1..=256)
+        #[arg(long, default_value_t = 64, value_parser = limits::parse_nodes)]
+        nodes: u32,
+    },
     /// LINKS-1 Fig. 5.2 analog: frame time against the number of sub-screens at 64 nodes
     Divisions {
         /// Scene file (.ron)
@@ -134,6 +151,13 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
             output,
             board,
         } => divisions(&scene, *board, &output),
+        SweepCmd::Film {
+            scene,
+            frames,
+            width,
+            height,
+            nodes,
+        } => film(&scene, frames, (width, height), nodes),
     }
 }
 
@@ -170,5 +194,33 @@ fn divisions(scene: &Path, board: BoardProfile, output: &Path) -> Result<(), Cli
     )?;
     outln!("{text}");
     eprintln!("wrote {}/divisions*.csv and .svg", output.display());
+    Ok(())
+}
+
+/// `links sweep film`: the table on stdout.
+fn film(
+    scene: &Path,
+    frames: super::film::FrameRange,
+    (width, height): (u32, u32),
+    nodes: u32,
+) -> Result<(), CliError> {
+    let film = super::args::load_film_any(scene)?;
+    let opts = SceneArgs {
+        width: Some(width),
+        height: Some(height),
+        ..SceneArgs::plain(scene)
+    }
+    .compile_options();
+    let nodes = u16::try_from(nodes).map_err(|_| CliError::Usage(format!("{nodes} nodes")))?;
+    let points = crate::studies::film_study::film_points(
+        &film,
+        frames.start..frames.end,
+        &opts,
+        nodes,
+        &[BoardProfile::F407, BoardProfile::IDEAL],
+        &|s| eprintln!("{s} ..."),
+    )
+    .map_err(|e| CliError::Failed(format!("{}: {e}", scene.display())))?;
+    outln!("{}", crate::studies::film_study::film_table(&points));
     Ok(())
 }

@@ -47,6 +47,13 @@ pub enum GltfError {
     },
     /// The document has no scene to import, or its scene has no triangles.
     Empty { file: String, message: String },
+    /// An animation channel is malformed (`path` e.g. `animations[0].channels[1]`): times not
+    /// increasing, outputs of the wrong type or count.
+    Animation {
+        file: String,
+        path: String,
+        message: String,
+    },
     /// The node graph is deeper than the cluster tree allows, or expands to too many nodes.
     TooLarge { file: String, message: String },
 }
@@ -77,6 +84,11 @@ impl fmt::Display for GltfError {
                 path,
                 message,
             } => write!(f, "{file}: {path}: {message}"),
+            GltfError::Animation {
+                file,
+                path,
+                message,
+            } => write!(f, "{file}: {path}: malformed animation channel: {message}"),
             GltfError::VertexIndex {
                 file,
                 mesh,

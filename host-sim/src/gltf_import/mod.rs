@@ -7,6 +7,7 @@
 //! Whatever is not imported is named in a [`Warning`]; a malformed file is a [`GltfError`]
 //! naming the file and the JSON path or index. See docs/scene-format.md, "glTF import".
 
+mod animations;
 mod base64;
 mod buffers;
 mod error;
@@ -20,10 +21,12 @@ mod warning;
 use std::collections::HashMap;
 use std::path::Path;
 
+use links_core::anim::{AnimError, Film};
 use links_core::desc::{Cluster, Material, SceneDesc, Texture, TransparencyMode};
 
 use crate::limits::{read_bounded, MAX_MESH_BYTES};
 
+pub use animations::{Animation, DEFAULT_RATE};
 pub use error::GltfError;
 pub use materials::{eq21_terms, Pbr};
 pub use transform::{
@@ -42,11 +45,28 @@ const SUPPORTED_EXTENSIONS: &[&str] = &[
 pub const DEFAULT_WIDTH: u32 = 512;
 pub const DEFAULT_HEIGHT: u32 = 480;
 
-/// An imported scene and what could not be carried over.
+/// An imported scene (its nodes at rest), its animation and what could not be carried over.
 #[derive(Debug)]
 pub struct Imported {
     pub scene: SceneDesc,
+    /// The TRS channels as tracks ([`links_core::anim::Timeline::STILL`] and no tracks without animations).
+    pub animation: Animation,
     pub warnings: Vec<Warning>,
+}
+
+impl Imported {
+    /// The scene as a film: the animation's frames and tracks (checked again by
+    /// [`Film::new`]), or the still scene's one frame.
+    pub fn film(&self) -> Result<Film, AnimError> {
+        if self.animation.tracks.is_empty() {
+            return Ok(Film::still(self.scene.clone()));
+        }
+        Film::new(
+            self.scene.clone(),
+            self.animation.timeline,
+            self.animation.tracks.clone(),
+        )
+    }
 }
 
 /// Does `path` name a glTF file (`.gltf` or `.glb`, any case)?
@@ -175,9 +195,15 @@ impl Importer<'_> {
                 message: "the scene has no triangles".into(),
             });
         }
+        let animation = self.animations(&animations::node_paths(&scene, &root))?;
+        if let Some((lo, hi)) = animations::swept_bounds(&root, &animation) {
+            world.include(lo);
+            world.include(hi);
+        }
         let (camera, width, height) = self.camera(&world);
         let lights = self.lights(&world, &camera);
         Ok(Imported {
+            animation,
             scene: SceneDesc {
                 camera,
                 width,
@@ -195,16 +221,8 @@ impl Importer<'_> {
         })
     }
 
-    /// Warnings about the document as a whole: animations, extensions used but ignored.
+    /// Warnings about the document as a whole: extensions used but ignored.
     fn warn_document(&mut self) {
-        for anim in self.doc.animations() {
-            self.warnings.push(Warning::Animation {
-                name: anim
-                    .name()
-                    .map_or_else(|| format!("animation {}", anim.index()), str::to_string),
-                channels: anim.channels().count(),
-            });
-        }
         for name in self.doc.extensions_used() {
             if !SUPPORTED_EXTENSIONS.contains(&name) {
                 self.warnings.push(Warning::Extension {
@@ -286,5 +304,7 @@ impl Importer<'_> {
     }
 }
 
+#[cfg(test)]
+mod animations_tests;
 #[cfg(test)]
 mod tests;

@@ -48,7 +48,7 @@ pub struct WorldInfo {
 }
 
 impl WorldInfo {
-    fn include(&mut self, p: [f64; 3]) {
+    pub(super) fn include(&mut self, p: [f64; 3]) {
         let (lo, hi) = self.bounds.get_or_insert((p, p));
         for k in 0..3 {
             lo[k] = lo[k].min(p[k]);

@@ -4,8 +4,12 @@ use std::fmt;
 
 #[derive(Clone, Debug, PartialEq)]
 pub enum Warning {
-    /// Animations are not imported (the scene format has no tracks yet).
-    Animation { name: String, channels: usize },
+    /// An animation channel not imported (morph-target weights, a node outside the imported
+    /// scene, a second channel on the same property) or only partly (a camera or light node).
+    AnimationTarget { channel: String, message: String },
+    /// A CUBICSPLINE channel: imported as smooth (Catmull-Rom through the key values); the
+    /// file's tangents are not used.
+    CubicSpline { channel: String },
     /// A node's skin is ignored: the mesh is imported in its bind pose.
     Skin { node: String },
     /// Morph targets are ignored: the base shape is imported.
@@ -36,9 +40,12 @@ pub enum Warning {
 impl fmt::Display for Warning {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Warning::Animation { name, channels } => {
-                write!(f, "animation '{name}' ({channels} channels) not imported")
-            }
+            Warning::AnimationTarget { channel, message } => write!(f, "{channel}: {message}"),
+            Warning::CubicSpline { channel } => write!(
+                f,
+                "{channel}: CUBICSPLINE imported as smooth (Catmull-Rom through the key values); \
+                 the file's tangents are approximated, not used"
+            ),
             Warning::Skin { node } => {
                 write!(
                     f,

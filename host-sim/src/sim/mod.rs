@@ -5,5 +5,6 @@
 
 pub mod cluster;
 pub mod cost;
+pub mod film;
 pub mod options;
 pub mod single;

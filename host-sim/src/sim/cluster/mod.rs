@@ -2,7 +2,8 @@
 //! over an emulated SPI star in deterministic virtual time.
 //!
 //! - [`exec`]: the discrete-event executor (virtual time, fixed poll order).
-//! - [`dm`]: the DM stage (each frame's scene appears after a fixed DM time per frame).
+//! - [`dm`]: the DM stage (each frame's scene appears after the DM's time for it).
+//! - [`dmcost`]: the DM's time per frame from a model of its work.
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
@@ -19,6 +20,7 @@
 //! inputs; sweeps run independent simulations on several host threads.
 
 pub mod dm;
+pub mod dmcost;
 pub mod exec;
 pub mod framemem;
 pub mod rccost;
@@ -102,6 +104,10 @@ pub struct SimConfig {
     /// DM time per frame (s): frame `f`'s scene exists from `(f + 1) · dm_s_per_frame` on.
     /// Default 0: every scene is compiled before the run (see docs/cluster.md).
     pub dm_s_per_frame: f64,
+    /// The DM's time for each frame (s), in frame order: when not empty it replaces
+    /// `dm_s_per_frame`, and frame `f`'s scene exists from the sum of its first `f + 1`
+    /// entries on (a film's DM times from [`dmcost`]). One entry per frame.
+    pub dm_frame_s: Vec<f64>,
     pub collect: Collect,
     /// Node options (run-length coded pixel runs).
     pub node: NodeConfig,
@@ -147,6 +153,7 @@ impl SimConfig {
             board: profile.node,
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
+            dm_frame_s: Vec::new(),
             collect: Collect::Snoop,
             node: NodeConfig::default(),
             rc_cost: RcCost::for_board(&profile),

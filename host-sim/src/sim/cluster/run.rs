@@ -142,7 +142,8 @@ pub fn simulate_frame(image: &[u8], cfg: &SimConfig) -> Result<SimReport, SimErr
 }
 
 /// Simulate the cluster rendering an animation: `scenes[f]` is frame `f`'s SceneImage (the
-/// DM's output; it becomes available at `(f + 1) · cfg.dm_s_per_frame`, see [`dm`]). Frame
+/// DM's output; it becomes available at `(f + 1) · cfg.dm_s_per_frame`, or after the first
+/// `f + 1` of `cfg.dm_frame_s`, see [`dm`]). Frame
 /// `f + 1`'s scene is broadcast into the nodes' second bank while frame `f` renders. Nodes in
 /// `cfg.deaths` stop answering at their time; the RC re-issues their work.
 pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimReport, SimError> {
@@ -173,7 +174,15 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let clock: SharedClock = Rc::new(RefCell::new(exec::Clock::default()));
     let fm = Rc::new(RefCell::new(FrameMemory::new()));
     let star = build_star(&clock, cfg, &fm);
-    let dm = dm::DmStage::new(scenes, &clock, (cfg.dm_s_per_frame * 1e12).round() as Ps);
+    let dm_ps: Vec<Ps> = if cfg.dm_frame_s.is_empty() {
+        vec![(cfg.dm_s_per_frame * 1e12).round() as Ps; scenes.len()]
+    } else {
+        cfg.dm_frame_s
+            .iter()
+            .map(|s| (s * 1e12).round() as Ps)
+            .collect()
+    };
+    let dm = dm::DmStage::with_times(scenes, &clock, &dm_ps);
     let buses = star.borrow().bus_count();
     let log: Option<SharedTimeline> = cfg.timeline.map(|limit| {
         let t = Timeline::new(cfg.nodes, buses, width, height, limit);
@@ -285,6 +294,7 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
     let times = [cfg.node_timeout_s, cfg.dm_s_per_frame];
     if times
         .iter()
+        .chain(&cfg.dm_frame_s)
         .any(|t| !(t.is_finite() && *t >= 0.0 && *t < 1e6))
     {
         return Err(SimError::Config(
@@ -304,6 +314,13 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
     cfg.noise.check().map_err(SimError::Config)?;
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
+    if !cfg.dm_frame_s.is_empty() && cfg.dm_frame_s.len() != scenes.len() {
+        return Err(SimError::Config(format!(
+            "{} DM times for {} frames: give one per frame",
+            cfg.dm_frame_s.len(),
+            scenes.len()
+        )));
+    }
     if let Some((frame, s)) = scenes
         .iter()
         .enumerate()
