@@ -13,6 +13,7 @@ use links_core::dm::CompileOptions;
 use links_core::image::SceneView;
 
 use super::cluster::dmcost::{self, DmCost, DmMachine};
+use super::cluster::relay::Topology;
 use super::cluster::{simulate, SimConfig, SimError, SimReport};
 
 /// The DM's output for a range of frames: each frame's SceneImage and the instructions the
@@ -151,6 +152,7 @@ pub fn simulate_film(
     let one = SimConfig {
         nodes: 1,
         buses: 1,
+        topology: Topology::Star,
         keep_frames: false,
         deaths: Vec::new(),
         timeline: None,

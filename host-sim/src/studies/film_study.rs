@@ -51,10 +51,10 @@ pub fn film_points(
             "simulating {} frames on {nodes} and 1 {} nodes",
             n, board.name
         ));
+        // The board as it can be built (a relay tree past one bus's nodes on the F407).
         let cfg = SimConfig {
-            nodes,
             cache: Some(RunCache::new()),
-            ..SimConfig::for_board(*board)
+            ..SimConfig::buildable(*board, nodes)
         };
         let run = simulate_film(&images, &cfg, DmMachine::PC).map_err(FilmError::Sim)?;
         progress(&format!("simulating frame 0 repeated on {}", board.name));
@@ -66,8 +66,8 @@ pub fn film_points(
             )))?;
         let still = steady_state_interval(first, &cfg, 8).map_err(FilmError::Sim)?;
         let one = SimConfig {
-            nodes: 1,
-            ..cfg.clone()
+            cache: Some(RunCache::new()),
+            ..SimConfig::buildable(*board, 1)
         };
         let still_one =
             steady_state_interval(&images.images[0], &one, 4).map_err(FilmError::Sim)?;
