@@ -2,6 +2,7 @@
 //! over an emulated SPI star in deterministic virtual time.
 //!
 //! - [`exec`]: the discrete-event executor (virtual time, fixed poll order).
+//! - [`backup`]: the serial backup line (RS-485) with nodes whose SPI link is dead.
 //! - [`dm`]: the DM stage (each frame's scene appears after a fixed DM time per frame).
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
@@ -16,6 +17,7 @@
 //! configured core clock. A simulation is single-threaded and its results depend only on its
 //! inputs; sweeps run independent simulations on several host threads.
 
+pub mod backup;
 pub mod dm;
 pub mod exec;
 pub mod framemem;
