@@ -273,8 +273,10 @@ pub fn rle_chunk(rgb: &[u8], out: &mut [u8]) -> (usize, usize) {
     (taken, n)
 }
 
+pub mod line;
 mod node;
 mod rollcall;
+pub use line::{call_roll, serve, LineError, LinePort};
 pub use node::{BackupNode, NodeScene};
 pub use rollcall::{RollCall, RollCallStep};
 

@@ -170,7 +170,7 @@ impl<'b> BackupNode<'b> {
         last: bool,
     ) -> Result<(), BackupError> {
         let n = rgb.len() / 3;
-        if !self.outbox_free() || n > OUTBOX_PIXELS || rgb.len() % 3 != 0 || n == 0 {
+        if !self.outbox_free() || n > OUTBOX_PIXELS || !rgb.len().is_multiple_of(3) || n == 0 {
             return Err(BackupError::TooLong);
         }
         let o = &mut self.out;

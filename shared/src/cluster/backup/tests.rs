@@ -310,3 +310,81 @@ fn roll_call_finds_the_silent_nodes() {
     assert_eq!(rc.health(0), None);
     assert_eq!(rc.step(), RollCallStep::Done);
 }
+
+/// A fake line: nodes 1 and 2 on it (node 2 silent), every frame the RC sends answered at
+/// once by the node's serve loop.
+struct FakeLine<'a, 'b> {
+    node: &'a mut BackupNode<'b>,
+    pending: Vec<u8>,
+    sent: usize,
+}
+
+impl LinePort for FakeLine<'_, '_> {
+    async fn send(&mut self, frame: &[u8]) -> Result<(), LineError> {
+        self.sent += 1;
+        let mut reply = [0u8; MAX_FRAME];
+        if let Ok(Some(n)) = self.node.handle(frame, &mut reply) {
+            self.pending.extend_from_slice(&reply[..n]);
+        }
+        Ok(())
+    }
+    async fn receive(&mut self, buf: &mut [u8], _: Option<u32>) -> Result<usize, LineError> {
+        let n = self.pending.len().min(buf.len());
+        buf[..n].copy_from_slice(&self.pending[..n]);
+        self.pending.drain(..n);
+        Ok(n)
+    }
+}
+
+#[test]
+fn the_rc_calls_the_roll_over_a_port() {
+    let mut bank = [0u8; 4];
+    let mut node = BackupNode::new(1, &mut bank);
+    let mut line = FakeLine {
+        node: &mut node,
+        pending: Vec::new(),
+        sent: 0,
+    };
+    let rc = embassy_futures::block_on(call_roll(&mut line, 2, 1000)).unwrap();
+    assert_eq!(line.sent, 2);
+    assert_eq!(rc.absent().collect::<Vec<_>>(), vec![2]);
+    assert_eq!(rc.health(1).unwrap().firmware, FIRMWARE_ID);
+}
+
+/// The node's serve loop answers a burst holding a roll call and a poll, and ignores a
+/// frame for another node.
+#[test]
+fn the_node_serves_a_burst_of_frames() {
+    struct Burst(Vec<u8>, Vec<Vec<u8>>);
+    impl LinePort for Burst {
+        async fn send(&mut self, frame: &[u8]) -> Result<(), LineError> {
+            self.1.push(frame.to_vec());
+            Ok(())
+        }
+        async fn receive(&mut self, buf: &mut [u8], _: Option<u32>) -> Result<usize, LineError> {
+            let n = self.0.len().min(buf.len());
+            buf[..n].copy_from_slice(&self.0[..n]);
+            Ok(n)
+        }
+    }
+    let mut burst = Vec::new();
+    for (a, m) in [
+        (3, Msg::RollCall),
+        (4, Msg::RollCall),
+        (3, Msg::Poll { ack: 0 }),
+    ] {
+        let mut b = [0u8; MAX_FRAME];
+        let n = encode(a, &m, &mut b).unwrap();
+        burst.extend_from_slice(&b[..n]);
+    }
+    let mut port = Burst(burst, Vec::new());
+    let mut bank = [0u8; 4];
+    let mut node = BackupNode::new(3, &mut bank);
+    let mut reader = FrameReader::new();
+    let handled = embassy_futures::block_on(serve(&mut port, &mut node, &mut reader)).unwrap();
+    assert_eq!(handled, 3);
+    let got: Vec<_> = port.1.iter().map(|f| decode(f).unwrap()).collect();
+    assert_eq!(got.len(), 2);
+    assert!(matches!(got[0], (3, Msg::Health(_))));
+    assert_eq!(got[1], (3, Msg::Idle));
+}
