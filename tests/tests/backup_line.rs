@@ -93,3 +93,46 @@ fn a_backup_only_node_moves_at_the_line_bit_rate() {
     assert!(real.time_s >= r.time_s && real.time_s >= real.node_compute_s[0]);
     assert_eq!(real.frame, r.frame);
 }
+
+/// In the cluster: a node whose SPI link dies (the node lives on) is declared dead by the
+/// RC, found on the backup line, and renders over it; the frame is still the single-node
+/// render's, and the report counts the line's bytes and time.
+#[test]
+fn a_node_whose_spi_link_died_renders_over_the_backup_line() {
+    use links_host::cluster::star::NodeDeath;
+    use links_host::cluster::{simulate_frame, SimConfig};
+    let img = image("photo1.ron", 128, 96);
+    let want = reference(&img);
+    // (nodes, when node 0's SPI link dies, the RC's time-out): the default 0.5 s, or 20 ms
+    // (longer than the scene's SPI broadcast) so the line is found before the frame ends.
+    for (nodes, at_s, timeout_s) in [(1, 0.0, 0.5), (3, 0.0, 0.02), (3, 0.03, 0.02)] {
+        let cfg = SimConfig {
+            nodes,
+            keep_frames: true,
+            node_timeout_s: timeout_s,
+            spi_dead: vec![NodeDeath { node: 0, at_s }],
+            ..SimConfig::default()
+        };
+        let r = simulate_frame(&img, &cfg).unwrap_or_else(|e| panic!("{nodes} nodes: {e}"));
+        assert_eq!(r.frames[0], want, "{nodes} nodes, SPI dead at {at_s} s");
+        let line = r.backup.expect("the line ran");
+        println!(
+            "{nodes} nodes, node 0's SPI dead at {at_s} s: {:.4} s, line {} frames {} bytes \
+             {:.4} s busy, served {:?}, {} jobs {} pixels over the line",
+            r.time_s, line.frames, line.bytes, line.busy_s, line.served, line.jobs, line.pixels
+        );
+        // Node 0 at least; another node the 20 ms time-out falsely declared dead while it
+        // rendered may be taken to the line too (and goes back to SPI when it speaks).
+        assert_eq!(line.served.first(), Some(&0));
+        assert!(line.absent.is_empty());
+        assert_eq!(r.root.backup_runs > 0, line.jobs > 0);
+        if nodes == 1 {
+            // Nobody else: every pixel came over the line.
+            assert_eq!(line.pixels, 128 * 96);
+        }
+        if at_s == 0.0 {
+            assert!(line.jobs > 0, "the node found at the start took work");
+        }
+        assert!(line.bytes > 0 && line.busy_s > 0.0);
+    }
+}

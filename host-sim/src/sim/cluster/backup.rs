@@ -99,7 +99,7 @@ impl fmt::Display for BackupSimError {
         match self {
             BackupSimError::Config(s) => write!(f, "backup line: {s}"),
             BackupSimError::Scene(s) => write!(f, "backup line: scene: {s}"),
-            BackupSimError::Protocol(e) => write!(f, "backup line: {e}"),
+            BackupSimError::Protocol(e) => write!(f, "backup line: {e} ({e:?})"),
             BackupSimError::NoNodes => write!(f, "backup line: no node answered the roll call"),
             BackupSimError::Stalled => write!(f, "backup line: the work did not finish"),
         }
@@ -118,29 +118,54 @@ impl From<backup::BackupError> for BackupSimError {
 type Rendered = (Job, u16, u16, Vec<u8>, bool, Ps);
 
 /// One simulated node: the protocol state, its renderer's progress in virtual time.
-struct SimNode<'b> {
-    proto: BackupNode<'b>,
-    alive: bool,
+pub(super) struct SimNode<'b> {
+    pub(super) proto: BackupNode<'b>,
+    pub(super) alive: bool,
     /// The job being rendered and its next piece.
     job: Option<(Job, u32)>,
     rendered: Option<Rendered>,
     /// When its core is free again.
     free_at: Ps,
-    compute: Ps,
-    jobs: u32,
+    pub(super) compute: Ps,
+    pub(super) jobs: u32,
+}
+
+impl<'b> SimNode<'b> {
+    pub(super) fn new(addr: u8, bank: &'b mut [u8], alive: bool) -> Self {
+        Self {
+            proto: BackupNode::new(addr, bank),
+            alive,
+            job: None,
+            rendered: None,
+            free_at: 0,
+            compute: 0,
+            jobs: 0,
+        }
+    }
 }
 
 /// The line, the clock and the counters.
-struct Line {
-    profile: LineProfile,
-    now: Ps,
-    frames: u64,
-    bytes: u64,
-    timeouts: u64,
-    busy: Ps,
+pub(super) struct Line {
+    pub(super) profile: LineProfile,
+    pub(super) now: Ps,
+    pub(super) frames: u64,
+    pub(super) bytes: u64,
+    pub(super) timeouts: u64,
+    pub(super) busy: Ps,
 }
 
 impl Line {
+    pub(super) fn new(profile: LineProfile) -> Self {
+        Self {
+            profile,
+            now: 0,
+            frames: 0,
+            bytes: 0,
+            timeouts: 0,
+            busy: 0,
+        }
+    }
+
     fn carry(&mut self, bytes: usize) {
         let ps = self.profile.frame_ns(bytes) * 1000;
         self.now += ps;
@@ -157,18 +182,21 @@ impl Line {
     }
 }
 
-/// The scene, the renderer's settings and the frame being assembled.
-struct Work<'s> {
-    view: SceneView<'s>,
-    width: u32,
-    cfg: &'s BackupConfig,
-    frame: Vec<u8>,
+/// The scenes (by frame), the renderer's settings, the frame being assembled (standalone
+/// runs only).
+pub(super) struct Work<'s> {
+    pub(super) views: Vec<SceneView<'s>>,
+    pub(super) width: u32,
+    pub(super) model: CycleModel,
+    pub(super) clock_hz: f64,
+    pub(super) techniques: Techniques,
+    pub(super) frame: Vec<u8>,
 }
 
 impl Work<'_> {
     /// Advance node `n` to time `t`: move a finished piece into its outbox, start its next
     /// piece (rendered now, charged at the core's cost), take a new job.
-    fn advance(&self, n: &mut SimNode<'_>, t: Ps) -> Result<(), BackupSimError> {
+    pub(super) fn advance(&self, n: &mut SimNode<'_>, t: Ps) -> Result<(), BackupSimError> {
         loop {
             if let Some(r) = n.rendered.take_if(|r| r.5 <= t && n.proto.outbox_free()) {
                 n.proto.push_pixels(&r.0, r.1, r.2, &r.3, r.4)?;
@@ -189,8 +217,8 @@ impl Work<'_> {
             };
             let last = job.region.piece(self.width, i + 1).is_none();
             n.job = Some((job, i + 1));
-            let (rgb, stats) = self.render(y, x, len)?;
-            let ps = (self.cfg.model.cycles(&stats) as f64 * 1e12 / self.cfg.clock_hz).ceil() as Ps;
+            let (rgb, stats) = self.render(job.frame, y, x, len)?;
+            let ps = (self.model.cycles(&stats) as f64 * 1e12 / self.clock_hz).ceil() as Ps;
             let start = n.free_at.max(t);
             n.free_at = start + ps;
             n.compute += ps;
@@ -198,8 +226,18 @@ impl Work<'_> {
         }
     }
 
-    fn render(&self, y: u32, x: u32, len: u32) -> Result<(Vec<u8>, Stats), BackupSimError> {
-        let mut t = Tracer::<f32>::with_techniques(self.view, self.cfg.techniques);
+    fn render(
+        &self,
+        frame: u16,
+        y: u32,
+        x: u32,
+        len: u32,
+    ) -> Result<(Vec<u8>, Stats), BackupSimError> {
+        let view = *self
+            .views
+            .get(frame as usize)
+            .ok_or_else(|| BackupSimError::Scene(format!("no frame {frame}")))?;
+        let mut t = Tracer::<f32>::with_techniques(view, self.techniques);
         let mut out = vec![Rgb8::default(); len as usize];
         render_run(&mut t, y, x, &mut out).map_err(|e| BackupSimError::Scene(format!("{e:?}")))?;
         Ok((out.as_flattened().to_vec(), t.stats))
@@ -208,7 +246,7 @@ impl Work<'_> {
 
 /// Send the RC's frame `req` (for `to`; every alive node hears it) and return the answer,
 /// charging the line; an addressed node that does not answer costs the reply timeout.
-fn exchange(
+pub(super) fn exchange(
     line: &mut Line,
     nodes: &mut [SimNode<'_>],
     work: &Work<'_>,
@@ -220,7 +258,8 @@ fn exchange(
     let mut reply = [0u8; MAX_FRAME];
     for n in nodes.iter_mut().filter(|n| n.alive) {
         work.advance(n, line.now)?;
-        if let Some(r) = n.proto.handle(req, &mut reply)? {
+        // A frame a node cannot take is counted in its health, as on the board.
+        if let Ok(Some(r)) = n.proto.handle(req, &mut reply) {
             answer = Some(reply[..r].to_vec());
         }
     }
@@ -232,7 +271,7 @@ fn exchange(
     Ok(answer)
 }
 
-fn send(
+pub(super) fn send(
     line: &mut Line,
     nodes: &mut [SimNode<'_>],
     work: &Work<'_>,
@@ -245,11 +284,13 @@ fn send(
 }
 
 /// The scene's chunks for `to` from byte `from` on.
-fn send_scene(
+#[allow(clippy::too_many_arguments)]
+pub(super) fn send_scene(
     line: &mut Line,
     nodes: &mut [SimNode<'_>],
     work: &Work<'_>,
     to: u8,
+    frame: u16,
     scene: &[u8],
     from: usize,
 ) -> Result<(), BackupSimError> {
@@ -258,7 +299,7 @@ fn send_scene(
     while at < scene.len() {
         let end = (at + SCENE_DATA).min(scene.len());
         let msg = Msg::Scene {
-            frame: 0,
+            frame,
             offset: at as u32,
             total: scene.len() as u32,
             crc,
@@ -271,7 +312,7 @@ fn send_scene(
 }
 
 /// Roll call over every address; returns each one's health.
-fn roll_call(
+pub(super) fn roll_call(
     line: &mut Line,
     nodes: &mut [SimNode<'_>],
     work: &Work<'_>,
@@ -297,7 +338,7 @@ pub fn simulate_backup(image: &[u8], cfg: &BackupConfig) -> Result<BackupReport,
             backup::MAX_ADDR
         )));
     }
-    if !(cfg.clock_hz > 0.0) || cfg.line.bit_rate_hz == 0 {
+    if cfg.clock_hz.is_nan() || cfg.clock_hz <= 0.0 || cfg.line.bit_rate_hz == 0 {
         return Err(BackupSimError::Config(
             "clock and bit rate must be positive".into(),
         ));
@@ -306,33 +347,20 @@ pub fn simulate_backup(image: &[u8], cfg: &BackupConfig) -> Result<BackupReport,
     let cam = view.camera::<f32>();
     let (width, height) = (cam.width, cam.height);
     let mut work = Work {
-        view,
+        views: vec![view],
         width,
-        cfg,
+        model: cfg.model,
+        clock_hz: cfg.clock_hz,
+        techniques: cfg.techniques,
         frame: vec![0u8; 3 * width as usize * height as usize],
     };
     let mut banks: Vec<Vec<u8>> = (0..cfg.nodes).map(|_| vec![0u8; image.len()]).collect();
     let mut nodes: Vec<SimNode<'_>> = banks
         .iter_mut()
         .enumerate()
-        .map(|(i, b)| SimNode {
-            proto: BackupNode::new(i as u8 + 1, b),
-            alive: !cfg.dead.contains(&(i as u8 + 1)),
-            job: None,
-            rendered: None,
-            free_at: 0,
-            compute: 0,
-            jobs: 0,
-        })
+        .map(|(i, b)| SimNode::new(i as u8 + 1, b, !cfg.dead.contains(&(i as u8 + 1))))
         .collect();
-    let mut line = Line {
-        profile: cfg.line,
-        now: 0,
-        frames: 0,
-        bytes: 0,
-        timeouts: 0,
-        busy: 0,
-    };
+    let mut line = Line::new(cfg.line);
     let calls = roll_call(&mut line, &mut nodes, &work, cfg.nodes)?;
     let roll_call_ps = line.now;
     let present: Vec<u8> = calls
@@ -377,7 +405,7 @@ fn deliver_scene(
     present: &[u8],
     scene: &[u8],
 ) -> Result<(), BackupSimError> {
-    send_scene(line, nodes, work, BROADCAST, scene, 0)?;
+    send_scene(line, nodes, work, BROADCAST, 0, scene, 0)?;
     for _ in 0..4 {
         let mut all = true;
         for &a in present {
@@ -390,7 +418,7 @@ fn deliver_scene(
             };
             if !h.scene_ok {
                 all = false;
-                send_scene(line, nodes, work, a, scene, h.scene_bytes as usize)?;
+                send_scene(line, nodes, work, a, 0, scene, h.scene_bytes as usize)?;
             }
         }
         if all {

@@ -18,6 +18,7 @@
 //! inputs; sweeps run independent simulations on several host threads.
 
 pub mod backup;
+mod backup_run;
 pub mod dm;
 pub mod exec;
 pub mod framemem;
@@ -28,6 +29,7 @@ pub mod timeline;
 
 pub use crate::studies::cluster_sweep as sweep;
 pub use crate::studies::faults as reliability;
+pub use backup_run::LineCounters;
 pub use run::{render_cluster, simulate, simulate_frame, ClusterRender};
 pub use sweep::{
     divisions_csv, nodes_csv, steady_state_interval, sweep_divisions, sweep_nodes,
@@ -85,6 +87,13 @@ pub struct SimConfig {
     pub deaths: Vec<NodeDeath>,
     /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
     pub drops: Vec<BroadcastDrop>,
+    /// Nodes whose SPI link dies at a time while the node lives on: the RC declares them
+    /// dead on SPI, finds them on the serial backup line and serves them there (nodes
+    /// 0..64, the line's addresses). Turns the backup line on.
+    pub spi_dead: Vec<NodeDeath>,
+    /// Run the serial backup line ([`backup_run`]) even without `spi_dead` nodes: roll
+    /// call at the start, and of every node the RC declares dead.
+    pub backup_line: bool,
     /// The node board: a scene larger than its larger scene bank
     /// ([`NodeBoard::largest_bank`]) is refused before the run; the simulated nodes have two
     /// banks that size. Default: the profile's node (the NC firmware's board,
@@ -137,6 +146,8 @@ impl SimConfig {
             noise: Noise::default(),
             deaths: Vec::new(),
             drops: Vec::new(),
+            spi_dead: Vec::new(),
+            backup_line: false,
             board: profile.node,
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
@@ -189,6 +200,8 @@ pub struct SimReport {
     pub stats: Stats,
     /// The event log, if [`SimConfig::timeline`] asked for one.
     pub timeline: Option<Timeline>,
+    /// What the serial backup line did, if it ran.
+    pub backup: Option<LineCounters>,
 }
 
 impl SimReport {

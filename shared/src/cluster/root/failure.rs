@@ -17,6 +17,9 @@ impl RootState {
         };
         if slot.dead {
             slot.dead = false;
+            // A false alarm taken to the backup line: back on SPI (the job it holds there
+            // is still taken when its pixels come).
+            slot.backup = false;
             self.report.revived += 1;
             if slot.dead_rendering {
                 let silence = now_us.saturating_sub(slot.heard_us);

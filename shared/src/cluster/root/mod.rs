@@ -28,6 +28,7 @@
 //! one and twice the longest silence of a node that was rendering, however many false alarms
 //! there are (see docs/reliability.md for the recovery bound).
 
+mod backup;
 mod bus;
 mod config;
 mod exchange;

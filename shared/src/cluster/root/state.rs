@@ -32,6 +32,10 @@ pub(super) struct NodeSlot {
     /// Declared dead while holding jobs (it was rendering): if it speaks again, the
     /// time-out was too short for its runs.
     pub(super) dead_rendering: bool,
+    /// Served over the serial backup line (dead on SPI, alive on the line).
+    pub(super) backup: bool,
+    /// The job it renders for the backup line.
+    pub(super) backup_job: Option<Job>,
 }
 
 impl NodeSlot {
@@ -45,6 +49,8 @@ impl NodeSlot {
         heard_us: 0,
         dead: false,
         dead_rendering: false,
+        backup: false,
+        backup_job: None,
     };
     pub(super) fn ready_for(&self, frame: u16) -> bool {
         self.ready[(frame % 2) as usize] == Some(frame)
