@@ -148,7 +148,11 @@ fn rle_chunks_cover_a_row_and_decode_to_it() {
             s ^= s >> 17;
             s ^= s << 5;
             // A few colours, so runs of all lengths occur.
-            let c = if s.is_multiple_of(3) { (s >> 8) as u8 } else { 9 };
+            let c = if s.is_multiple_of(3) {
+                (s >> 8) as u8
+            } else {
+                9
+            };
             p.copy_from_slice(&[c, c / 2, 1]);
         }
         let mut at = 0;
