@@ -577,6 +577,8 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
                 buses: 1,
                 keep_frames: false,
                 deaths: Vec::new(),
+                spi_dead: Vec::new(),
+                backup_line: false,
                 ..cfg
             },
         )?
