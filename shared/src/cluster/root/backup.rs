@@ -1,8 +1,9 @@
 //! The RC's bookkeeping for nodes served over the serial backup line
 //! ([`crate::backup`]): a node declared dead on its SPI link that still answers the
 //! backup line's roll call gets work (one job at a time, an orphan first) and returns its
-//! pixels over the line. Its job is kept apart from its SPI job list, whose jobs stay
-//! orphans for the SPI nodes (or for itself) to adopt.
+//! pixels over the line. Its job is kept apart from its SPI job list (in a table of
+//! [`BACKUP_NODES`] entries), whose jobs stay orphans for the SPI nodes (or for itself) to
+//! adopt.
 
 use super::*;
 use crate::cluster::link::NodeId;
@@ -16,7 +17,7 @@ impl RootState {
         let Some(slot) = self.nodes.get(node as usize) else {
             return false;
         };
-        if node >= self.cfg.nodes || slot.backup {
+        if node >= self.cfg.nodes || self.by_backup(node) {
             return false;
         }
         let silent = now_us.saturating_sub(slot.heard_us) >= self.timeout_us.saturating_mul(2);
@@ -29,26 +30,34 @@ impl RootState {
 
     /// Serve `node` over the backup line from now on (it answered a roll call after
     /// [`RootState::backup_candidate`]); it counts as dead on SPI. Returns false for a node
-    /// that is not a candidate.
+    /// that is not a candidate, or when [`BACKUP_NODES`] nodes are served already.
     pub fn serve_by_backup(&mut self, node: NodeId, now_us: u64) -> bool {
         if !self.backup_candidate(node, now_us) {
             return false;
         }
-        let slot = &mut self.nodes[node as usize];
-        slot.dead = true;
-        slot.backup = true;
+        let Some(entry) = self
+            .backup_jobs
+            .iter_mut()
+            .find(|e| e.0 == node || e.0 == NodeId::MAX)
+        else {
+            return false;
+        };
+        (entry.0, entry.1) = (node, true);
+        self.nodes[node as usize].dead = true;
         true
     }
 
     /// Whether `node` is served over the backup line.
     pub fn by_backup(&self, node: NodeId) -> bool {
-        self.nodes.get(node as usize).is_some_and(|s| s.backup)
+        self.backup_jobs.iter().any(|e| e.0 == node && e.1)
     }
 
     /// The backup node reported frame `frame`'s scene complete and CRC-checked.
     pub fn backup_scene_ready(&mut self, node: NodeId, frame: u16) {
-        if let Some(slot) = self.nodes.get_mut(node as usize).filter(|s| s.backup) {
-            slot.ready[(frame % 2) as usize] = Some(frame);
+        if self.by_backup(node) {
+            if let Some(slot) = self.nodes.get_mut(node as usize) {
+                slot.ready[(frame % 2) as usize] = Some(frame);
+            }
         }
     }
 
@@ -56,11 +65,11 @@ impl RootState {
     /// (a fresh id), else the next region of the frame being handed out if the node holds
     /// its scene. `None`: nothing to do for it now.
     pub fn backup_assign(&mut self, node: NodeId) -> Option<Job> {
-        let slot = self.nodes.get(node as usize)?;
-        if let Some(j) = slot.backup_job {
+        let k = self.backup_entry(node)?;
+        if let Some(j) = self.backup_jobs[k].2 {
             return Some(j);
         }
-        if !slot.backup {
+        if !self.backup_jobs[k].1 {
             return None;
         }
         if self.finished() {
@@ -89,8 +98,13 @@ impl RootState {
                 self.new_job(frame, region)
             }
         };
-        self.nodes[node as usize].backup_job = Some(job);
+        self.backup_jobs[k].2 = Some(job);
         Some(job)
+    }
+
+    /// The index of `node`'s entry in the backup table.
+    fn backup_entry(&self, node: NodeId) -> Option<usize> {
+        self.backup_jobs.iter().position(|e| e.0 == node)
     }
 
     /// Take a run of pixels backup node `node` returned for its job `job` (RGB8 of
@@ -106,11 +120,10 @@ impl RootState {
         done: bool,
         sink: &mut P,
     ) -> bool {
-        let Some(held) = self
-            .nodes
-            .get(node as usize)
-            .and_then(|s| s.backup_job)
-            .filter(|j| j.id == job)
+        let entry = self.backup_entry(node);
+        let Some((k, held)) = entry
+            .and_then(|k| Some((k, self.backup_jobs[k].2?)))
+            .filter(|(_, j)| j.id == job)
         else {
             self.report.rejected += 1;
             return false;
@@ -128,7 +141,7 @@ impl RootState {
         self.report.backup_runs += 1;
         self.report.pixels += n as u64;
         if done {
-            self.nodes[node as usize].backup_job = None;
+            self.backup_jobs[k].2 = None;
             if let Some(p) = self.prog(held.frame) {
                 p.done += 1;
             }

@@ -19,7 +19,9 @@ impl RootState {
             slot.dead = false;
             // A false alarm taken to the backup line: back on SPI (the job it holds there
             // is still taken when its pixels come).
-            slot.backup = false;
+            if let Some(e) = self.backup_jobs.iter_mut().find(|e| e.0 == node) {
+                e.1 = false;
+            }
             self.report.revived += 1;
             if slot.dead_rendering {
                 let silence = now_us.saturating_sub(slot.heard_us);

@@ -32,10 +32,6 @@ pub(super) struct NodeSlot {
     /// Declared dead while holding jobs (it was rendering): if it speaks again, the
     /// time-out was too short for its runs.
     pub(super) dead_rendering: bool,
-    /// Served over the serial backup line (dead on SPI, alive on the line).
-    pub(super) backup: bool,
-    /// The job it renders for the backup line.
-    pub(super) backup_job: Option<Job>,
 }
 
 impl NodeSlot {
@@ -49,8 +45,6 @@ impl NodeSlot {
         heard_us: 0,
         dead: false,
         dead_rendering: false,
-        backup: false,
-        backup_job: None,
     };
     pub(super) fn ready_for(&self, frame: u16) -> bool {
         self.ready[(frame % 2) as usize] == Some(frame)
@@ -128,6 +122,10 @@ pub struct RootState {
     pub(super) scene_crc: [Option<(u16, u32)>; 2],
     /// Scene bytes checksummed since [`RootState::take_crc_work`] last ran.
     pub(super) crc_work: usize,
+    /// Nodes served over the backup line: (node, served now (false: back on SPI), the job
+    /// it renders there), at most [`BACKUP_NODES`] at once (a table, not a field of every
+    /// node's slot: the RC's RAM).
+    pub(super) backup_jobs: [(NodeId, bool, Option<Job>); BACKUP_NODES],
 }
 
 /// Resolves when every frame is complete.
@@ -200,6 +198,7 @@ impl RootState {
             finish_wakers: [const { None }; MAX_BUSES],
             scene_crc: [None; 2],
             crc_work: 0,
+            backup_jobs: [(NodeId::MAX, false, None); BACKUP_NODES],
         })
     }
 
