@@ -67,11 +67,42 @@ pub mod pins {
     pub const MISO_PA: usize = 6;
     /// MOSI pin number on GPIOA.
     pub const MOSI_PA: usize = 7;
+    /// The serial backup line (RS-485, `links_core::backup`): USART2 TX, RX, and the
+    /// transceiver's driver enable (also its /RE).
+    pub const BACKUP: [&str; 3] = ["PA2", "PA3", "PA1"];
+    /// The node's backup-line address straps (pull-ups; a jumper to ground is a 1 bit):
+    /// address = 1 + the 6-bit value, bit 0 first.
+    pub const ADDRESS: [&str; 6] = ["PE7", "PE8", "PE9", "PE10", "PE11", "PE12"];
+}
+
+/// The backup-line address the straps give: 1 + their value (1..=64).
+pub const fn backup_address(straps: [bool; 6]) -> u8 {
+    let mut v = 0u8;
+    let mut i = 0;
+    while i < 6 {
+        if straps[i] {
+            v |= 1 << i;
+        }
+        i += 1;
+    }
+    v + 1
 }
 
 #[cfg(test)]
 mod tests {
     use links_core::board::BoardProfile;
+
+    /// Every strap setting is a valid node address, all 64 distinct.
+    #[test]
+    fn the_address_straps_cover_the_backup_line() {
+        let mut seen = [false; 65];
+        for v in 0..64u8 {
+            let a = super::backup_address(core::array::from_fn(|i| v & (1 << i) != 0));
+            assert_eq!(a, v + 1);
+            assert!((1..=links_core::backup::MAX_ADDR).contains(&a) && !seen[a as usize]);
+            seen[a as usize] = true;
+        }
+    }
 
     /// The node's memory plan and link banks are the F407 board profile's.
     #[test]

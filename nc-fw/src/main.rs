@@ -18,9 +18,14 @@ mod fw {
     use defmt::{info, unwrap, warn};
     use embassy_executor::{Executor, InterruptExecutor};
     use embassy_stm32::exti::ExtiInput;
-    use embassy_stm32::gpio::{Level, Output, Pull, Speed};
+    use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
     use embassy_stm32::interrupt;
     use embassy_stm32::interrupt::{InterruptExt, Priority};
+    use embassy_stm32::peripherals::{DMA1_CH5, DMA1_CH6, USART2};
+    use embassy_stm32::usart::{self, Uart};
+    use embassy_stm32::{bind_interrupts, dma};
+    use links_board::rs485::Rs485;
+    use links_core::backup::{self, BackupNode, FrameReader};
     use links_core::board::Memory;
     use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
     use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
@@ -42,6 +47,13 @@ mod fw {
     static SCENE_ODD_BANK: ConstStaticCell<[u8; SCENE_ODD_CCM]> =
         ConstStaticCell::new([0; SCENE_ODD_CCM]);
     static SHARED: StaticCell<SlaveShared<'static>> = StaticCell::new();
+    static BACKUP_NODE: StaticCell<BackupNode<'static>> = StaticCell::new();
+
+    bind_interrupts!(struct BackupIrqs {
+        USART2 => usart::InterruptHandler<USART2>;
+        DMA1_STREAM5 => dma::InterruptHandler<DMA1_CH5>;
+        DMA1_STREAM6 => dma::InterruptHandler<DMA1_CH6>;
+    });
     static EXECUTOR_LINK: InterruptExecutor = InterruptExecutor::new();
     static EXECUTOR_NODE: StaticCell<Executor> = StaticCell::new();
 
@@ -59,6 +71,20 @@ mod fw {
     ) {
         let mut port = port;
         task.run(&mut port, shared).await
+    }
+
+    /// The serial backup line: answer the RC (roll call, health, polls) with
+    /// `links_core::backup`'s node state. The node takes no scene over the line yet (its
+    /// banks are the render task's): scene chunks are refused and counted.
+    #[embassy_executor::task]
+    async fn backup_task(mut line: Rs485, node: &'static mut BackupNode<'static>) {
+        let mut reader = FrameReader::new();
+        loop {
+            if let Err(e) = backup::serve(&mut line, node, &mut reader).await {
+                warn!("backup line: {}", e);
+                reader.reset();
+            }
+        }
     }
 
     #[embassy_executor::task]
@@ -123,9 +149,36 @@ mod fw {
             want_ready: false,
         };
 
+        // The backup line (USART2 on PA2/PA3, driver enable PA1) and the address straps.
+        let straps = [
+            Input::new(p.PE7, Pull::Up),
+            Input::new(p.PE8, Pull::Up),
+            Input::new(p.PE9, Pull::Up),
+            Input::new(p.PE10, Pull::Up),
+            Input::new(p.PE11, Pull::Up),
+            Input::new(p.PE12, Pull::Up),
+        ];
+        let addr = nc_fw::backup_address(straps.each_ref().map(|s| s.is_low()));
+        info!("backup line address {}", addr);
+        let uart = unwrap!(Uart::new(
+            p.USART2,
+            p.PA3,
+            p.PA2,
+            p.DMA1_CH6,
+            p.DMA1_CH5,
+            BackupIrqs,
+            links_board::rs485::config(),
+        ));
+        let line = Rs485 {
+            uart,
+            de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
+        };
+        let backup_node = BACKUP_NODE.init(BackupNode::new(addr, &mut []));
+
         interrupt::UART4.set_priority(Priority::P6);
         let spawner = EXECUTOR_LINK.start(interrupt::UART4);
         spawner.spawn(unwrap!(link_task(port, task, shared)));
+        spawner.spawn(unwrap!(backup_task(line, backup_node)));
 
         let executor = EXECUTOR_NODE.init(Executor::new());
         // The odd bank is wherever the plan put it (the other placement is empty).

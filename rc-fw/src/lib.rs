@@ -105,6 +105,24 @@ pub mod pins {
     /// profile's ([`crate::link::NODES`]); the pin table must list that many.
     pub use crate::link::NODES;
     crate::with_pins!(pin_names);
+    /// The serial backup line (RS-485, `links_core::backup`): USART2 TX, RX, and the
+    /// transceiver's driver enable (also its /RE). Free of every pin above and of the
+    /// Discovery's on-board parts.
+    pub const BACKUP: [&str; 3] = ["PA2", "PA3", "PA1"];
+}
+
+/// The backup line's numbers, the board profile's: its bit rate, the reply timeout of a
+/// roll call, and how often the RC calls the roll.
+pub mod backup_line {
+    use links_core::board::LineProfile;
+
+    const LINE: LineProfile = crate::link::PROFILE.backup;
+    /// USART2's bit rate.
+    pub const BIT_RATE: u32 = LINE.bit_rate_hz;
+    /// How long a node has to answer (µs).
+    pub const REPLY_TIMEOUT_US: u32 = LINE.reply_timeout_us;
+    /// The RC calls the roll this often (ms).
+    pub const ROLL_CALL_PERIOD_MS: u64 = 1000;
 }
 
 // The PC conversation, render requests, readback and throttle are board-independent: they
@@ -126,6 +144,18 @@ mod tests {
         assert_eq!(super::link::CS_HOLD_US * 1000, p.link.cs_hold_ns as u64);
         assert_eq!((super::link::CS_SETUP_US, super::link::CS_HOLD_US), (8, 15));
         assert_eq!(super::pins::NODES, p.link.nodes_per_bus as usize);
+        assert_eq!(super::backup_line::BIT_RATE, p.backup.bit_rate_hz);
+        assert_eq!(
+            super::backup_line::REPLY_TIMEOUT_US,
+            p.backup.reply_timeout_us
+        );
+        // The backup line's pins are none of the star's.
+        for b in super::pins::BACKUP {
+            assert!(
+                !super::pins::CS.contains(&b) && !super::pins::READY.contains(&b),
+                "{b}"
+            );
+        }
         assert_eq!(super::pins::CS.len(), super::pins::NODES);
         assert_eq!(super::plan::LINK_BANKS, 3 * p.dma_bank_bytes());
         assert_eq!(links_core::spi::HEADER, p.link.header_bytes as usize);

@@ -18,15 +18,20 @@ mod fw {
     use embassy_executor::Spawner;
     use embassy_stm32::exti::{self, ExtiInput};
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
-    use embassy_stm32::peripherals::{DMA2_CH0, DMA2_CH3, USB_OTG_FS};
+    use embassy_stm32::peripherals::{DMA1_CH5, DMA1_CH6, DMA2_CH0, DMA2_CH3, USART2, USB_OTG_FS};
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
+    use embassy_stm32::usart::{self as uart, Uart};
     use embassy_stm32::{bind_interrupts, dma, interrupt, usb};
     use embassy_sync::pipe::Pipe;
+    use embassy_time::Timer;
     use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
     use embassy_usb::{Builder, UsbDevice};
+    use links_board::rs485::Rs485;
+    use links_core::backup;
     use links_core::serial::FrameStreamer;
     use links_core::spi::{Bank, MasterLink};
+    use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS};
     use rc_fw::pins::NODES;
     use rc_fw::plan::SCENE;
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
@@ -47,6 +52,9 @@ mod fw {
         EXTI2 => exti::InterruptHandler<interrupt::typelevel::EXTI2>;
         EXTI3 => exti::InterruptHandler<interrupt::typelevel::EXTI3>;
         EXTI9_5 => exti::InterruptHandler<interrupt::typelevel::EXTI9_5>;
+        USART2 => uart::InterruptHandler<USART2>;
+        DMA1_STREAM5 => dma::InterruptHandler<DMA1_CH5>;
+        DMA1_STREAM6 => dma::InterruptHandler<DMA1_CH6>;
     });
 
     /// DMA banks and the uploaded scene, in SRAM (`.sram`, see memory.x).
@@ -80,6 +88,28 @@ mod fw {
                     break;
                 }
             }
+        }
+    }
+
+    /// The serial backup line: call the roll of every node (`links_core::backup`) once a
+    /// period and log who is absent and each node's health.
+    #[embassy_executor::task]
+    async fn backup_task(mut line: Rs485) {
+        loop {
+            match backup::call_roll(&mut line, NODES as u8, REPLY_TIMEOUT_US).await {
+                Ok(rc) => {
+                    for a in rc.absent() {
+                        warn!("backup line: node {} absent", a);
+                    }
+                    for a in 1..=NODES as u8 {
+                        if let Some(h) = rc.health(a) {
+                            info!("backup line: node {}: {}", a, h);
+                        }
+                    }
+                }
+                Err(e) => warn!("backup line: {}", e),
+            }
+            Timer::after_millis(ROLL_CALL_PERIOD_MS).await;
         }
     }
 
@@ -216,6 +246,22 @@ mod fw {
         let [btx0, btx1, brx] = &mut sram.link;
         let link = MasterLink::new(port, 0, [btx0, btx1], brx);
 
+        // The serial backup line: USART2 (PA2 TX, PA3 RX), driver enable PA1.
+        let uart = unwrap!(Uart::new(
+            p.USART2,
+            p.PA3,
+            p.PA2,
+            p.DMA1_CH6,
+            p.DMA1_CH5,
+            Irqs,
+            links_board::rs485::config(),
+        ));
+        let line = Rs485 {
+            uart,
+            de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
+        };
+
+        spawner.spawn(unwrap!(backup_task(line)));
         spawner.spawn(unwrap!(usb_task(device)));
         spawner.spawn(unwrap!(usb_tx_task(tx)));
         spawner.spawn(unwrap!(serial_task(rx, link, &mut sram.scene)));

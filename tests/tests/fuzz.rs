@@ -6,6 +6,8 @@
 //!   on decoded frames (`run_node`, `run_bus`) fed mutated conversations.
 //! - `link`: the SPI link's receive paths (`links_core::spi`): the node's link task and the
 //!   RC's master link fed mutated bus bytes.
+//! - `backup`: the serial backup line (`links_core::backup`): frame decoder, frame reader,
+//!   the node's state machine and the RC's roll call fed mutated frames.
 //! - `serial`: the PC <-> RC serial protocol (`links_core::serial`) in both directions: the
 //!   RC's session (`rc_fw::session`) and the PC's frame assembly fed mutated byte streams.
 //!
@@ -42,7 +44,7 @@ use links_core::wire::{
     self, Down, Job, Region, SceneState, Up, CRC32, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
     SCENE_CHUNK,
 };
-use links_core::{desc::TransparencyMode, serial};
+use links_core::{backup, desc::TransparencyMode, serial};
 use links_host::scene_file::load_scene;
 use links_host::serial_host::FrameAssembly;
 use rc_fw::session::{Session, Step};
@@ -2498,5 +2500,129 @@ fn serial() {
             .notes
             .get("serial readbacks complete")
             .is_some_and(|&n| n > 0));
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Target: backup
+// ---------------------------------------------------------------------------------------
+
+/// A valid RC frame for node `addr` (or broadcast), of a random kind.
+fn backup_rc_frame(rng: &mut Rng, addr: u8, scene: &[u8], ack: u16) -> Vec<u8> {
+    let mut buf = [0u8; backup::MAX_FRAME];
+    let at = rng.below(scene.len().div_ceil(backup::SCENE_DATA).max(1)) * backup::SCENE_DATA;
+    let end = (at + backup::SCENE_DATA).min(scene.len());
+    let msg = match rng.below(4) {
+        0 => backup::Msg::RollCall,
+        1 => backup::Msg::Scene {
+            frame: 1,
+            offset: at as u32,
+            total: scene.len() as u32,
+            crc: links_core::wire::CRC32.checksum(scene),
+            data: &scene[at.min(end)..end],
+        },
+        2 => backup::Msg::Work {
+            job: links_core::wire::Job {
+                id: rng.u32(),
+                frame: 1,
+                region: links_core::wire::Region::Span {
+                    start: rng.u32() % 4096,
+                    len: 1 + rng.u32() % 512,
+                },
+            },
+        },
+        _ => backup::Msg::Poll { ack },
+    };
+    let n = backup::encode(addr, &msg, &mut buf).expect("a valid message fits");
+    buf[..n].to_vec()
+}
+
+/// Mutate a frame; most of the time fix its length byte and CRC so the body is reached.
+fn backup_mutate(rng: &mut Rng, f: &mut Vec<u8>) {
+    mutate_bytes(rng, f, backup::MAX_FRAME + 8);
+    if rng.chance(70) && f.len() >= backup::FRAME_OVERHEAD {
+        f[0] = backup::SYNC;
+        let body = (f.len() - backup::FRAME_OVERHEAD).min(backup::MAX_BODY);
+        f.truncate(body + backup::FRAME_OVERHEAD);
+        f[2] = body as u8;
+        let crc = links_core::wire::CRC32.checksum(&f[1..3 + body]);
+        f[3 + body..].copy_from_slice(&crc.to_le_bytes());
+    }
+}
+
+/// One conversation: valid and mutated RC frames through a node's frame reader into its
+/// state machine, every reply checked, then the node's replies mutated into a roll call.
+fn backup_conversation(rng: &mut Rng, input: &mut Vec<u8>, tally: &mut Tally) -> bool {
+    let len = rng.range(1, 600) as usize;
+    let scene: Vec<u8> = rng.bytes(len);
+    let mut bank = vec![0u8; 512];
+    let mut node = backup::BackupNode::new(3, &mut bank);
+    let mut reader = backup::FrameReader::new();
+    let mut reply = [0u8; backup::MAX_FRAME];
+    let mut replies = Vec::new();
+    let mut ack = 0u16;
+    for _ in 0..rng.range(1, 12) {
+        let addr = *rng.pick(&[3, 3, 3, 4, backup::BROADCAST]);
+        let mut f = backup_rc_frame(rng, addr, &scene, ack);
+        if rng.chance(60) {
+            backup_mutate(rng, &mut f);
+        }
+        input.extend_from_slice(&f);
+        // A direct decode agrees with re-encoding.
+        if let Ok((a, m)) = backup::decode(&f) {
+            let mut again = [0u8; backup::MAX_FRAME];
+            let n = backup::encode(a, &m, &mut again).expect("a decoded message re-encodes");
+            assert_eq!(backup::decode(&again[..n]), Ok((a, m)));
+            tally.note("backup frames decoded", 1);
+        }
+        for &b in &f {
+            let Some(n) = reader.push(b) else { continue };
+            if let Ok(Some(r)) = node.handle(reader.frame(n), &mut reply) {
+                let (from, m) = backup::decode(&reply[..r]).expect("a node's reply decodes");
+                assert_eq!(from, 3);
+                if let backup::Msg::Pixels { .. } = m {
+                    ack = ack.wrapping_add(1);
+                }
+                replies.push(reply[..r].to_vec());
+            }
+        }
+        if let Some(job) = node.take_job() {
+            let n = 3 * rng.range(1, 40) as usize;
+            let rgb = rng.bytes(n);
+            let _ = node.push_pixels(&job, 0, 0, &rgb, true);
+        }
+    }
+    if let Some((_, s)) = node.scene.ready() {
+        assert_eq!(s, &scene[..], "a CRC-checked scene is the one sent");
+        tally.note("backup scenes complete", 1);
+    }
+    // The node's replies, some mutated, as answers to a roll call of node 3.
+    let mut present = false;
+    for mut r in replies.into_iter().take(3) {
+        if rng.chance(50) {
+            backup_mutate(rng, &mut r);
+        }
+        let mut rc = backup::RollCall::new(3);
+        let _ = (rc.answered(None), rc.answered(None));
+        let res = rc.answered(Some(&r));
+        let found = rc.absent().count() == 2;
+        assert_eq!(found, rc.health(3).is_some());
+        assert!(!found || res.is_ok());
+        present |= found;
+    }
+    present
+}
+
+#[test]
+fn backup() {
+    let t = fuzz("backup", &mut (), |_, rng, input, tally| {
+        if backup_conversation(rng, input, tally) {
+            Verdict::Accepted
+        } else {
+            Verdict::Rejected("no roll-call answer".into())
+        }
+    });
+    if t.tried >= 100 {
+        assert!(t.notes.get("backup frames decoded").is_some_and(|&n| n > 0));
     }
 }

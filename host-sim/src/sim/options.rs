@@ -319,6 +319,15 @@ pub struct FaultArgs {
     /// Seed of the bit errors and losses (a run is deterministic for a seed; cluster only)
     #[arg(long, default_value_t = 1)]
     pub fault_seed: u64,
+    /// A node whose SPI link dies while the node lives on: NODE@SECONDS or
+    /// FIRST-LAST@SECONDS (repeatable; nodes 0-63). The RC finds it on the serial backup
+    /// line and serves it there (cluster only)
+    #[arg(long = "spi-dead", value_name = "NODE@SECONDS")]
+    pub spi_dead: Vec<String>,
+    /// Run the serial backup line (roll call at the start and of every node declared
+    /// dead) even without --spi-dead (cluster only)
+    #[arg(long)]
+    pub backup_line: bool,
 }
 
 /// Set the faults of `args` on `cfg` (whose node count is already set), with errors that
@@ -339,21 +348,46 @@ pub fn apply_faults(cfg: &mut SimConfig, args: &FaultArgs) -> Result<(), OptionE
         drop_broadcast: p,
         seed: args.fault_seed,
     };
-    cfg.deaths.clear();
-    for k in &args.kills {
+    cfg.deaths = node_times(&args.kills, cfg.nodes)?;
+    cfg.spi_dead = node_times(&args.spi_dead, cfg.nodes)?;
+    cfg.backup_line = args.backup_line;
+    Ok(())
+}
+
+/// `--kill`-style values (NODE@SECONDS, FIRST-LAST@SECONDS) for a cluster of `nodes`.
+fn node_times(values: &[String], nodes: u16) -> Result<Vec<NodeDeath>, OptionError> {
+    let mut out = Vec::new();
+    for k in values {
         let kill: Kill = k.parse()?;
         for d in kill.deaths() {
-            if d.node >= cfg.nodes {
+            if d.node >= nodes {
                 return Err(OptionError::NoSuchNode {
                     text: kill.text.clone(),
                     node: d.node,
-                    nodes: cfg.nodes,
+                    nodes,
                 });
             }
-            cfg.deaths.push(d);
+            out.push(d);
         }
     }
-    Ok(())
+    Ok(out)
+}
+
+/// What the serial backup line did, for the render's stats line ("" if it did not run).
+pub fn backup_summary(r: &SimReport) -> String {
+    let Some(b) = &r.backup else {
+        return String::new();
+    };
+    format!(
+        " | backup line: {} bytes in {} frames, busy {:.3} s, {} absent at roll call, nodes {:?} served, {} jobs and {} pixels over it",
+        b.bytes,
+        b.frames,
+        b.busy_s,
+        b.absent.len(),
+        b.served,
+        b.jobs,
+        b.pixels
+    )
 }
 
 /// What the faults did, for the render's stats line ("" without faults).
@@ -362,9 +396,9 @@ pub fn fault_summary(r: &SimReport) -> String {
     let corrupted: u64 = r.bus.iter().map(|b| b.corrupted()).sum();
     let dropped: u64 = r.bus.iter().map(|b| b.dropped_broadcast).sum();
     if root.timeouts == 0 && corrupted == 0 && dropped == 0 && root.repairs == 0 {
-        return String::new();
+        return backup_summary(r);
     }
-    format!(
+    backup_summary(r) + &format!(
         " | faults: {} declared dead ({} revived), {} sub-screens re-issued, time-out {:.3} s; {corrupted} messages corrupted, {} rejected by CRC at the RC; {dropped} broadcast copies lost, {} scene repairs",
         root.timeouts,
         root.revived,
@@ -542,8 +576,17 @@ mod tests {
             ber_up: 2e-4,
             drop_broadcast: 0.1,
             fault_seed: 9,
+            spi_dead: vec!["3@0.05".into()],
+            backup_line: false,
         };
         apply_faults(&mut cfg, &args).unwrap();
+        assert_eq!(
+            cfg.spi_dead
+                .iter()
+                .map(|d| (d.node, d.at_s))
+                .collect::<Vec<_>>(),
+            vec![(3, 0.05)]
+        );
         assert_eq!(
             cfg.noise,
             Noise {

@@ -1,8 +1,11 @@
 //! The board both LINKS-1 firmwares run on (STM32F407VG on an STM32F4DISCOVERY): the RAM
 //! sizes their memory plans divide up, and for the MCU the one bring-up they share: the
 //! clock tree ([`config`], [`init`]) and the zeroed DMA-reachable `.sram` region
-//! ([`take_sram!`]). Pins and memory plans stay with each firmware (`nc-fw`, `rc-fw`).
+//! ([`take_sram!`]), and the serial backup line's RS-485 port (`rs485`). Pins and memory plans stay with each firmware (`nc-fw`, `rc-fw`).
 #![no_std]
+
+#[cfg(target_os = "none")]
+pub mod rs485;
 
 /// SRAM1 + SRAM2 (DMA-reachable): the board's data, `links_core::board::NodeBoard::F407`.
 pub const SRAM: usize = links_core::board::NodeBoard::F407.sram;

@@ -9,7 +9,7 @@
 
 use crate::cluster::spi::BANK;
 
-pub use crate::cluster::profile::{BoardProfile, Core, LinkProfile};
+pub use crate::cluster::profile::{BoardProfile, Core, LineProfile, LinkProfile};
 
 /// A node computer board: its RAM and the scene banks of its memory plan (bytes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -7,8 +7,11 @@
 //! - [`sched`]: sub-screen scheduling (which region a node renders next).
 //! - [`node`]: the NC's whole behaviour (scene, jobs, render, return pixel runs).
 //! - [`root`]: the RC's whole behaviour (broadcast, hand out, collect, detect completion).
+//! - [`backup`]: the serial backup line (RS-485 multi-drop UART): roll call, health, and
+//!   the slow path for scene, work and pixels of a node whose SPI link failed.
 //! - [`spi`]: the link driver's protocol over a real SPI star, generic over the MCU ports.
 
+pub mod backup;
 pub mod board;
 pub mod link;
 pub mod node;

@@ -98,6 +98,41 @@ impl LinkProfile {
     }
 }
 
+/// The serial backup line ([`crate::backup`]): one RS-485 multi-drop UART pair from the RC
+/// to every node (USART2 on the F407 boards, docs/hardware.md).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LineProfile {
+    /// UART bit rate (bits per second).
+    pub bit_rate_hz: u32,
+    /// Bits on the line per byte (8N1: start, 8 data, stop).
+    pub bits_per_byte: u32,
+    /// Line turnaround before each frame (ns): the sender's transceiver enable, the receiver
+    /// noticing the frame ended (UART idle line) and answering.
+    pub turnaround_ns: u32,
+    /// How long the RC waits for an addressed node's answer before it counts it absent (µs).
+    pub reply_timeout_us: u32,
+}
+
+impl LineProfile {
+    /// USART2 at 1 Mbit/s, 8N1, on MAX3485 transceivers (10 Mbit/s parts, enable time
+    /// < 1 µs); 20 µs of turnaround (the node's idle-line interrupt, decode and DE switch),
+    /// 1 ms reply timeout.
+    pub const F407: LineProfile = LineProfile {
+        bit_rate_hz: 1_000_000,
+        bits_per_byte: 10,
+        turnaround_ns: 20_000,
+        reply_timeout_us: 1_000,
+    };
+
+    /// Time on the line of a frame of `bytes` bytes, turnaround included (ns).
+    pub const fn frame_ns(&self, bytes: usize) -> u64 {
+        self.turnaround_ns as u64
+            + (bytes as u64 * self.bits_per_byte as u64 * 1_000_000_000)
+                .div_ceil(self.bit_rate_hz as u64)
+    }
+}
+
 /// One board: its link, its node's memory, its core and clock.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -105,6 +140,8 @@ pub struct BoardProfile {
     /// The name the command line knows it by (`--board f407`).
     pub name: &'static str,
     pub link: LinkProfile,
+    /// The serial backup line.
+    pub backup: LineProfile,
     /// The node's RAM, its link DMA banks and its two scene banks.
     pub node: NodeBoard,
     /// The core of the nodes and the RC (the cost model's weights).
@@ -122,6 +159,7 @@ impl BoardProfile {
     pub const F407: BoardProfile = BoardProfile {
         name: "f407",
         link: LinkProfile::F407,
+        backup: LineProfile::F407,
         node: NodeBoard::F407,
         core: Core::CortexM4F,
         core_clock_hz: F407_CORE_CLOCK_HZ,
@@ -132,6 +170,7 @@ impl BoardProfile {
     pub const IDEAL: BoardProfile = BoardProfile {
         name: "ideal",
         link: LinkProfile::IDEAL,
+        backup: LineProfile::F407,
         node: NodeBoard::F407,
         core: Core::CortexM4F,
         core_clock_hz: F407_CORE_CLOCK_HZ,
@@ -209,6 +248,16 @@ mod tests {
         assert_eq!(i.link.trailer_bytes, 0);
         assert_eq!(f.core_clock_hz, 168_000_000);
         assert_eq!((f.node, f.core), (i.node, i.core));
+    }
+
+    /// The backup line's timing, worked by hand: a 262-byte frame is 2,620 bits at 1 Mbit/s
+    /// = 2,620 µs, plus 20 µs of turnaround.
+    #[test]
+    fn the_backup_line_charges_bits_and_turnaround() {
+        let l = BoardProfile::F407.backup;
+        assert_eq!(l.frame_ns(crate::backup::MAX_FRAME), 2_640_000);
+        assert_eq!(l.frame_ns(0), 20_000);
+        assert_eq!(BoardProfile::IDEAL.backup, l);
     }
 
     #[test]

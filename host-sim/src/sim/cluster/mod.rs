@@ -2,6 +2,7 @@
 //! over an emulated SPI star in deterministic virtual time.
 //!
 //! - [`exec`]: the discrete-event executor (virtual time, fixed poll order).
+//! - [`backup`]: the serial backup line (RS-485) with nodes whose SPI link is dead.
 //! - [`dm`]: the DM stage (each frame's scene appears after the DM's time for it).
 //! - [`dmcost`]: the DM's time per frame from a model of its work.
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
@@ -19,6 +20,8 @@
 //! configured core clock. A simulation is single-threaded and its results depend only on its
 //! inputs; sweeps run independent simulations on several host threads.
 
+pub mod backup;
+mod backup_run;
 pub mod dm;
 pub mod dmcost;
 pub mod exec;
@@ -31,6 +34,7 @@ pub mod timeline;
 
 pub use crate::studies::cluster_sweep as sweep;
 pub use crate::studies::faults as reliability;
+pub use backup_run::LineCounters;
 pub use run::{render_cluster, simulate, simulate_frame, ClusterRender};
 pub use sweep::{
     divisions_csv, nodes_csv, steady_state_interval, sweep_divisions, sweep_nodes,
@@ -93,6 +97,13 @@ pub struct SimConfig {
     pub deaths: Vec<NodeDeath>,
     /// Nodes that lose some broadcasts whole (off the bus for a while, then back).
     pub drops: Vec<BroadcastDrop>,
+    /// Nodes whose SPI link dies at a time while the node lives on: the RC declares them
+    /// dead on SPI, finds them on the serial backup line and serves them there (nodes
+    /// 0..64, the line's addresses). Turns the backup line on.
+    pub spi_dead: Vec<NodeDeath>,
+    /// Run the serial backup line ([`backup_run`]) even without `spi_dead` nodes: roll
+    /// call at the start, and of every node the RC declares dead.
+    pub backup_line: bool,
     /// The node board: a scene larger than its larger scene bank
     /// ([`NodeBoard::largest_bank`]) is refused before the run; the simulated nodes have two
     /// banks that size. Default: the profile's node (the NC firmware's board,
@@ -150,6 +161,8 @@ impl SimConfig {
             noise: Noise::default(),
             deaths: Vec::new(),
             drops: Vec::new(),
+            spi_dead: Vec::new(),
+            backup_line: false,
             board: profile.node,
             node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
             dm_s_per_frame: 0.0,
@@ -237,6 +250,8 @@ pub struct SimReport {
     /// The relay tree's links and root, if the topology is one. `rc_busy_s` is then the
     /// leaf relays' CPU time summed.
     pub tree: Option<TreeReport>,
+    /// What the serial backup line did, if it ran.
+    pub backup: Option<LineCounters>,
 }
 
 impl SimReport {

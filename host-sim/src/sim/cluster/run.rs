@@ -2,6 +2,8 @@
 //! star and the DM, spawn one task per bus and per node, run the executor in virtual time
 //! (recording when each frame completes), and assemble the [`SimReport`].
 
+use super::backup::{BackupSimError, Work};
+use super::backup_run::{run_line, LineCounters, LineSetup};
 use super::exec::{self, Delay, ExecError, Ps, SharedClock, Task};
 use super::framemem::{self, FrameMemory, ViaRoot};
 use super::rccost::RcClock;
@@ -203,6 +205,8 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         .map(|_| [vec![0u8; bank_len], vec![0u8; bank_len]])
         .collect();
 
+    let line_counters = RefCell::new(LineCounters::default());
+    let line_result: RefCell<Option<Result<(), BackupSimError>>> = RefCell::new(None);
     let rc_busy = Rc::new(Cell::new(0 as Ps));
     let mut tasks = bus_tasks(
         cfg,
@@ -211,6 +215,14 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         (&rc_busy, &log),
         (&root, &sink, &bus_results, &dm),
     );
+    let line_on = cfg.backup_line || !cfg.spi_dead.is_empty();
+    if line_on {
+        let setup = line_setup(scenes, cfg, &clock, &root, &fm, &line_counters)?;
+        let result = &line_result;
+        tasks.push(Some(Box::pin(async move {
+            *result.borrow_mut() = Some(run_line(setup).await);
+        })));
+    }
     tasks.extend(node_tasks(
         cfg,
         (&clock, &star, &log),
@@ -236,6 +248,9 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         if let Err(e) = r {
             return Err(SimError::Root(*e));
         }
+    }
+    if let Some(Err(e)) = line_result.borrow_mut().take() {
+        return Err(SimError::Config(e.to_string()));
     }
     let node_ps = busy.borrow().clone();
     let compute_ps: Ps = node_ps.iter().sum();
@@ -268,6 +283,40 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         stats,
         timeline,
         tree,
+        backup: line_on.then(|| line_counters.take()),
+    })
+}
+
+/// The backup line's task set-up: every frame's scene as the nodes' renderer sees it.
+fn line_setup<'a, S: AsRef<[u8]>>(
+    scenes: &'a [S],
+    cfg: &'a SimConfig,
+    clock: &SharedClock,
+    root: &'a RefCell<RootState>,
+    fm: &'a RefCell<FrameMemory>,
+    counters: &'a RefCell<LineCounters>,
+) -> Result<LineSetup<'a>, SimError> {
+    let views = scenes
+        .iter()
+        .map(|s| SceneView::new(s.as_ref()))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| SimError::Config(format!("backup line: {e}")))?;
+    let width = root.borrow().size().0;
+    Ok(LineSetup {
+        cfg,
+        clock: clock.clone(),
+        root,
+        fm,
+        scenes: scenes.iter().map(|s| s.as_ref()).collect(),
+        work: Work {
+            views,
+            width,
+            model: cfg.model,
+            clock_hz: cfg.clock_hz,
+            techniques: cfg.techniques,
+            frame: Vec::new(),
+        },
+        counters,
     })
 }
 
@@ -311,6 +360,17 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
             d.node, d.at_s
         )));
     }
+    let on_line = cfg.nodes.min(links_core::backup::MAX_ADDR as u16);
+    if let Some(d) = cfg
+        .spi_dead
+        .iter()
+        .find(|d| d.node >= on_line || !(d.at_s.is_finite() && d.at_s >= 0.0))
+    {
+        return Err(SimError::Config(format!(
+            "node {}'s SPI link cannot die at {} s (the backup line reaches nodes 0..{on_line})",
+            d.node, d.at_s
+        )));
+    }
     cfg.noise.check().map_err(SimError::Config)?;
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
@@ -345,7 +405,7 @@ fn build_star(clock: &SharedClock, cfg: &SimConfig, fm: &Rc<RefCell<FrameMemory>
         let relays = Relays::new(shape, batch, cfg.timing, cfg.rc_cost);
         star.borrow_mut().set_relays(relays);
     }
-    for d in &cfg.deaths {
+    for d in cfg.deaths.iter().chain(&cfg.spi_dead) {
         star.borrow_mut()
             .kill_at(d.node, (d.at_s * 1e12).round() as Ps);
     }
@@ -561,6 +621,8 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
                 topology: Topology::Star,
                 keep_frames: false,
                 deaths: Vec::new(),
+                spi_dead: Vec::new(),
+                backup_line: false,
                 ..cfg
             },
         )?

@@ -111,4 +111,6 @@ pub struct RootReport {
     pub revived: u32,
     /// The time-out in force (µs): the configured one, raised by false alarms.
     pub timeout_us: u64,
+    /// Pixel runs taken from nodes over the serial backup line.
+    pub backup_runs: u64,
 }

@@ -17,6 +17,11 @@ impl RootState {
         };
         if slot.dead {
             slot.dead = false;
+            // A false alarm taken to the backup line: back on SPI (the job it holds there
+            // is still taken when its pixels come).
+            if let Some(e) = self.backup_jobs.iter_mut().find(|e| e.0 == node) {
+                e.1 = false;
+            }
             self.report.revived += 1;
             if slot.dead_rendering {
                 let silence = now_us.saturating_sub(slot.heard_us);

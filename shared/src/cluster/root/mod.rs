@@ -28,6 +28,7 @@
 //! one and twice the longest silence of a node that was rendering, however many false alarms
 //! there are (see docs/reliability.md for the recovery bound).
 
+mod backup;
 mod bus;
 mod config;
 mod exchange;
@@ -44,6 +45,10 @@ use state::{Finished, Pieces};
 
 /// Most buses (concurrent [`run_bus`] tasks) one RC drives.
 pub const MAX_BUSES: usize = 8;
+
+/// Most nodes the RC serves over the serial backup line at once (a fixed table: the line
+/// carries a few nodes' work at best, docs/cluster.md).
+pub const BACKUP_NODES: usize = 8;
 
 /// Most nodes an RC drives (LINKS-1's design limit).
 pub const MAX_NODES: usize = 256;

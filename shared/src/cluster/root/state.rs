@@ -122,6 +122,10 @@ pub struct RootState {
     pub(super) scene_crc: [Option<(u16, u32)>; 2],
     /// Scene bytes checksummed since [`RootState::take_crc_work`] last ran.
     pub(super) crc_work: usize,
+    /// Nodes served over the backup line: (node, served now (false: back on SPI), the job
+    /// it renders there), at most [`BACKUP_NODES`] at once (a table, not a field of every
+    /// node's slot: the RC's RAM).
+    pub(super) backup_jobs: [(NodeId, bool, Option<Job>); BACKUP_NODES],
 }
 
 /// Resolves when every frame is complete.
@@ -194,6 +198,7 @@ impl RootState {
             finish_wakers: [const { None }; MAX_BUSES],
             scene_crc: [None; 2],
             crc_work: 0,
+            backup_jobs: [(NodeId::MAX, false, None); BACKUP_NODES],
         })
     }
 
