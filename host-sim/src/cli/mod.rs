@@ -61,7 +61,7 @@ pub struct Cli {
 pub enum Cmd {
     /// Render a scene (or a compiled SceneImage, --image) to a PNG file
     #[command(mut_arg("scene", |a| a.required(false).required_unless_present("image")))]
-    Render(render::RenderArgs),
+    Render(Box<render::RenderArgs>),
     /// Check a compiled SceneImage file and print its size by section
     CheckImage {
         /// SceneImage file (as `info --image` writes)
@@ -132,7 +132,7 @@ where
 /// Runs one parsed command line.
 pub fn run(cli: Cli) -> Result<(), CliError> {
     match cli.cmd {
-        Cmd::Render(a) => render::run(a),
+        Cmd::Render(a) => render::run(*a),
         Cmd::CheckImage { image } => check_image::run(&image),
         Cmd::Info { scene, image, node } => info::run(&scene, image.as_deref(), node.as_ref()),
         Cmd::Compare {
