@@ -1,6 +1,7 @@
 //! glTF node transforms -> [`Transform`] (`p' = T · Rz · Ry · Rx · S · p`, Euler angles in
 //! degrees about X, then Y, then Z), and the 4x4 matrices used for world positions.
 
+use links_core::anim::quat::{euler_deg_of_matrix, Quat};
 use links_core::desc::Transform;
 
 /// A glTF matrix: column-major, `m[col][row]`.
@@ -15,10 +16,6 @@ pub const IDENTITY: Mat4 = [
     [0.0, 0.0, 1.0, 0.0],
     [0.0, 0.0, 0.0, 1.0],
 ];
-
-/// Below this `cos β` the rotation is taken as gimbal-locked (β = ±90°): X and Z rotate about
-/// the same axis and the whole of it is given to X.
-const GIMBAL_EPS: f64 = 1e-9;
 
 /// How far from orthogonal a decomposed rotation may be before it counts as shear.
 const SHEAR_EPS: f64 = 1e-4;
@@ -45,31 +42,17 @@ pub fn from_f32(m: [[f32; 4]; 4]) -> Mat4 {
     m.map(|c| c.map(f64::from))
 }
 
-/// The rotation of a unit quaternion `[x, y, z, w]` (glTF order); normalised first.
+/// The rotation of a unit quaternion `[x, y, z, w]` (glTF order); normalised first (a zero
+/// quaternion is the identity).
 pub fn quat_to_matrix(q: [f64; 4]) -> Mat3 {
-    let n = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]).sqrt();
-    let [x, y, z, w] = if n > 0.0 {
-        q.map(|v| v / n)
-    } else {
-        [0.0, 0.0, 0.0, 1.0]
-    };
-    [
-        [
-            1.0 - 2.0 * (y * y + z * z),
-            2.0 * (x * y - z * w),
-            2.0 * (x * z + y * w),
-        ],
-        [
-            2.0 * (x * y + z * w),
-            1.0 - 2.0 * (x * x + z * z),
-            2.0 * (y * z - x * w),
-        ],
-        [
-            2.0 * (x * z - y * w),
-            2.0 * (y * z + x * w),
-            1.0 - 2.0 * (x * x + y * y),
-        ],
-    ]
+    Quat {
+        w: q[3],
+        x: q[0],
+        y: q[1],
+        z: q[2],
+    }
+    .normalized()
+    .matrix()
 }
 
 /// `Rz(γ) · Ry(β) · Rx(α)` for `[α, β, γ]` in degrees: the rotation a [`Transform`] means.
@@ -85,18 +68,10 @@ pub fn euler_deg_to_matrix(e: [f64; 3]) -> Mat3 {
     ]
 }
 
-/// The Euler angles `[α, β, γ]` (degrees, X then Y then Z) of a rotation matrix:
-/// `r20 = -sin β`, `r21 / r22 = tan α`, `r10 / r00 = tan γ`. At gimbal lock (cos β = 0)
-/// γ is 0 and α = atan2(-r12, r11).
+/// The Euler angles `[α, β, γ]` (degrees, X then Y then Z) of a rotation matrix (the
+/// films' own conversion, [`euler_deg_of_matrix`]).
 pub fn matrix_to_euler_deg(r: &Mat3) -> [f64; 3] {
-    let cb = r[0][0].hypot(r[1][0]);
-    let beta = (-r[2][0]).atan2(cb);
-    let (alpha, gamma) = if cb > GIMBAL_EPS {
-        (r[2][1].atan2(r[2][2]), r[1][0].atan2(r[0][0]))
-    } else {
-        ((-r[1][2]).atan2(r[1][1]), 0.0)
-    };
-    [alpha, beta, gamma].map(f64::to_degrees)
+    euler_deg_of_matrix(r)
 }
 
 /// A TRS node's transform.

@@ -96,15 +96,7 @@ impl Quat {
     /// Euler angles in degrees `(x, y, z)` with `Rz · Ry · Rx` = this rotation; y in
     /// [-90, 90]. At y = ±90 (gimbal lock) the z angle is taken as 0.
     pub fn to_euler_deg(self) -> [f64; 3] {
-        let m = self.normalized().matrix();
-        let sin_y = (-m[2][0]).clamp(-1.0, 1.0);
-        let y = sin_y.asin();
-        let (x, z) = if sin_y.abs() < 1.0 - 1e-12 {
-            (m[2][1].atan2(m[2][2]), m[1][0].atan2(m[0][0]))
-        } else {
-            ((-m[1][2]).atan2(m[1][1]), 0.0)
-        };
-        [x, y, z].map(f64::to_degrees)
+        euler_deg_of_matrix(&self.normalized().matrix())
     }
 
     /// Spherical linear interpolation along the shorter arc from `a` (s = 0) to `b` (s = 1);
@@ -149,4 +141,23 @@ impl core::ops::Neg for Quat {
     fn neg(self) -> Quat {
         self.scaled(-1.0)
     }
+}
+
+/// How far from ±90° the y angle must stay for x and z to be told apart (below it the
+/// rotation is gimbal-locked and z is taken as 0).
+const GIMBAL_EPS: f64 = 1e-9;
+
+/// The Euler angles `[x, y, z]` in degrees (about X, then Y, then Z: `R = Rz · Ry · Rx`) of a
+/// rotation matrix `r` (rows): `r20 = -sin y`, `r21 / r22 = tan x`, `r10 / r00 = tan z`, each
+/// through `atan2` (accurate near ±90°, unlike `asin`). At gimbal lock (cos y = 0) z is 0
+/// and x = atan2(-r12, r11).
+pub fn euler_deg_of_matrix(r: &[[f64; 3]; 3]) -> [f64; 3] {
+    let cb = r[0][0].hypot(r[1][0]);
+    let y = (-r[2][0]).atan2(cb);
+    let (x, z) = if cb > GIMBAL_EPS {
+        (r[2][1].atan2(r[2][2]), r[1][0].atan2(r[0][0]))
+    } else {
+        ((-r[1][2]).atan2(r[1][1]), 0.0)
+    };
+    [x, y, z].map(f64::to_degrees)
 }
