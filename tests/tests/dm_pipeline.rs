@@ -50,8 +50,10 @@ fn a_films_steady_state_comes_from_its_distinct_frames() {
     let t_heavy = steady_state_interval(&heavy, &cfg, 6).expect("simulates");
     assert!(t_heavy > 1.5 * t_light, "{t_heavy} vs {t_light}");
     // Light and heavy frames alternate: the film's interval is their mean, far from either
-    // repeated alone (it would equal the light one if frame 0 were repeated).
-    let images: Vec<Vec<u8>> = (0..6)
+    // repeated alone (it would equal the light one if frame 0 were repeated). Seven frames:
+    // the steady state, (T(7) - T(1)) / 6, then spans three of each kind (with six it spanned
+    // three heavy and two light and leaned 16% towards the heavy one).
+    let images: Vec<Vec<u8>> = (0..7)
         .map(|f| {
             if f % 2 == 0 {
                 light.clone()
