@@ -533,6 +533,10 @@ impl Real for Fx {
     fn is_finite(self) -> bool {
         !self.special()
     }
+    #[inline(always)]
+    fn is_sign_negative(self) -> bool {
+        self.0 < 0
+    }
     #[inline]
     fn next_up(self) -> Fx {
         if self.special() || self.0 == MAX_RAW {

@@ -135,6 +135,8 @@ pub trait Real:
     fn atan2(self, x: Self) -> Self;
     fn acos(self) -> Self;
     fn is_finite(self) -> bool;
+    /// Whether the sign bit is set (a float's `-0` and `-inf` included).
+    fn is_sign_negative(self) -> bool;
 
     /// The next representable value towards +infinity (a float: one ulp; a fixed-point
     /// format: one step). `offset_ray_origin` relies on the direction: it pushes a
@@ -242,6 +244,10 @@ macro_rules! impl_float_real {
             #[inline]
             fn is_finite(self) -> bool {
                 <$t>::is_finite(self)
+            }
+            #[inline(always)]
+            fn is_sign_negative(self) -> bool {
+                <$t>::is_sign_negative(self)
             }
             #[inline]
             fn next_up(self) -> Self {
@@ -491,6 +497,10 @@ impl Real for FastF32 {
     #[inline(always)]
     fn is_finite(self) -> bool {
         self.0.is_finite()
+    }
+    #[inline(always)]
+    fn is_sign_negative(self) -> bool {
+        self.0.is_sign_negative()
     }
     #[inline(always)]
     fn next_up(self) -> Self {

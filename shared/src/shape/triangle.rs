@@ -45,6 +45,12 @@ pub struct Shear<T> {
 }
 
 impl<T: Real> Shear<T> {
+    /// The axis of the ray's largest direction component (z after the permutation).
+    #[inline(always)]
+    pub fn kz(&self) -> usize {
+        self.kz
+    }
+
     /// A placeholder for rays that will test no triangle (no set-up work).
     #[inline]
     pub fn unused() -> Self {
@@ -107,8 +113,20 @@ impl<T: Real> Triangle<T> {
         }
     }
 
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     fn intersect_permuted<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        ray: &Shear<T>,
+        t_max: T,
+    ) -> Option<TriHit<T>> {
+        self.intersect_permuted_inline::<KX, KY, KZ>(ray, t_max)
+    }
+
+    /// The test for a ray whose permutation (`ray.kz() == KZ`, `KX`, `KY` the next axes
+    /// cyclically) the caller has matched once for many triangles: inlined into that loop,
+    /// the vertices go from the scene image straight into registers.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    #[inline(always)]
+    pub fn intersect_permuted_inline<const KX: usize, const KY: usize, const KZ: usize>(
         &self,
         ray: &Shear<T>,
         t_max: T,

@@ -176,8 +176,9 @@ fn box_entry<T: Real>(
 ) -> Option<T> {
     let mut span = SlabSpan::new(t_max);
     for axis in order {
-        let (lo, hi) = node.span::<T>(axis);
-        if !span.clip(lo, hi, ray.origin[axis], inv.inv_dir[axis]) {
+        // Sign-specialised: the ray's direction picks the entry bound, no compare-and-swap.
+        let (near, far) = node.slab::<T>(axis, inv.inv_dir[axis].is_sign_negative());
+        if !span.clip_entering(near, far, ray.origin[axis], inv.inv_dir[axis]) {
             return None;
         }
     }
@@ -414,8 +415,14 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Whether any opaque surface lies along the probe's ray in (0, t_max) (stops at the
     /// first, and says which shape it was), and whether a transparent one was seen on the
     /// way. Which opaque shape is found first depends on the order of the walk, whether
-    /// one is found does not.
-    pub(super) fn any_opaque(&mut self, probe: &Probe<T>, t_max: T) -> (Option<Blocker>, bool) {
+    /// one is found does not. `leaving`: a convex shape the ray starts on and leaves
+    /// outwards, which it cannot meet again ([`super::lights`]), so it is not tested.
+    pub(super) fn any_opaque(
+        &mut self,
+        probe: &Probe<T>,
+        t_max: T,
+        leaving: Option<ShapeRef>,
+    ) -> (Option<Blocker>, bool) {
         let nodes = self.scene.node_table();
         let mut transparent = false;
         let mut i = 0;
@@ -441,6 +448,9 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                     }
                 } else {
                     for k in 0..l.count {
+                        if leaving == Some(l.shape(k)) {
+                            continue;
+                        }
                         if let Some(h) = self.intersect_shape(l, k, probe, t_max) {
                             if self.is_opaque(&h) {
                                 return (Some(Blocker { leaf: l, k }), transparent);
@@ -457,14 +467,35 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
 
     /// The first triangle of a leaf the probe's ray crosses in (0, t_max), in leaf order.
     fn first_triangle_hit(&mut self, leaf: Leaf, probe: &Probe<T>, t_max: T) -> Option<u32> {
+        // One loop per axis permutation, matched once per leaf (shadow rays on photo1-d0:
+        // each test called out of line spilled the vertices to the stack and back).
+        let (k, hit) = match probe.shear.kz() {
+            0 => self.first_hit_permuted::<1, 2, 0>(leaf, probe, t_max),
+            1 => self.first_hit_permuted::<2, 0, 1>(leaf, probe, t_max),
+            _ => self.first_hit_permuted::<0, 1, 2>(leaf, probe, t_max),
+        };
+        self.stats.triangle_tests += k as u64;
+        hit
+    }
+
+    /// [`Self::first_triangle_hit`] for rays of one permutation: (tests made, the hit).
+    #[inline(always)]
+    fn first_hit_permuted<const KX: usize, const KY: usize, const KZ: usize>(
+        &self,
+        leaf: Leaf,
+        probe: &Probe<T>,
+        t_max: T,
+    ) -> (u32, Option<u32>) {
         for k in 0..leaf.count {
-            self.stats.triangle_tests += 1;
-            let tri = self.scene.triangle::<T>(leaf.first + k).tri;
-            if tri.intersect_sheared(&probe.shear, t_max).is_some() {
-                return Some(k);
+            let (_, tri) = self.scene.triangle_corners::<T>(leaf.first + k);
+            if tri
+                .intersect_permuted_inline::<KX, KY, KZ>(&probe.shear, t_max)
+                .is_some()
+            {
+                return (k + 1, Some(k));
             }
         }
-        None
+        (leaf.count, None)
     }
 
     /// Whether `blocker` stops the probe's ray within (0, t_max).

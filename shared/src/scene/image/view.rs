@@ -133,6 +133,25 @@ impl NodeRef<'_> {
         (c(r.h(node::LO + 2 * k)), c(r.h(node::HI + 2 * k)))
     }
 
+    /// The box along `axis` as a ray crosses it: (entry bound, exit bound), the upper bound
+    /// first when the ray runs towards negative coordinates (`negative`). Decoded as
+    /// [`Self::span`] decodes it.
+    #[inline(always)]
+    pub fn slab<T: Real>(&self, axis: usize, negative: bool) -> (T, T) {
+        let k = axis.min(2);
+        let r = Record(self.r);
+        let g = &self.grid;
+        let c = |q: u16| {
+            T::from_stored(g.origin[k]) + T::from_i32(q as i16 as i32) * T::from_stored(g.step[k])
+        };
+        let (near, far) = if negative {
+            (node::HI, node::LO)
+        } else {
+            (node::LO, node::HI)
+        };
+        (c(r.h(near + 2 * k)), c(r.h(far + 2 * k)))
+    }
+
     /// The leaf's primitives (`None` for a cluster).
     #[inline(always)]
     pub fn leaf(&self) -> Option<Leaf> {
