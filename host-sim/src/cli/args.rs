@@ -72,7 +72,7 @@ pub struct SceneArgs {
     /// Render without shadows (no shadow rays)
     #[arg(long)]
     pub no_shadows: bool,
-    /// Most triangles in one leaf of the tree, 1..=31 (default 4): larger leaves make a
+    /// Most triangles in one leaf of the tree, 1..=31 (default 8): larger leaves make a
     /// smaller SceneImage and test more triangles per ray
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=31))]
     pub leaf_size: Option<u8>,

@@ -354,8 +354,16 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Test a leaf's shapes and keep each that is the nearest so far.
     #[inline]
     pub(super) fn offer(&mut self, near: &mut Nearest<T>, leaf: Leaf, node: u32, probe: &Probe<T>) {
-        if let (ShapeKind::Triangle, Some(eye)) = (leaf.kind, &probe.eye) {
-            return self.offer_triangles_from_eye(near, leaf, node, probe, eye);
+        if leaf.kind == ShapeKind::Triangle {
+            return match &probe.eye {
+                Some(eye) => self.offer_triangles_from_eye(near, leaf, node, probe, eye),
+                // One loop per axis permutation, matched once per leaf (as for shadow rays).
+                None => match probe.shear.kz() {
+                    0 => self.offer_triangles_permuted::<1, 2, 0>(near, leaf, node, probe),
+                    1 => self.offer_triangles_permuted::<2, 0, 1>(near, leaf, node, probe),
+                    _ => self.offer_triangles_permuted::<0, 1, 2>(near, leaf, node, probe),
+                },
+            };
         }
         for k in 0..leaf.count {
             if let Some(h) = self.intersect_shape(leaf, k, probe, near.limit()) {
@@ -387,6 +395,35 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 .intersect_from_eye(eye.d, eye.len, limit);
             let tri = || scene.triangle::<T>(index).tri;
             if let Some(h) = test.or_sheared(tri, &probe.shear, limit) {
+                let hit = Hit {
+                    t: h.t,
+                    shape: leaf.shape(k),
+                    detail: HitDetail::Triangle {
+                        b: h.b,
+                        material: leaf.material,
+                    },
+                };
+                near.offer(hit, shape_key(node, k));
+                limit = near.limit();
+            }
+        }
+    }
+
+    /// [`Self::offer`] for a leaf of triangles and a ray of one axis permutation (not from
+    /// the eye): the sheared test inlined, the vertices read straight into registers.
+    #[inline(always)]
+    fn offer_triangles_permuted<const KX: usize, const KY: usize, const KZ: usize>(
+        &mut self,
+        near: &mut Nearest<T>,
+        leaf: Leaf,
+        node: u32,
+        probe: &Probe<T>,
+    ) {
+        self.stats.triangle_tests += leaf.count as u64;
+        let mut limit = near.limit();
+        for k in 0..leaf.count {
+            let (_, tri) = self.scene.triangle_corners::<T>(leaf.first + k);
+            if let Some(h) = tri.intersect_permuted_inline::<KX, KY, KZ>(&probe.shear, limit) {
                 let hit = Hit {
                     t: h.t,
                     shape: leaf.shape(k),
