@@ -38,10 +38,13 @@
 //! transfer when both RX banks are full (counted as an overflow; scene chunks lost that way
 //! are repaired by the root logic).
 
+mod bus_task;
+mod clock;
 mod framing;
 mod master;
 mod slave;
 
+pub use bus_task::{MasterFront, MasterShared, MasterTask};
 pub use framing::{
     nc_header, rc_header, Bank, Header, PortError, ACK, BANK, CRC16, HEADER, NAK, TRAILER,
 };
