@@ -296,6 +296,12 @@ impl RootBus for MasterFront<'_, '_> {
         self.ready_in(&lines)
     }
 
+    fn line(&self, node: NodeId) -> bool {
+        let lines = self.shared.with(|s| s.lines);
+        self.index(node)
+            .is_ok_and(|i| lines[i as usize / 32] & (1 << (i % 32)) != 0)
+    }
+
     fn tx_bank(&mut self) -> &mut [u8] {
         match self.compose.as_deref_mut() {
             Some(b) => &mut b[HEADER..HEADER + MAX_MESSAGE],

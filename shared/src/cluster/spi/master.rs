@@ -139,6 +139,10 @@ impl<P: MasterPort> RootBus for MasterLink<'_, P> {
             .map(|i| self.first + i)
     }
 
+    fn line(&self, node: NodeId) -> bool {
+        self.index(node).is_ok_and(|i| self.port.ready(i))
+    }
+
     fn tx_bank(&mut self) -> &mut [u8] {
         &mut self.tx[self.idle][HEADER..HEADER + MAX_MESSAGE]
     }
