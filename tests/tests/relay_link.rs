@@ -97,13 +97,13 @@ fn node(bus: SharedBus, i: usize, scene_len: usize) -> Task<NodeReport> {
 }
 
 /// Relay `r`: a node (index `r`) on the root's bus, the root of `bus` (its nodes numbered
-/// from `first`).
-fn relay(root_bus: SharedBus, r: usize, bus: SharedBus, first: u16) -> Task<RelayReport> {
+/// from 0: the relay's records name its nodes by their place on its bus).
+fn relay(root_bus: SharedBus, r: usize, bus: SharedBus) -> Task<RelayReport> {
     Box::pin(async move {
         let (pshared, ptask, mut pport) = slave_link(&root_bus, r);
         let pshared = leak(pshared);
         let mut parent = pshared.handle();
-        let (bshared, mut front, btask, mut bport) = master_split(&bus, first);
+        let (bshared, mut front, btask, mut bport) = master_split(&bus, 0);
         let buffers = RelayBuffers {
             down: leak([0u8; MAX_MESSAGE]),
             up: leak([0u8; MAX_MESSAGE]),
@@ -162,14 +162,7 @@ fn tree(relays: usize, per: usize, faults: Vec<(u64, Dir, usize)>) -> Run {
         }
     };
     let relay_tasks: Vec<Task<RelayReport>> = (0..relays)
-        .map(|r| {
-            relay(
-                root_bus.clone(),
-                r,
-                relay_buses[r].clone(),
-                (r * per) as u16,
-            )
-        })
+        .map(|r| relay(root_bus.clone(), r, relay_buses[r].clone()))
         .collect();
     let node_tasks: Vec<Task<NodeReport>> = (0..nodes)
         .map(|k| node(relay_buses[k / per].clone(), k % per, img.len()))

@@ -20,9 +20,9 @@
 //!   per frame and [`BATCH_HEADER`] per batch; the longest node frame or reply the protocol
 //!   produces fits a batch on its own ([`MAX_ROUTED`], checked by a test).
 //!
-//! Replies are routed by node number: a relay's bus numbers its nodes as the root does
-//! (`first..first + count`), and a request for a node not on it, or not waiting, is counted
-//! and dropped (the root re-sends a request in every exchange with that relay until the
+//! Replies are routed by node number: records name a node by its index on its relay's bus
+//! (a relay needs no strap to know where it sits; [`RelayedBus`] maps the root's numbers),
+//! and a request for a node not on the relay's bus, or not waiting, is counted and dropped (the root re-sends a request in every exchange with that relay until the
 //! node's frame comes back, so a lost down half costs one more exchange). Nothing read from
 //! either link can make the relay panic; no heap: the relay's buffers are the caller's.
 //!

@@ -166,7 +166,8 @@ async fn serve<B: RootBus>(
             report.bad_frames += 1;
             continue;
         };
-        let b = match bit(first, count, node) {
+        // Records name the node by its index on this bus.
+        let b = match bit(0, count, node) {
             Some(b) if nodes.waiting & b != 0 => b,
             _ => {
                 report.stray_requests += 1;
@@ -177,7 +178,9 @@ async fn serve<B: RootBus>(
         if up.room() < super::MAX_ROUTED {
             continue;
         }
-        let got = bus.exchange(node as NodeId, data, &mut rx[..]).await?;
+        let got = bus
+            .exchange(first + node as NodeId, data, &mut rx[..])
+            .await?;
         // A frame too long to route is sent up empty (the root counts it bad, the node's
         // go-back sends it again).
         let data = rx

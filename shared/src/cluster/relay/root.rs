@@ -104,6 +104,11 @@ impl<L: RootBus> RelayedBus<L> {
         (r < self.relays).then_some((r, 1u32 << i))
     }
 
+    /// `node`'s index on its relay's bus (what the relay's records carry).
+    fn local(&self, node: NodeId) -> NodeId {
+        node.wrapping_sub(self.first) % self.per_relay.max(1)
+    }
+
     fn ready_in(&self) -> Option<NodeId> {
         let total = self.relays * self.per_relay;
         let busy = match self.started {
@@ -125,7 +130,9 @@ impl<L: RootBus> RelayedBus<L> {
     /// down, its batch up.
     fn start_gather(&mut self, r: u16, asking: Option<(NodeId, usize)>) -> Result<(), LinkError> {
         let (link_first, _) = self.link.nodes();
-        let request = asking.filter(|&(node, _)| self.place(node).is_some_and(|(q, _)| q == r));
+        let request = asking
+            .filter(|&(node, _)| self.place(node).is_some_and(|(q, _)| q == r))
+            .map(|(node, len)| (self.local(node), len));
         let bank = self.link.tx_bank();
         let mut w = BatchWriter::new(bank).map_err(|_| LinkError::Aborted)?;
         if let Some((node, len)) = request {
@@ -170,6 +177,8 @@ impl<L: RootBus> RelayedBus<L> {
             Some((Op::Exchange(n), _)) => Some(n),
             _ => None,
         };
+        // Records name a relay's nodes by their index on its bus.
+        let base = self.first + r * self.per_relay;
         let Ok(Relayed::Batch { waiting, records }) = parse(&self.rx[..got]) else {
             self.counters.bad_batches += 1;
             return;
@@ -187,7 +196,9 @@ impl<L: RootBus> RelayedBus<L> {
                     kind: Kind::Frame,
                     node,
                     data,
-                }) if Some(node) == asking && self.answer.is_none() => {
+                }) if asking.is_some_and(|a| a.checked_sub(base) == Some(node))
+                    && self.answer.is_none() =>
+                {
                     self.answer_buf[..data.len()].copy_from_slice(data);
                     self.answer = Some(data.len());
                 }
