@@ -14,7 +14,12 @@ fn main() {
     std::process::exit(2);
 }
 
-#[cfg(target_os = "none")]
+/// The relay role (`--features relay`): see `relay_role.rs`.
+#[cfg(all(target_os = "none", feature = "relay"))]
+#[path = "relay_role.rs"]
+mod relay_role;
+
+#[cfg(all(target_os = "none", not(feature = "relay")))]
 mod fw {
     use defmt::{info, unwrap, warn};
     use embassy_executor::{InterruptExecutor, Spawner};
