@@ -2,7 +2,7 @@
 
 use super::batch::{parse, BatchWriter, Kind, Record, Relayed};
 use super::{bit, RelayError, MAX_RELAY_NODES};
-use crate::cluster::link::{Incoming, NodeId, NodeLink, RootBus};
+use crate::cluster::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
 use crate::cluster::wire::{self, Down, MAX_MESSAGE};
 use embassy_futures::select::{select, Either};
 
@@ -82,7 +82,16 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         let report_waiting = nodes.waiting | fresh;
         if !posted && (up.records() > 0 || report_waiting != 0) {
             up.set_waiting(report_waiting);
-            parent.post(up.bytes())?;
+            match parent.post(up.bytes()) {
+                Ok(()) => {}
+                // A batch of an earlier run (before the last `Stop`) still waits for the
+                // parent: it goes first, this one after it.
+                Err(LinkError::Busy) => {
+                    posted = true;
+                    continue;
+                }
+                Err(e) => return Err(e.into()),
+            }
             posted = true;
             report.batches += 1;
             nodes.in_post = nodes.answered;
