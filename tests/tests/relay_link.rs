@@ -130,7 +130,12 @@ struct Run {
 
 /// Render photo1 at 24x16 through `relays` relays of `per` nodes each; the frame must be
 /// the single-node render.
-fn tree(relays: usize, per: usize, faults: Vec<(u64, Dir, usize)>) -> Run {
+fn tree(
+    relays: usize,
+    per: usize,
+    faults: Vec<(u64, Dir, usize)>,
+    relay0_faults: Vec<(u64, Dir, usize)>,
+) -> Run {
     let (w, h) = (24u32, 16u32);
     let img = image(w, h);
     let want = render_frame(&img, Precision::F32, 1, &|| {})
@@ -153,6 +158,7 @@ fn tree(relays: usize, per: usize, faults: Vec<(u64, Dir, usize)>) -> Run {
     let root_bus = bus(relays);
     root_bus.borrow_mut().faults = faults;
     let relay_buses: Vec<SharedBus> = (0..relays).map(|_| bus(per)).collect();
+    relay_buses[0].borrow_mut().faults = relay0_faults;
     let (shared, front, task, mut port) = master_split(&root_bus, 0);
     let mut relayed = RelayedBus::new(front, 0, per as u16).expect("a tree that fits");
     let rc = async {
@@ -189,7 +195,7 @@ fn tree(relays: usize, per: usize, faults: Vec<(u64, Dir, usize)>) -> Run {
 
 #[test]
 fn one_relay_of_three_nodes_renders_the_single_node_frame() {
-    let run = tree(1, 3, Vec::new());
+    let run = tree(1, 3, Vec::new(), Vec::new());
     let pixels: u64 = run.nodes.iter().map(|n| n.pixels).sum();
     assert!(pixels >= 24 * 16);
     assert!(run.nodes.iter().all(|n| n.pixels > 0), "every node worked");
@@ -208,7 +214,7 @@ fn one_relay_of_three_nodes_renders_the_single_node_frame() {
 
 #[test]
 fn two_relays_under_one_root_render_the_single_node_frame() {
-    let run = tree(2, 3, Vec::new());
+    let run = tree(2, 3, Vec::new(), Vec::new());
     // Six nodes share a 24x16 frame of three sub-screens: who renders them depends on who
     // reported its scene first; every node is exchanged with through its relay.
     let pixels: u64 = run.nodes.iter().map(|n| n.pixels).sum();
@@ -237,6 +243,27 @@ fn corrupt_bytes_on_the_root_link_cost_retries_never_the_frame() {
         })
         .collect();
     let n = faults.len() as u32;
-    let run = tree(2, 3, faults);
+    let run = tree(2, 3, faults, Vec::new());
     assert_eq!(run.root_bus.borrow().faults_hit, n, "every fault landed");
+}
+
+#[test]
+fn corrupt_bytes_on_a_relays_bus_are_the_nodes_business_as_on_a_direct_bus() {
+    // Transfers on relay 0's own bus (its broadcasts and its node exchanges), both
+    // directions: the node link's NAK and go-back repair them, the relay routes on.
+    let faults: Vec<_> = (0..8u64)
+        .map(|k| {
+            let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
+            (15 + 9 * k, dir, (k as usize * 5) % 9)
+        })
+        .collect();
+    let n = faults.len() as u32;
+    let run = tree(2, 3, Vec::new(), faults);
+    assert_eq!(
+        run.relay_buses[0].borrow().faults_hit,
+        n,
+        "every fault landed"
+    );
+    let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
+    assert_eq!(routed, run.root.exchanges);
 }
