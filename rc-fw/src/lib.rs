@@ -111,6 +111,58 @@ pub mod pins {
     pub const BACKUP: [&str; 3] = ["PA2", "PA3", "PA1"];
 }
 
+/// The relay role's pin table (`--features relay`; `docs/hardware.md`, "Reaching 64 and
+/// 256 nodes"), written once like [`with_pins!`]: the parent's link on SPI1 as a slave (the
+/// NC board's pins), the relay's own bus on SPI2 as master (the RC's chip-selects and MISO
+/// multiplexer; the first handshake line moves from PD0 to PD10 because EXTI0 is the parent
+/// link's chip-select sense).
+#[macro_export]
+macro_rules! with_relay_pins {
+    ($m:ident $(, $arg:ident)*) => {
+        $m! {$($arg),*;
+            parent: [PA5, PA6, PA7, PA4], cs_sense: PB0 / EXTI0, ready_out: PB1,
+            spi2: [PB13, PB14, PB15],
+            accel_cs: PE3,
+            cs: [PE8, PE9, PE10, PE11, PE12, PE13, PE14, PE15],
+            ready: [PD10 / EXTI10, PD1 / EXTI1, PD2 / EXTI2, PD3 / EXTI3,
+                    PD6 / EXTI6, PD7 / EXTI7, PD8 / EXTI8, PD9 / EXTI9],
+            miso_sel: [PE4, PE5, PE6]
+        }
+    };
+}
+
+/// The relay table's names (see [`with_relay_pins!`]).
+macro_rules! relay_pin_names {
+    (; parent: [$($par:ident),*], cs_sense: $sense:ident / $sexti:ident, ready_out: $rdy_out:ident,
+       spi2: [$($spi:ident),*], accel_cs: $acc:ident, cs: [$($cs:ident),*],
+       ready: [$($rdy:ident / $exti:ident),*], miso_sel: [$($sel:ident),*]) => {
+        /// SPI1 (slave, towards the parent): SCK, MISO, MOSI, NSS.
+        pub const PARENT: [&str; 4] = [$(stringify!($par)),*];
+        /// The parent's chip-select, sensed, and its EXTI line.
+        pub const CS_SENSE: [&str; 2] = [stringify!($sense), stringify!($sexti)];
+        /// Handshake output to the parent.
+        pub const READY_OUT: &str = stringify!($rdy_out);
+        /// SPI2 (master of the relay's bus): SCK, MISO, MOSI.
+        pub const SPI2: [&str; 3] = [$(stringify!($spi)),*];
+        /// Chip-select outputs of the relay's nodes.
+        pub const CS: [&str; NODES] = [$(stringify!($cs)),*];
+        /// Handshake inputs of the relay's nodes.
+        pub const READY: [&str; NODES] = [$(stringify!($rdy)),*];
+        /// Their EXTI lines.
+        pub const READY_EXTI: [&str; NODES] = [$(stringify!($exti)),*];
+        /// MISO multiplexer selects.
+        pub const MISO_SEL: [&str; 3] = [$(stringify!($sel)),*];
+        /// The accelerometer's chip-select (shares SPI1's pins), held high.
+        pub const ACCEL_CS: &str = stringify!($acc);
+    };
+}
+
+/// Pins of a relay board (`--features relay`), from [`with_relay_pins!`].
+pub mod relay_pins {
+    pub use crate::link::NODES;
+    crate::with_relay_pins!(relay_pin_names);
+}
+
 /// The backup line's numbers, the board profile's: its bit rate, the reply timeout of a
 /// roll call, and how often the RC calls the roll.
 pub mod backup_line {
@@ -162,6 +214,39 @@ mod tests {
         assert_eq!(links_core::spi::TRAILER, p.link.trailer_bytes as usize);
         assert_eq!(links_core::spi::RC_OVERLAPS, p.link.rc_overlaps);
         assert_eq!(links_board::CORE_CLOCK_HZ, p.core_clock_hz);
+    }
+
+    /// The relay's table: no pin twice, every EXTI line once (the parent's chip-select sense
+    /// included), the parent link on the NC board's pins.
+    #[test]
+    fn relay_pins_are_distinct_and_exti_lines_differ() {
+        use super::relay_pins as r;
+        let mut all: Vec<&str> = r::CS.to_vec();
+        all.extend(r::READY);
+        all.extend(r::PARENT);
+        all.extend(r::SPI2);
+        all.extend(r::MISO_SEL);
+        all.extend([r::CS_SENSE[0], r::READY_OUT, r::ACCEL_CS]);
+        let n = all.len();
+        all.sort();
+        all.dedup();
+        assert_eq!(all.len(), n, "no pin used twice");
+        let mut lines: Vec<&str> = r::READY_EXTI.to_vec();
+        lines.push(r::CS_SENSE[1]);
+        lines.sort();
+        lines.dedup();
+        assert_eq!(lines.len(), r::NODES + 1, "one EXTI line each");
+        for (pin, exti) in r::READY
+            .iter()
+            .zip(r::READY_EXTI)
+            .chain([(&r::CS_SENSE[0], r::CS_SENSE[1])])
+        {
+            let line = pin.trim_start_matches(|c: char| c.is_ascii_alphabetic());
+            assert_eq!(exti, format!("EXTI{line}"), "{pin} is on its own EXTI line");
+        }
+        // The parent's end is the NC's (nc-fw's port drives it).
+        assert_eq!(r::PARENT, ["PA5", "PA6", "PA7", "PA4"]);
+        assert_eq!((r::CS_SENSE[0], r::READY_OUT), ("PB0", "PB1"));
     }
 
     #[test]

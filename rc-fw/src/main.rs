@@ -1,5 +1,7 @@
 //! RC bring-up: clocks, USB CDC (scene upload, frame readback: `links_core::serial`), the SPI
-//! star (chip-selects, handshake EXTI) and `links_core::root::run_bus` over it.
+//! star (chip-selects, handshake EXTI) and `links_core::root::run_bus` over it. The bus is
+//! clocked by `links_core::spi::MasterTask` on an interrupt executor (UART4's IRQ, priority
+//! 6) while `run_bus` and USB run on the thread executor: the wire overlaps the RC's work.
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -12,12 +14,18 @@ fn main() {
     std::process::exit(2);
 }
 
-#[cfg(target_os = "none")]
+/// The relay role (`--features relay`): see `relay_role.rs`.
+#[cfg(all(target_os = "none", feature = "relay"))]
+#[path = "relay_role.rs"]
+mod relay_role;
+
+#[cfg(all(target_os = "none", not(feature = "relay")))]
 mod fw {
     use defmt::{info, unwrap, warn};
-    use embassy_executor::Spawner;
+    use embassy_executor::{InterruptExecutor, Spawner};
     use embassy_stm32::exti::{self, ExtiInput};
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
+    use embassy_stm32::interrupt::{InterruptExt, Priority};
     use embassy_stm32::peripherals::{DMA1_CH5, DMA1_CH6, DMA2_CH0, DMA2_CH3, USART2, USB_OTG_FS};
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
@@ -30,7 +38,7 @@ mod fw {
     use links_board::rs485::Rs485;
     use links_core::backup;
     use links_core::serial::FrameStreamer;
-    use links_core::spi::{Bank, MasterLink};
+    use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
     use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS};
     use rc_fw::pins::NODES;
     use rc_fw::plan::SCENE;
@@ -41,7 +49,7 @@ mod fw {
     use {defmt_rtt as _, panic_probe as _};
 
     type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
-    type Link = MasterLink<'static, RcPort<NODES>>;
+    type Link = MasterFront<'static, 'static>;
 
     bind_interrupts!(struct Irqs {
         OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
@@ -64,6 +72,26 @@ mod fw {
     }
 
     static USB_QUEUE: UsbPipe = Pipe::new();
+    /// The bus link's two halves share this: the front (`serial_task`, thread mode) hands
+    /// transfers over, the bus task clocks them.
+    static BUS: MasterShared<'static> = MasterShared::new();
+    /// The bus task's executor: UART4's interrupt (unused on this board) at a priority
+    /// above thread mode, so each DMA completion resumes the clocking at once while the
+    /// root logic composes the next transfer (`links_core::spi::RC_OVERLAPS`).
+    static EXECUTOR_BUS: InterruptExecutor = InterruptExecutor::new();
+
+    #[interrupt]
+    unsafe fn UART4() {
+        // SAFETY: the interrupt executor's documented use: called from its own interrupt.
+        unsafe { EXECUTOR_BUS.on_interrupt() }
+    }
+
+    /// Clock every transfer the root logic hands over (`links_core::spi::MasterTask`).
+    #[embassy_executor::task]
+    async fn bus_task(port: RcPort<NODES>) {
+        let mut port = port;
+        MasterTask::new().run(&mut port, &BUS).await
+    }
     static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
@@ -156,7 +184,7 @@ mod fw {
                             .await;
                             match r {
                                 Ok(report) => {
-                                    info!("rendered: {} / link {}", report, link.counters)
+                                    info!("rendered: {} / link {}", report, link.counters())
                                 }
                                 Err(e) => warn!("render failed: {}", e),
                             }
@@ -244,7 +272,7 @@ mod fw {
         let (tx, rx) = class.split();
 
         let [btx0, btx1, brx] = &mut sram.link;
-        let link = MasterLink::new(port, 0, [btx0, btx1], brx);
+        let link = MasterFront::new(&BUS, 0, NODES as u16, [btx0, btx1], brx);
 
         // The serial backup line: USART2 (PA2 TX, PA3 RX), driver enable PA1.
         let uart = unwrap!(Uart::new(
@@ -261,6 +289,9 @@ mod fw {
             de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
         };
 
+        interrupt::UART4.set_priority(Priority::P6);
+        let bus_spawner = EXECUTOR_BUS.start(interrupt::UART4);
+        bus_spawner.spawn(unwrap!(bus_task(port)));
         spawner.spawn(unwrap!(backup_task(line)));
         spawner.spawn(unwrap!(usb_task(device)));
         spawner.spawn(unwrap!(usb_tx_task(tx)));

@@ -8,6 +8,8 @@
 //!   RC's master link fed mutated bus bytes.
 //! - `backup`: the serial backup line (`links_core::backup`): frame decoder, frame reader,
 //!   the node's state machine and the RC's roll call fed mutated frames.
+//! - `relay`: the relay link (`links_core::relay`): its batch decoder (what decodes must
+//!   re-encode to the bytes it came from) and the relay's logic fed mutated parent frames.
 //! - `serial`: the PC <-> RC serial protocol (`links_core::serial`) in both directions: the
 //!   RC's session (`rc_fw::session`) and the PC's frame assembly fed mutated byte streams.
 //!
@@ -44,7 +46,7 @@ use links_core::wire::{
     self, Down, Job, Region, SceneState, Up, CRC32, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
     SCENE_CHUNK,
 };
-use links_core::{backup, desc::TransparencyMode, serial};
+use links_core::{backup, desc::TransparencyMode, relay, serial};
 use links_host::scene_file::load_scene;
 use links_host::serial_host::FrameAssembly;
 use rc_fw::session::{Session, Step};
@@ -2625,4 +2627,249 @@ fn backup() {
     if t.tried >= 100 {
         assert!(t.notes.get("backup frames decoded").is_some_and(|&n| n > 0));
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// Target: relay (the relay link's batches and the relay's logic)
+// ---------------------------------------------------------------------------------------
+
+/// A valid relay-link frame: a forwarded broadcast, or a batch of requests and frames for
+/// nodes 0..4 (some beyond the relay's three), data cut from the corpus.
+fn relay_frame(rng: &mut Rng, corpus: &[Vec<u8>]) -> Vec<u8> {
+    let mut buf = vec![0u8; MAX_MESSAGE];
+    if rng.chance(20) {
+        let body = rng.pick(corpus);
+        let body = &body[..body.len().min(MAX_MESSAGE - 1)];
+        let n = relay::forward(body, &mut buf).expect("fits");
+        buf.truncate(n);
+        return buf;
+    }
+    let mut w = relay::BatchWriter::new(&mut buf).expect("room");
+    w.set_waiting(rng.u32() & 0xf);
+    for _ in 0..rng.below(4) {
+        let src = rng.pick(corpus);
+        let take = rng.below(src.len() + 1).min(w.room());
+        let kind = if rng.chance(80) {
+            relay::Kind::Request
+        } else {
+            relay::Kind::Frame
+        };
+        let rec = relay::Record {
+            kind,
+            node: rng.below(5) as u16,
+            data: &src[..take],
+        };
+        if w.push(rec).is_err() {
+            break;
+        }
+    }
+    w.bytes().to_vec()
+}
+
+/// Decode one frame: records stay inside it, and re-encoding what decoded gives back the
+/// bytes it came from.
+fn check_relay_bytes(bytes: &[u8], tally: &mut Tally) -> Verdict {
+    match relay::parse(bytes) {
+        Err(e) => Verdict::Rejected(variant(&e)),
+        Ok(relay::Relayed::Forward(f)) => {
+            assert_eq!(f, &bytes[1..]);
+            *tally.notes.entry("forwards").or_default() += 1;
+            Verdict::Accepted
+        }
+        Ok(relay::Relayed::Batch { waiting, records }) => {
+            let mut buf = vec![0u8; MAX_MESSAGE];
+            let mut w = relay::BatchWriter::new(&mut buf).expect("room");
+            w.set_waiting(waiting);
+            let mut bad = None;
+            for r in records {
+                match r {
+                    Ok(rec) => w.push(rec).expect("what decoded from a frame fits one"),
+                    Err(e) => bad = Some(variant(&e)),
+                }
+            }
+            let n = w.bytes().len();
+            assert_eq!(w.bytes(), &bytes[..n], "re-encoded records are the input");
+            *tally.notes.entry("records").or_default() += w.records() as u64;
+            match bad {
+                Some(why) => Verdict::Rejected(why),
+                None => {
+                    assert_eq!(n, bytes.len(), "a clean batch is consumed whole");
+                    Verdict::Accepted
+                }
+            }
+        }
+    }
+}
+
+/// The relay's parent, scripted: delivers the frames of `script` in turn (odd ones as
+/// exchanges, which the relay answers by its next post).
+struct ScriptParent {
+    script: VecDeque<(bool, Vec<u8>)>,
+    posts: u32,
+}
+
+impl NodeLink for ScriptParent {
+    fn post(&mut self, frame: &[u8]) -> Result<(), LinkError> {
+        assert!(frame.len() <= MAX_MESSAGE, "the relay posts a link frame");
+        assert!(
+            matches!(relay::parse(frame), Ok(relay::Relayed::Batch { .. })),
+            "the relay posts batches"
+        );
+        self.posts += 1;
+        Ok(())
+    }
+    async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError> {
+        match self.script.pop_front() {
+            Some((exchanged, f)) => {
+                let n = f.len().min(rx.len());
+                rx[..n].copy_from_slice(&f[..n]);
+                Ok(if exchanged {
+                    Incoming::Exchanged { len: n }
+                } else {
+                    Incoming::Broadcast { len: n }
+                })
+            }
+            None => core::future::pending().await,
+        }
+    }
+}
+
+/// The relay's bus, scripted: three nodes whose lines are up, each exchange answered with
+/// a corpus frame.
+struct RelayBus {
+    tx: Vec<u8>,
+    started: Option<(Transfer, usize)>,
+    answer: Vec<u8>,
+    exchanges: u32,
+}
+
+impl RootBus for RelayBus {
+    fn nodes(&self) -> (NodeId, u16) {
+        (0, 3)
+    }
+    async fn wait_ready(&mut self) -> NodeId {
+        0
+    }
+    fn ready(&self) -> Option<NodeId> {
+        Some(0)
+    }
+    fn line(&self, node: NodeId) -> bool {
+        node < 3
+    }
+    fn tx_bank(&mut self) -> &mut [u8] {
+        &mut self.tx
+    }
+    fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
+        assert!(self.started.is_none() && len <= MAX_MESSAGE);
+        if let Transfer::Exchange(node) = transfer {
+            assert!(node < 3, "the relay clocks only its own nodes");
+        }
+        self.started = Some((transfer, len));
+        Ok(())
+    }
+    async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+        let (transfer, _) = self.started.take().ok_or(LinkError::Aborted)?;
+        match transfer {
+            Transfer::Broadcast => Ok(0),
+            Transfer::Exchange(_) => {
+                self.exchanges += 1;
+                let n = self.answer.len().min(rx.len());
+                rx[..n].copy_from_slice(&self.answer[..n]);
+                Ok(n)
+            }
+        }
+    }
+}
+
+/// Run the relay over a mutated conversation until it waits for more; it must never panic,
+/// clock only its nodes, and clock no more exchanges than it was sent requests.
+fn relay_session(
+    rng: &mut Rng,
+    corpus: &[Vec<u8>],
+    input: &mut Vec<u8>,
+    tally: &mut Tally,
+) -> Verdict {
+    let mut script = VecDeque::new();
+    let mut requests = 0u32;
+    for _ in 0..1 + rng.below(6) {
+        let mut f = relay_frame(rng, corpus);
+        if rng.chance(60) {
+            mutate_bytes(rng, &mut f, MAX_MESSAGE);
+        }
+        if let Ok(relay::Relayed::Batch { records, .. }) = relay::parse(&f) {
+            requests += records.filter(|r| r.is_ok()).count() as u32;
+        }
+        input.extend_from_slice(&(f.len() as u16).to_le_bytes());
+        input.extend_from_slice(&f);
+        script.push_back((rng.chance(70), f));
+    }
+    let mut parent = ScriptParent { script, posts: 0 };
+    let mut bus = RelayBus {
+        tx: vec![0; MAX_MESSAGE],
+        started: None,
+        answer: rng.pick(corpus).clone(),
+        exchanges: 0,
+    };
+    let mut bufs = ([0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE]);
+    let report = {
+        let buffers = relay::RelayBuffers {
+            down: &mut bufs.0,
+            up: &mut bufs.1,
+            node: &mut bufs.2,
+        };
+        let fut = relay::run_relay(&mut parent, &mut bus, buffers);
+        let mut fut = pin!(fut);
+        let mut cx = Context::from_waker(Waker::noop());
+        let mut out = None;
+        for _ in 0..64 {
+            if let Poll::Ready(r) = fut.as_mut().poll(&mut cx) {
+                out = Some(r);
+                break;
+            }
+        }
+        out
+    };
+    assert!(
+        bus.exchanges <= requests,
+        "{} exchanges for {requests} requests",
+        bus.exchanges
+    );
+    *tally.notes.entry("relay exchanges").or_default() += bus.exchanges as u64;
+    match report {
+        Some(Ok(r)) => {
+            assert_eq!(r.routed, bus.exchanges);
+            *tally.notes.entry("stopped").or_default() += 1;
+            Verdict::Accepted
+        }
+        Some(Err(e)) => Verdict::Rejected(variant(&e)),
+        None if bus.exchanges > 0 => Verdict::Accepted,
+        None => Verdict::Rejected("nothing routed".into()),
+    }
+}
+
+#[test]
+fn relay() {
+    let mut rng0 = Rng(11);
+    let data = rng0.bytes(3 * MAX_RUN);
+    let mut corpus: Vec<Vec<u8>> = (0..32)
+        .map(|k| {
+            if k % 2 == 0 {
+                wire_frame(k, 0, &some_down(&mut rng0, &data, 16, 16))
+            } else {
+                wire_frame(k, 0, &some_up(&mut rng0, &data, 16, 16))
+            }
+        })
+        .collect();
+    corpus.push(wire_frame(0, 0, &Down::Stop));
+    corpus.retain(|f| f.len() <= relay::MAX_ROUTED);
+    fuzz("relay", &mut corpus, |corpus, rng, input, tally| {
+        if rng.chance(50) {
+            let mut f = relay_frame(rng, corpus);
+            mutate_bytes(rng, &mut f, MAX_MESSAGE);
+            input.extend_from_slice(&f);
+            check_relay_bytes(&f, tally)
+        } else {
+            relay_session(rng, corpus, input, tally)
+        }
+    });
 }

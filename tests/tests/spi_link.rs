@@ -241,6 +241,84 @@ fn rc_composes_the_next_frame_while_a_transfer_is_started() {
     assert!(bus.borrow().violations.is_empty());
 }
 
+/// The split link (`MasterFront` + `MasterTask`, the firmware's): the task clocks the
+/// exchange while the RC composes the next frame. The RC writes its next frame only once
+/// the emulated bus shows the node selected and the exchange's trailer not yet clocked, so
+/// a link that clocks only inside `finish` (no overlap) stalls here and fails the test.
+#[test]
+fn split_link_composes_while_the_task_clocks_the_transfer() {
+    let bus = bus(1);
+    let (shared, mut front, task, mut mport) = master_split(&bus, 0);
+    let (nshared, ntask, mut nport) = slave_link(&bus, 0);
+    let up: Vec<u8> = (0..700u32).map(|i| (i * 5 + 2) as u8).collect();
+    let mut handle = nshared.handle();
+    handle.post(&up).unwrap();
+    let seen = RefCell::new(None);
+    let rc = async {
+        let mut rx = [0u8; MAX_MESSAGE];
+        assert_eq!(front.finish(&mut rx).await, Err(LinkError::Aborted));
+        let node = front.wait_ready().await;
+        assert_eq!(node, 0);
+        front.tx_bank()[..40].fill(7);
+        front.start(Transfer::Exchange(0), 40).unwrap();
+        assert_eq!(front.start(Transfer::Broadcast, 1), Err(LinkError::Busy));
+        // Wait until the task has the node selected: the exchange is on the wire.
+        core::future::poll_fn(|cx| {
+            if bus.borrow().selected.is_some() {
+                Poll::Ready(())
+            } else {
+                cx.waker().wake_by_ref();
+                Poll::Pending
+            }
+        })
+        .await;
+        // Compose the next frame now, and note what the wire was doing meanwhile.
+        front.tx_bank()[..64].fill(9);
+        *seen.borrow_mut() = Some((
+            shared.in_flight(),
+            bus.borrow().selected.is_some(),
+            bus.borrow().trailers.len(),
+        ));
+        let n = front.finish(&mut rx).await.unwrap();
+        assert!(!shared.in_flight());
+        polls(50).await;
+        front.start(Transfer::Broadcast, 64).unwrap();
+        front.finish(&mut []).await.unwrap();
+        polls(50).await;
+        rx[..n].to_vec()
+    };
+    let nc = async {
+        let mut rx = [0u8; MAX_MESSAGE];
+        let a = handle.recv(&mut rx).await.unwrap();
+        let down = rx[..40].to_vec();
+        let b = handle.recv(&mut rx).await.unwrap();
+        (a, down, b, rx[..64].to_vec())
+    };
+    let tasks = select(
+        task.run(&mut mport, shared),
+        ntask.run(&mut nport, &nshared),
+    );
+    // The link tasks never end (`!`): only the first arm exists.
+    let Either::First((got_up, (a, down, b, bcast))) = run(select(join(rc, nc), tasks));
+    assert_eq!(
+        *seen.borrow(),
+        Some((true, true, 0)),
+        "composed while the exchange was selected and before its trailer"
+    );
+    assert_eq!(got_up, up, "the node's frame crossed intact");
+    assert_eq!(a, Incoming::Exchanged { len: 40 });
+    assert_eq!(down, [7u8; 40], "the frame composed before start went out");
+    assert_eq!(b, Incoming::Broadcast { len: 64 });
+    assert_eq!(
+        bcast, [9u8; 64],
+        "the frame composed during the transfer went out"
+    );
+    let c = shared.counters();
+    assert_eq!((c.exchanges, c.broadcasts, c.naks), (1, 1, 0));
+    assert_eq!(bus.borrow().trailers, [ACK]);
+    assert!(bus.borrow().violations.is_empty());
+}
+
 #[test]
 fn a_corrupt_broadcast_is_counted_and_dropped() {
     let bus = bus(1);
@@ -314,7 +392,16 @@ async fn node(
     (report, shared.counters())
 }
 
-fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
+/// Which RC link drives the cluster.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum RcLink {
+    /// `MasterLink`: clocked inside `finish`.
+    Inline,
+    /// `MasterFront` + `MasterTask` (the firmware's): clocked while the RC composes.
+    Split,
+}
+
+fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32, link: RcLink) {
     let (w, h) = (24u32, 16u32);
     let img = image(w, h);
     let want = render_frame(&img, Precision::F32, 1, &|| {})
@@ -336,14 +423,30 @@ fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
         w: w as usize,
         rgb: vec![0; (w * h * 3) as usize],
     });
-    let mut master = master_link(&bus, 0);
     let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
     let [s0, s1, s2, s3] = &mut scene_banks[..] else {
         unreachable!()
     };
     let nodes = join_array([node(bus.clone(), 0, s0, s1), node(bus.clone(), 1, s2, s3)]);
-    let rc = run_bus(0, &mut master, &NoClock, &root, &scenes[..], &sink);
-    let (rr, nodes) = run(join(rc, nodes));
+    let (rr, nodes, mc) = match link {
+        RcLink::Inline => {
+            let mut master = master_link(&bus, 0);
+            let rc = run_bus(0, &mut master, &NoClock, &root, &scenes[..], &sink);
+            let (rr, nodes) = run(join(rc, nodes));
+            (rr, nodes, master.counters)
+        }
+        RcLink::Split => {
+            let (shared, mut front, task, mut port) = master_split(&bus, 0);
+            let rc = async {
+                let logic = run_bus(0, &mut front, &NoClock, &root, &scenes[..], &sink);
+                match select(logic, task.run(&mut port, shared)).await {
+                    Either::First(r) => r,
+                }
+            };
+            let (rr, nodes) = run(join(rc, nodes));
+            (rr, nodes, shared.counters())
+        }
+    };
     let rr = rr.expect("root runs");
     assert_eq!(
         sink.borrow().rgb,
@@ -352,7 +455,6 @@ fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
     );
     let b = bus.borrow();
     assert!(b.violations.is_empty(), "{:?}", b.violations);
-    let mc = master.counters;
     let pixels: u64 = nodes.iter().map(|(r, _)| r.pixels).sum();
     assert!(pixels >= (w * h) as u64);
     assert!(rr.broadcasts > 0 && mc.exchanges > 0);
@@ -386,20 +488,33 @@ fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32) {
 
 #[test]
 fn cluster_over_the_link_equals_the_single_node_render() {
-    cluster(Vec::new(), 0);
+    cluster(Vec::new(), 0, RcLink::Inline);
+}
+
+#[test]
+fn cluster_over_the_split_link_equals_the_single_node_render() {
+    cluster(Vec::new(), 0, RcLink::Split);
+}
+
+#[test]
+fn cluster_over_the_split_link_survives_corrupt_bytes_and_lost_edges() {
+    cluster(fault_plan(), 3, RcLink::Split);
 }
 
 #[test]
 fn cluster_over_the_link_survives_corrupt_bytes_and_lost_edges() {
-    // Transfers in all three phases of several exchanges and broadcasts, both directions
-    // (transfers 10 to 87 of the run's ~100).
-    let faults = (0..12u64)
+    cluster(fault_plan(), 3, RcLink::Inline);
+}
+
+/// Transfers in all three phases of several exchanges and broadcasts, both directions
+/// (transfers 10 to 87 of the run's ~100).
+fn fault_plan() -> Vec<(u64, Dir, usize)> {
+    (0..12u64)
         .map(|k| {
             let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
             (10 + 7 * k, dir, (k as usize * 5) % 9)
         })
-        .collect();
-    cluster(faults, 3);
+        .collect()
 }
 
 #[test]

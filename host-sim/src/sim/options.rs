@@ -485,7 +485,10 @@ mod tests {
         assert_eq!(f.timing.bit_rate_hz, 21e6);
         assert_eq!((f.timing.header_bytes, f.timing.trailer_bytes), (8, 1));
         assert_eq!(f.timing.overhead_ns, 23_000.0);
-        assert!(!f.rc_double_buffer);
+        assert!(
+            f.rc_double_buffer,
+            "the F407's RC overlaps (spi::RC_OVERLAPS)"
+        );
         assert_eq!(f.overloaded_bus(), Some(64));
         let text = board_text(&f);
         assert!(text.starts_with("board f407: 21 MHz, 23.0 us"), "{text}");

@@ -110,6 +110,13 @@ pub trait RootBus {
     /// [`RootBus::wait_ready`] would make).
     fn ready(&self) -> Option<NodeId>;
 
+    /// Whether `node`'s ready line is up now (a relay asks about each of its nodes). The
+    /// default knows only the node [`RootBus::ready`] would choose; links that see every
+    /// line say so for each.
+    fn line(&self, node: NodeId) -> bool {
+        self.ready() == Some(node)
+    }
+
     /// The idle TX bank (at least [`crate::wire::MAX_MESSAGE`] bytes): compose the next frame
     /// here, also while a transfer is in flight.
     fn tx_bank(&mut self) -> &mut [u8];

@@ -10,12 +10,15 @@
 //! - [`backup`]: the serial backup line (RS-485 multi-drop UART): roll call, health, and
 //!   the slow path for scene, work and pixels of a node whose SPI link failed.
 //! - [`spi`]: the link driver's protocol over a real SPI star, generic over the MCU ports.
+//! - [`relay`]: relay RCs (a node on the parent's bus, the root of their own): broadcasts
+//!   stored and forwarded, node frames and replies routed in batches.
 
 pub mod backup;
 pub mod board;
 pub mod link;
 pub mod node;
 pub mod profile;
+pub mod relay;
 pub mod root;
 pub mod sched;
 pub mod spi;

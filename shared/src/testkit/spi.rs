@@ -14,8 +14,8 @@
 
 use crate::link::NodeId;
 use crate::spi::{
-    Armed, Bank, MasterLink, MasterPort, PortError, Select, SlaveBanks, SlavePort, SlaveShared,
-    SlaveTask, BANK,
+    Armed, Bank, MasterFront, MasterLink, MasterPort, MasterShared, MasterTask, PortError, Select,
+    SlaveBanks, SlavePort, SlaveShared, SlaveTask, BANK,
 };
 use core::future::Future;
 use core::pin::pin;
@@ -344,6 +344,25 @@ pub fn master_link(bus: &SharedBus, first: NodeId) -> MasterLink<'static, FakeMa
     let [tx0, tx1, rx] = Box::leak(Box::new([[0u8; BANK]; 3]));
     let port = FakeMaster { bus: bus.clone() };
     MasterLink::new(port, first, [tx0, tx1], rx)
+}
+
+/// The RC's split link over `bus` (node ids from `first`): the shared state, the
+/// [`MasterFront`] the root logic drives, the [`MasterTask`] and the port it clocks (run the
+/// task beside the root logic). Banks and shared state are leaked, as in [`master_link`].
+pub fn master_split(
+    bus: &SharedBus,
+    first: NodeId,
+) -> (
+    &'static MasterShared<'static>,
+    MasterFront<'static, 'static>,
+    MasterTask,
+    FakeMaster,
+) {
+    let [tx0, tx1, rx] = Box::leak(Box::new([[0u8; BANK]; 3]));
+    let shared: &'static MasterShared<'static> = Box::leak(Box::new(MasterShared::new()));
+    let port = FakeMaster { bus: bus.clone() };
+    let front = MasterFront::new(shared, first, port.count(), [tx0, tx1], rx);
+    (shared, front, MasterTask::new(), port)
 }
 
 /// Node `i`'s link (shared state, link task, port) over `bus`, on banks of its own (leaked).

@@ -31,7 +31,7 @@ use super::rccost::RcCost;
 use super::star::BusTiming;
 use links_core::board::BoardProfile;
 use links_core::root::RcWork;
-use links_core::wire::{self, Down, MAX_MESSAGE};
+use links_core::wire::{self, Down};
 use std::collections::{HashMap, VecDeque};
 use std::fmt;
 
@@ -177,8 +177,11 @@ pub struct TreeReport {
     pub root_busy_s: f64,
 }
 
-/// Most bytes of node frames one forwarded exchange carries each way: eight node frames.
-pub const BATCH_BYTES: usize = 8 * MAX_MESSAGE;
+/// Most bytes one forwarded exchange carries each way: the firmware's relay link, one link
+/// frame of routed records (`links_core::relay`: each node frame or reply costs a
+/// [`RECORD`] header, each exchange a [`BATCH_HEADER`]).
+pub use links_core::relay::BATCH_BYTES;
+use links_core::relay::{BATCH_HEADER, RECORD};
 
 /// Node frames a relay has gathered for its parent's link, not on the wire yet.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -260,7 +263,7 @@ impl Wires {
                     break;
                 }
                 self.waiting[link].pop_front();
-                let end = self.claim(link, start, b.up.max(b.down), true);
+                let end = self.claim(link, start, BATCH_HEADER + b.up.max(b.down), true);
                 self.links[link].frames_up += b.frames;
                 if link == 0 {
                     let done = end.max(self.root_cpu_free) + b.work;
@@ -352,8 +355,8 @@ impl Relays {
         let b = Batch {
             child,
             ready: at,
-            up: up.len(),
-            down: down_len,
+            up: RECORD + up.len(),
+            down: RECORD + down_len,
             frames: 1,
             work,
         };
@@ -448,15 +451,18 @@ mod tests {
         // A relay's own broadcast (Stop) waits for nothing.
         let n = wire::encode(0, 0, &Down::Stop, &mut buf).unwrap();
         assert_eq!(r.broadcast_ready(3, &buf[..n], 42), 42);
-        // A forwarded exchange of 10 bytes up, 20 down: 21 bytes (header + 20) per hop.
+        // A forwarded exchange of 10 bytes up, 20 down, each routed in a 5-byte record of a
+        // batch with a 5-byte header: 31 bytes (link header + 5 + 5 + 20) per hop.
         r.forward_up(0, &[0u8; 10], 20, 10_000_000_000);
-        let ex = 21 * 8 * 1_000_000;
+        assert_eq!((BATCH_HEADER, RECORD), (5, 5));
+        let ex = 31 * 8 * 1_000_000;
         assert_eq!(r.taken_up_to(), 10_000_000_000 + 2 * ex);
     }
 
     /// Frames a relay gathers while its parent's link is busy go up in one exchange; worked
-    /// by hand on a 1 MHz link, no handshake, a 1-byte header: a 10-byte frame takes 88 us,
-    /// two in one exchange 168 us.
+    /// by hand on a 1 MHz link, no handshake, a 1-byte header: a 10-byte frame routed alone
+    /// (5-byte batch header, 5-byte record) takes (1 + 5 + 15) x 8 = 168 us, two in one
+    /// exchange (1 + 5 + 30) x 8 = 288 us.
     #[test]
     fn a_relay_batches_the_frames_that_wait_for_its_link() {
         let timing = BusTiming {
@@ -476,7 +482,7 @@ mod tests {
             let l = r.report().links[0];
             (l.exchanges, l.frames_up, r.taken_up_to())
         };
-        assert_eq!(run(true), (3, 4, (88 + 168 + 88) * us));
-        assert_eq!(run(false), (4, 4, 4 * 88 * us));
+        assert_eq!(run(true), (3, 4, (168 + 288 + 168) * us));
+        assert_eq!(run(false), (4, 4, 4 * 168 * us));
     }
 }

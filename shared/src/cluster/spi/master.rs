@@ -1,5 +1,6 @@
 //! The RC side: the master's port trait and [`MasterLink`], the [`RootBus`] over it.
 
+use super::clock::{Clocked, Wire};
 use super::framing::*;
 use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
 use crate::cluster::wire::MAX_MESSAGE;
@@ -52,10 +53,11 @@ pub struct MasterCounters {
     pub bytes: u64,
 }
 
-/// Whether [`MasterLink`] clocks the wire while the RC composes and decodes (no: the
-/// transfer runs inside [`RootBus::finish`], see [`MasterLink`]); the F407 board profile's
-/// `rc_overlaps` (`links_core::board::LinkProfile::F407`).
-pub const RC_OVERLAPS: bool = false;
+/// Whether the firmware's RC clocks the wire while it composes and decodes: yes, `rc-fw`
+/// runs [`super::MasterTask`] on an interrupt executor above the thread executor where the
+/// root logic drives [`super::MasterFront`] (the inline [`MasterLink`] does not overlap).
+/// The F407 board profile's `rc_overlaps` (`links_core::board::LinkProfile::F407`).
+pub const RC_OVERLAPS: bool = true;
 
 /// The RC's end of one bus: the [`RootBus`] the root logic drives, over a [`MasterPort`].
 ///
@@ -65,7 +67,8 @@ pub const RC_OVERLAPS: bool = false;
 /// [`RootBus::finish`] (header phase, body, trailer: the phases need the CPU in between, and
 /// `MasterPort::transfer` is an async DMA transfer that runs only while awaited), so what
 /// the banks buy is that composing never waits for a bank; the wire and the composing do
-/// not overlap yet (that needs the phases driven from the DMA interrupt: docs/hardware.md).
+/// not overlap here. [`super::MasterFront`] + [`super::MasterTask`] is the split link that
+/// overlaps them (the firmware's); this one suits a single task (tests, tools).
 pub struct MasterLink<'b, P> {
     port: P,
     first: NodeId,
@@ -110,93 +113,6 @@ impl<'b, P: MasterPort> MasterLink<'b, P> {
             .filter(|&i| i < self.port.count())
             .ok_or(LinkError::NoSuchNode { node })
     }
-
-    /// The node frame of an exchange (after the header phase): clock the body and trailer
-    /// from TX bank `b`. Returns the node frame's length if intact.
-    async fn body(&mut self, b: usize, n: usize) -> Result<Option<usize>, PortError> {
-        let Some(h) = nc_header(&self.rx[..HEADER]) else {
-            self.counters.bad_headers += 1;
-            return Ok(None);
-        };
-        let nlen = if h.kind & FLAG_POSTED != 0 {
-            h.len as usize
-        } else {
-            0
-        };
-        let l = n.max(nlen);
-        let tx = &mut *self.tx[b];
-        tx[HEADER + n..HEADER + l].fill(0);
-        self.port
-            .transfer(&tx[HEADER..HEADER + l], &mut self.rx[HEADER..HEADER + l])
-            .await?;
-        let ok = nlen == 0 || body_ok(&self.rx[..], &h);
-        let t = [if ok { ACK } else { NAK }];
-        let mut back = [0u8];
-        self.port.transfer(&t, &mut back).await?;
-        self.counters.bytes += (HEADER + l + TRAILER) as u64;
-        if ok {
-            Ok(Some(nlen))
-        } else {
-            self.counters.naks += 1;
-            Ok(None)
-        }
-    }
-
-    /// Clock an exchange of TX bank `b` (`n` bytes of frame) with node index `i`; the
-    /// node's frame is then in the RX bank. Returns its length (0: none, or not intact).
-    async fn clock_exchange(&mut self, b: usize, i: u16, n: usize) -> usize {
-        // Handshake ordering: never clock a node that is not armed.
-        if !self.port.ready(i) {
-            self.counters.not_ready += 1;
-            return 0;
-        }
-        let h = rc_header(false, &self.tx[b][HEADER..HEADER + n]);
-        self.tx[b][..HEADER].copy_from_slice(&h);
-        self.rx[..HEADER].fill(0);
-        self.port.select(Select::One(i)).await;
-        if self.port.ready(i) {
-            // The node drops its line when selected (the handshake's acknowledgement); a
-            // line still high means it is not listening: clock nothing.
-            self.port.deselect().await;
-            self.counters.no_ack += 1;
-            return 0;
-        }
-        let got = match self
-            .port
-            .transfer(&self.tx[b][..HEADER], &mut self.rx[..HEADER])
-            .await
-        {
-            Ok(()) => self.body(b, n).await,
-            Err(e) => Err(e),
-        };
-        self.port.deselect().await;
-        self.counters.exchanges += 1;
-        match got {
-            Ok(Some(len)) => len,
-            Ok(None) => 0,
-            Err(PortError) => {
-                self.counters.port_errors += 1;
-                0
-            }
-        }
-    }
-
-    /// Clock a broadcast of TX bank `b` (`n` bytes of frame) to every node.
-    async fn clock_broadcast(&mut self, b: usize, n: usize) {
-        let h = rc_header(true, &self.tx[b][HEADER..HEADER + n]);
-        self.tx[b][..HEADER].copy_from_slice(&h);
-        self.port.select(Select::All).await;
-        let r = self
-            .port
-            .transfer(&self.tx[b][..HEADER + n], &mut self.rx[..HEADER + n])
-            .await;
-        self.port.deselect().await;
-        self.counters.broadcasts += 1;
-        self.counters.bytes += (HEADER + n) as u64;
-        if r.is_err() {
-            self.counters.port_errors += 1;
-        }
-    }
 }
 
 impl<P: MasterPort> RootBus for MasterLink<'_, P> {
@@ -221,6 +137,10 @@ impl<P: MasterPort> RootBus for MasterLink<'_, P> {
             .map(|i| (self.next_scan + i) % count)
             .find(|&i| self.port.ready(i))
             .map(|i| self.first + i)
+    }
+
+    fn line(&self, node: NodeId) -> bool {
+        self.index(node).is_ok_and(|i| self.port.ready(i))
     }
 
     fn tx_bank(&mut self) -> &mut [u8] {
@@ -248,26 +168,31 @@ impl<P: MasterPort> RootBus for MasterLink<'_, P> {
 
     async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
         let (transfer, n) = self.started.take().ok_or(LinkError::Aborted)?;
-        let b = self.idle ^ 1;
-        let len = match transfer {
-            Transfer::Exchange(node) => {
-                let i = self.index(node)?;
-                self.clock_exchange(b, i, n).await
-            }
-            Transfer::Broadcast => {
-                self.clock_broadcast(b, n).await;
-                0
-            }
+        let what = match transfer {
+            Transfer::Exchange(node) => Clocked::Exchange(self.index(node)?),
+            Transfer::Broadcast => Clocked::Broadcast,
         };
-        match rx.get_mut(..len) {
-            Some(dst) => {
-                dst.copy_from_slice(&self.rx[HEADER..HEADER + len]);
-                Ok(len)
-            }
-            None => Err(LinkError::TooLong {
-                len: len as u32,
-                max: rx.len() as u32,
-            }),
+        let mut wire = Wire {
+            port: &mut self.port,
+            tx: &mut *self.tx[self.idle ^ 1],
+            rx: &mut *self.rx,
+            counters: &mut self.counters,
+        };
+        let len = wire.clock(what, n).await;
+        copy_frame(&self.rx[..], len, rx)
+    }
+}
+
+/// Copy the node's frame (`len` bytes after the header room of the RX bank) into `rx`.
+pub(super) fn copy_frame(bank: &[u8], len: usize, rx: &mut [u8]) -> Result<usize, LinkError> {
+    match (rx.get_mut(..len), bank.get(HEADER..HEADER + len)) {
+        (Some(dst), Some(src)) => {
+            dst.copy_from_slice(src);
+            Ok(len)
         }
+        _ => Err(LinkError::TooLong {
+            len: len as u32,
+            max: rx.len() as u32,
+        }),
     }
 }

@@ -31,6 +31,16 @@
 //! again once re-armed. A lost edge costs at most one polling period ([`MasterPort::
 //! wait_any_ready`] also wakes on a timer), never a hang.
 //!
+//! ## The RC's two halves (overlap)
+//! [`MasterFront`] is the [`crate::link::RootBus`] the root logic drives; it hands each
+//! started transfer (with its TX and RX banks) to [`MasterTask`], which owns the
+//! [`MasterPort`] and clocks the phases on an executor of its own (`rc-fw`: an interrupt
+//! executor above the thread executor), then hands the banks back; `finish` waits for that.
+//! The task also publishes the handshake lines it reads, which the front's `ready` and
+//! `wait_ready` use. So the wire runs while the RC composes the next transfer and decodes the
+//! last ([`RC_OVERLAPS`]). [`MasterLink`] is the same protocol clocked inside `finish` (one
+//! task, no overlap): both call the same transfer code.
+//!
 //! ## Banks
 //! The node's link owns two TX banks (the one armed in DMA, the one `post` fills: double
 //! buffer), two RX banks handed to the node logic in turn (double buffer: a broadcast can
@@ -38,10 +48,13 @@
 //! transfer when both RX banks are full (counted as an overflow; scene chunks lost that way
 //! are repaired by the root logic).
 
+mod bus_task;
+mod clock;
 mod framing;
 mod master;
 mod slave;
 
+pub use bus_task::{MasterFront, MasterShared, MasterTask};
 pub use framing::{
     nc_header, rc_header, Bank, Header, PortError, ACK, BANK, CRC16, HEADER, NAK, TRAILER,
 };

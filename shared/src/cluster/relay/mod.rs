@@ -1,0 +1,158 @@
+//! Relay RCs: how the F407 board reaches 64 and 256 nodes (`docs/hardware.md`, "Reaching 64
+//! and 256 nodes"). A relay is a node on its parent's bus ([`NodeLink`]) and the root of a
+//! bus of its own ([`RootBus`]); the root drives its relays through [`RelayedBus`], a
+//! [`RootBus`] over the nodes behind them, so `run_bus` and `run_node` run unchanged.
+//!
+//! - **Broadcasts, store-and-forward:** the root's broadcasts (scene chunks, `SceneEnd`,
+//!   `Wake`, `Stop`) cross the parent's link as one link broadcast each, tagged
+//!   ([`batch::TAG_FORWARD`]); each relay broadcasts the frame unchanged on its bus once it
+//!   has all of it. After forwarding `Stop` the relay ends.
+//! - **Exchanges, routed:** the root composes a node's reply before it sees the node's
+//!   frame (the link's exchange semantics), so a relay clocks a node only with the root's
+//!   reply in hand: it reports the nodes whose ready line is up (`waiting`, in every batch
+//!   it posts), the root composes the reply for one of them ([`RelayedBus`]'s `start`), the
+//!   reply goes down as a [`Kind::Request`] record, the relay clocks that node's exchange
+//!   and sends the node's frame up as a [`Kind::Frame`] record, and `finish` returns it.
+//!   The node sees exactly the exchanges of a direct bus.
+//! - **Batched:** whatever a relay has gathered when its parent clocks it goes up in one
+//!   exchange (one chip-select handshake, header and trailer): the `waiting` bitmap and the
+//!   node frames, up to [`BATCH_BYTES`] (one link frame). Routing costs [`RECORD`] bytes
+//!   per frame and [`BATCH_HEADER`] per batch; the longest node frame or reply the protocol
+//!   produces fits a batch on its own ([`MAX_ROUTED`], checked by a test).
+//!
+//! Replies are routed by node number: records name a node by its index on its relay's bus
+//! (a relay needs no strap to know where it sits; [`RelayedBus`] maps the root's numbers),
+//! and a request for a node not on the relay's bus, or not waiting, is counted and dropped (the root re-sends a request in every exchange with that relay until the
+//! node's frame comes back, so a lost down half costs one more exchange). Nothing read from
+//! either link can make the relay panic; no heap: the relay's buffers are the caller's.
+//!
+//! Limits of this version: [`RelayedBus`] has one node exchange in flight per root bus (a
+//! frame crosses the parent's link twice per exchange, request down and frame up), and a
+//! relay that stops answering stalls the root's `finish` (no time-out through a relay yet).
+
+mod batch;
+mod node;
+mod root;
+
+pub use batch::{
+    forward, parse, BatchWriter, Kind, Record, Records, Relayed, BATCH_BYTES, BATCH_HEADER,
+    MAX_RELAY_NODES, MAX_ROUTED, RECORD, TAG_BATCH, TAG_FORWARD,
+};
+pub use node::{run_relay, RelayBuffers, RelayReport};
+pub use root::{RelayedBus, RelayedCounters};
+
+use crate::cluster::link::{LinkError, NodeId};
+use core::fmt;
+
+/// What went wrong on a relay link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RelayError {
+    /// A frame ended inside a header.
+    Truncated,
+    /// A frame whose first byte is no relay tag.
+    UnknownTag { tag: u8 },
+    /// A record of an unknown kind.
+    UnknownKind { kind: u8 },
+    /// A length beyond the frame or buffer.
+    TooLong { len: u32, max: u32 },
+    /// A record that does not fit the batch being built.
+    Full,
+    /// A bus with more nodes than a relay reports ([`MAX_RELAY_NODES`]), or a tree whose
+    /// node numbers do not fit.
+    TooManyNodes { nodes: u32, most: u32 },
+    /// The link under the relay logic failed.
+    Link(LinkError),
+}
+
+impl fmt::Display for RelayError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match *self {
+            RelayError::Truncated => write!(f, "relay frame ends inside a header"),
+            RelayError::UnknownTag { tag } => write!(f, "relay frame with unknown tag {tag:#04x}"),
+            RelayError::UnknownKind { kind } => write!(f, "relay record of unknown kind {kind}"),
+            RelayError::TooLong { len, max } => {
+                write!(f, "relay record of {len} bytes exceeds the {max} left")
+            }
+            RelayError::Full => write!(f, "relay batch is full"),
+            RelayError::TooManyNodes { nodes, most } => {
+                write!(f, "{nodes} nodes behind a relay link, at most {most}")
+            }
+            RelayError::Link(e) => write!(f, "relay link: {e}"),
+        }
+    }
+}
+
+impl core::error::Error for RelayError {}
+
+impl From<LinkError> for RelayError {
+    fn from(e: LinkError) -> Self {
+        RelayError::Link(e)
+    }
+}
+
+/// Bit of node `node` in a relay's `waiting` bitmap, for a bus from `first` (None: not on
+/// it, or beyond the bitmap).
+fn bit(first: NodeId, count: u16, node: NodeId) -> Option<u32> {
+    node.checked_sub(first)
+        .filter(|&i| i < count && i < MAX_RELAY_NODES)
+        .map(|i| 1u32 << i)
+}
+
+/// Every link frame a relay exchanges fits both ends' banks.
+const _: () = assert!(BATCH_HEADER + RECORD + MAX_ROUTED == crate::cluster::wire::MAX_MESSAGE);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cluster::wire::{self, Down, Job, Region, Up, JOB_QUEUE, MAX_RUN, SCENE_CHUNK};
+
+    /// The longest frames the node and root logic produce fit one routed record.
+    #[test]
+    fn the_longest_protocol_frames_fit_a_routed_record() {
+        let mut buf = [0u8; 4096];
+        let rgb = [0xffu8; 3 * MAX_RUN];
+        let up = Up::Pixels {
+            job: u32::MAX,
+            frame: u16::MAX,
+            y: u16::MAX,
+            x: u16::MAX,
+            rgb: &rgb,
+            done: true,
+        };
+        let n = wire::encode(u16::MAX, u16::MAX, &up, &mut buf).unwrap();
+        assert!(
+            n <= MAX_ROUTED,
+            "largest Up is {n} bytes, routed {MAX_ROUTED}"
+        );
+        let data = [0xffu8; SCENE_CHUNK];
+        let scene = Down::Scene {
+            frame: u16::MAX,
+            offset: u32::MAX,
+            total: u32::MAX,
+            crc: u32::MAX,
+            data: &data,
+        };
+        let n = wire::encode(u16::MAX, u16::MAX, &scene, &mut buf).unwrap();
+        assert!(n <= MAX_ROUTED, "largest Scene is {n} bytes");
+        let job = Job {
+            id: u32::MAX,
+            frame: u16::MAX,
+            region: Region::Rect {
+                x: u16::MAX,
+                y: u16::MAX,
+                w: u16::MAX,
+                h: u16::MAX,
+            },
+        };
+        let work = Down::Work {
+            jobs: [Some(job); JOB_QUEUE],
+        };
+        let n = wire::encode(u16::MAX, u16::MAX, &work, &mut buf).unwrap();
+        assert!(n <= MAX_ROUTED);
+        assert_eq!(bit(8, 8, 9), Some(2));
+        assert_eq!(bit(8, 8, 16), None);
+        assert_eq!(bit(8, 8, 7), None);
+        assert_eq!(bit(0, 40, 33), None, "beyond the bitmap");
+    }
+}

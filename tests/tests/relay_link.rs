@@ -1,0 +1,269 @@
+//! Relay RCs (`links_core::relay`) over the emulated SPI buses of `links_core::testkit::spi`:
+//! the root's `run_bus` drives `RelayedBus` over its link to the relays; each relay runs
+//! `run_relay` (a node on the root's bus through the firmware's `SlaveTask`, the root of its
+//! own bus through the split master link); the nodes run `run_node` on the relays' buses.
+//! The frame must equal the single-node render bit for bit.
+
+use core::future::Future;
+use core::pin::Pin;
+use core::task::Poll;
+use embassy_futures::join::join;
+use embassy_futures::select::{select, Either};
+use links_core::dm::{compile, CompileOptions};
+use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
+use links_core::relay::{run_relay, RelayBuffers, RelayReport, RelayedBus};
+use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootReport, RootState};
+use links_core::sched::Policy;
+use links_core::testkit::spi::*;
+use links_core::wire::MAX_MESSAGE;
+use links_host::frame::{render_frame, Precision};
+use links_host::scene_file::load_scene;
+use std::cell::RefCell;
+use std::path::Path;
+
+fn image(w: u32, h: u32) -> Vec<u8> {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
+    let desc = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
+    let opts = CompileOptions {
+        width: Some(w),
+        height: Some(h),
+        ..Default::default()
+    };
+    compile(&desc, &opts).expect("compiles").bytes
+}
+
+struct Frame {
+    w: usize,
+    rgb: Vec<u8>,
+}
+
+impl PixelSink for Frame {
+    fn pixels(&mut self, _frame: u16, y: u16, x: u16, rgb: &[u8]) {
+        let at = 3 * (y as usize * self.w + x as usize);
+        self.rgb[at..at + rgb.len()].copy_from_slice(rgb);
+    }
+}
+
+type Task<T> = Pin<Box<dyn Future<Output = T>>>;
+
+/// Poll every future until all are done; their outputs in order.
+async fn join_all<T>(mut futs: Vec<Task<T>>) -> Vec<T> {
+    let mut out: Vec<Option<T>> = futs.iter().map(|_| None).collect();
+    core::future::poll_fn(|cx| {
+        for (f, o) in futs.iter_mut().zip(out.iter_mut()) {
+            if o.is_none() {
+                if let Poll::Ready(v) = f.as_mut().poll(cx) {
+                    *o = Some(v);
+                }
+            }
+        }
+        if out.iter().all(Option::is_some) {
+            Poll::Ready(())
+        } else {
+            Poll::Pending
+        }
+    })
+    .await;
+    out.into_iter().flatten().collect()
+}
+
+fn leak<T>(v: T) -> &'static mut T {
+    Box::leak(Box::new(v))
+}
+
+/// Node `i` of a relay's bus: `run_node` beside its link task, on scene banks of its own.
+fn node(bus: SharedBus, i: usize, scene_len: usize) -> Task<NodeReport> {
+    Box::pin(async move {
+        let (shared, task, mut port) = slave_link(&bus, i);
+        let shared = leak(shared);
+        let mut handle = shared.handle();
+        let mut report = NodeReport::default();
+        let (mut clock, mut tracer) = (RealTime, Tracing::<f32>::new());
+        let scene = leak(vec![0u8; scene_len]);
+        let odd = leak(vec![0u8; scene_len]);
+        let logic = run_node(
+            NodeConfig::default(),
+            &mut handle,
+            &mut clock,
+            &mut tracer,
+            [&mut scene[..], &mut odd[..]],
+            &mut report,
+        );
+        match select(logic, task.run(&mut port, shared)).await {
+            Either::First(r) => r.expect("node ends on Stop"),
+        }
+        report
+    })
+}
+
+/// Relay `r`: a node (index `r`) on the root's bus, the root of `bus` (its nodes numbered
+/// from 0: the relay's records name its nodes by their place on its bus).
+fn relay(root_bus: SharedBus, r: usize, bus: SharedBus) -> Task<RelayReport> {
+    Box::pin(async move {
+        let (pshared, ptask, mut pport) = slave_link(&root_bus, r);
+        let pshared = leak(pshared);
+        let mut parent = pshared.handle();
+        let (bshared, mut front, btask, mut bport) = master_split(&bus, 0);
+        let buffers = RelayBuffers {
+            down: leak([0u8; MAX_MESSAGE]),
+            up: leak([0u8; MAX_MESSAGE]),
+            node: leak([0u8; MAX_MESSAGE]),
+        };
+        let logic = run_relay(&mut parent, &mut front, buffers);
+        let links = select(
+            ptask.run(&mut pport, pshared),
+            btask.run(&mut bport, bshared),
+        );
+        match select(logic, links).await {
+            Either::First(r) => r.expect("relay ends on Stop"),
+        }
+    })
+}
+
+struct Run {
+    root: RootReport,
+    relays: Vec<RelayReport>,
+    nodes: Vec<NodeReport>,
+    root_bus: SharedBus,
+    relay_buses: Vec<SharedBus>,
+}
+
+/// Render photo1 at 24x16 through `relays` relays of `per` nodes each; the frame must be
+/// the single-node render.
+fn tree(
+    relays: usize,
+    per: usize,
+    faults: Vec<(u64, Dir, usize)>,
+    relay0_faults: Vec<(u64, Dir, usize)>,
+) -> Run {
+    let (w, h) = (24u32, 16u32);
+    let img = image(w, h);
+    let want = render_frame(&img, Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    let nodes = relays * per;
+    let cfg = RootConfig {
+        policy: Policy::DECREASING,
+        nodes: nodes as u16,
+        frames: 1,
+        timeout_us: 0,
+        double_buffer: true,
+    };
+    let scenes = [img.as_slice()];
+    let root = RefCell::new(RootState::new(cfg, &scenes[..]).expect("valid"));
+    let sink = RefCell::new(Frame {
+        w: w as usize,
+        rgb: vec![0; (w * h * 3) as usize],
+    });
+    let root_bus = bus(relays);
+    root_bus.borrow_mut().faults = faults;
+    let relay_buses: Vec<SharedBus> = (0..relays).map(|_| bus(per)).collect();
+    relay_buses[0].borrow_mut().faults = relay0_faults;
+    let (shared, front, task, mut port) = master_split(&root_bus, 0);
+    let mut relayed = RelayedBus::new(front, 0, per as u16).expect("a tree that fits");
+    let rc = async {
+        let logic = run_bus(0, &mut relayed, &NoClock, &root, &scenes[..], &sink);
+        match select(logic, task.run(&mut port, shared)).await {
+            Either::First(r) => r.expect("root runs"),
+        }
+    };
+    let relay_tasks: Vec<Task<RelayReport>> = (0..relays)
+        .map(|r| relay(root_bus.clone(), r, relay_buses[r].clone()))
+        .collect();
+    let node_tasks: Vec<Task<NodeReport>> = (0..nodes)
+        .map(|k| node(relay_buses[k / per].clone(), k % per, img.len()))
+        .collect();
+    let (root_report, (relay_reports, node_reports)) =
+        run(join(rc, join(join_all(relay_tasks), join_all(node_tasks))));
+    assert_eq!(
+        sink.borrow().rgb,
+        want,
+        "the frame through {relays} relay(s) equals the single-node render"
+    );
+    for b in std::iter::once(&root_bus).chain(&relay_buses) {
+        let b = b.borrow();
+        assert!(b.violations.is_empty(), "{:?}", b.violations);
+    }
+    Run {
+        root: root_report,
+        relays: relay_reports,
+        nodes: node_reports,
+        root_bus,
+        relay_buses,
+    }
+}
+
+#[test]
+fn one_relay_of_three_nodes_renders_the_single_node_frame() {
+    let run = tree(1, 3, Vec::new(), Vec::new());
+    let pixels: u64 = run.nodes.iter().map(|n| n.pixels).sum();
+    assert!(pixels >= 24 * 16);
+    assert!(run.nodes.iter().all(|n| n.pixels > 0), "every node worked");
+    let r = run.relays[0];
+    // Every root broadcast reached the relay's bus once (store-and-forward), and the final
+    // Stop (which the root's report does not count) after them.
+    assert_eq!(r.forwarded, run.root.broadcasts + 1);
+    // Every exchange the root made with a node was clocked by the relay.
+    assert_eq!(r.routed, run.root.exchanges);
+    assert_eq!((r.bad_frames, run.root.bad_messages), (0, 0));
+    // The cost of routing: each request goes down twice, once to be served and once more
+    // in the exchange that brings the node's frame up (dropped there as already served).
+    assert_eq!(r.stray_requests, r.routed);
+    assert!(run.relay_buses[0].borrow().transfers > 0);
+}
+
+#[test]
+fn two_relays_under_one_root_render_the_single_node_frame() {
+    let run = tree(2, 3, Vec::new(), Vec::new());
+    // Six nodes share a 24x16 frame of three sub-screens: who renders them depends on who
+    // reported its scene first; every node is exchanged with through its relay.
+    let pixels: u64 = run.nodes.iter().map(|n| n.pixels).sum();
+    assert!(pixels >= 24 * 16);
+    let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
+    assert_eq!(routed, run.root.exchanges);
+    for r in &run.relays {
+        assert_eq!(
+            r.forwarded,
+            run.root.broadcasts + 1,
+            "both relays forwarded all"
+        );
+        assert!(r.routed > 0);
+    }
+    assert_eq!(run.root.bad_messages, 0);
+}
+
+#[test]
+fn corrupt_bytes_on_the_root_link_cost_retries_never_the_frame() {
+    // Transfers on the root's link (its relays' batches and the forwarded broadcasts),
+    // both directions.
+    let faults: Vec<_> = (0..10u64)
+        .map(|k| {
+            let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
+            (20 + 11 * k, dir, (k as usize * 7) % 9)
+        })
+        .collect();
+    let n = faults.len() as u32;
+    let run = tree(2, 3, faults, Vec::new());
+    assert_eq!(run.root_bus.borrow().faults_hit, n, "every fault landed");
+}
+
+#[test]
+fn corrupt_bytes_on_a_relays_bus_are_the_nodes_business_as_on_a_direct_bus() {
+    // Transfers on relay 0's own bus (its broadcasts and its node exchanges), both
+    // directions: the node link's NAK and go-back repair them, the relay routes on.
+    let faults: Vec<_> = (0..8u64)
+        .map(|k| {
+            let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
+            (15 + 9 * k, dir, (k as usize * 5) % 9)
+        })
+        .collect();
+    let n = faults.len() as u32;
+    let run = tree(2, 3, Vec::new(), faults);
+    assert_eq!(
+        run.relay_buses[0].borrow().faults_hit,
+        n,
+        "every fault landed"
+    );
+    let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
+    assert_eq!(routed, run.root.exchanges);
+}
