@@ -1,0 +1,182 @@
+//! `links upload --frames` end to end over a pseudo-terminal: a thread serves the film as the
+//! RC (the firmware's session with two scene banks, `links_host::sim_film`), the `links`
+//! binary streams photo1-orbit's frames and collects them. The frames must be the host
+//! render's byte for byte, the PC never more than one frame ahead, line faults repaired,
+//! and a frame that cannot be read named in the error.
+#![cfg(unix)]
+
+use links_host::sim_film::{serve_film, FilmFaults, FilmLog, FilmServed};
+use serialport::{SerialPort, TTYPort};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::Duration;
+
+const FRAMES: usize = 3;
+
+fn links() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_links"))
+}
+
+fn orbit() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1-orbit.ron")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("links-film-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// Frames 0..3 at 32x30 as `links render --frames` writes them (the reference).
+fn host_render(dir: &Path) {
+    let o = links()
+        .args(["render"])
+        .arg(orbit())
+        .args([
+            "--frames", "0..3", "--width", "32", "--height", "30", "-q", "-o",
+        ])
+        .arg(dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+/// Upload frames 0..3 to a simulated RC with `faults` over a pty; the command's output and
+/// what the RC saw.
+fn upload_film(dir: &Path, faults: FilmFaults) -> (Output, std::io::Result<FilmServed>) {
+    let (mut master, slave) = TTYPort::pair().expect("a pseudo-terminal pair");
+    master.set_timeout(Duration::from_secs(30)).unwrap();
+    let name = slave.name().expect("the slave has a path");
+    let mut rx = master
+        .try_clone_native()
+        .expect("a second master descriptor");
+    rx.set_timeout(Duration::from_millis(2)).unwrap();
+    // Kept open for the whole run (see tests/serial.rs: the PC's last flush races a close).
+    std::mem::forget(master.try_clone_native().expect("a third descriptor"));
+    let rc = std::thread::spawn(move || {
+        serve_film(
+            &mut rx,
+            &mut master,
+            62 * 1024,
+            &faults,
+            Duration::from_secs(20),
+        )
+    });
+    let o = links()
+        .args(["upload"])
+        .arg(orbit())
+        .args(["--frames", "0..3", "--width", "32", "--height", "30"])
+        .args(["--port", &name, "--timeout-ms", "2000"])
+        .args(["--readback-timeout-ms", "2000", "-o"])
+        .arg(dir)
+        .output()
+        .unwrap();
+    drop(slave);
+    (o, rc.join().unwrap())
+}
+
+fn frame_png(dir: &Path, k: usize) -> Vec<u8> {
+    std::fs::read(dir.join(format!("frame-{k:04}.png"))).expect("frame written")
+}
+
+/// Frame `k + 1` was begun only after frame `k` started rendering (and so at most one frame
+/// was ever stored ahead of the cluster), and every frame went begin, start, end, ack.
+fn assert_one_frame_ahead(log: &[FilmLog]) {
+    let at = |e: FilmLog| {
+        log.iter()
+            .position(|&l| l == e)
+            .unwrap_or_else(|| panic!("{e:?} missing from {log:?}"))
+    };
+    for k in 0..FRAMES as u16 {
+        let (b, s, r, a) = (
+            at(FilmLog::Begin(k)),
+            at(FilmLog::Started(k)),
+            at(FilmLog::Rendered(k)),
+            at(FilmLog::Acked(k)),
+        );
+        assert!(b < s && s < r && r < a, "frame {k}: {log:?}");
+        if k > 0 {
+            assert!(
+                at(FilmLog::Started(k - 1)) < b,
+                "frame {k} begun early: {log:?}"
+            );
+            assert!(
+                at(FilmLog::Acked(k - 1)) < s,
+                "frame {k} started early: {log:?}"
+            );
+        }
+    }
+}
+
+fn assert_same_film(got: &Path, want: &Path) {
+    for k in 0..FRAMES {
+        assert!(
+            frame_png(got, k) == frame_png(want, k),
+            "frame {k} differs from the host render"
+        );
+    }
+    let film = |d: &Path| std::fs::read(d.join("film.png")).expect("film.png written");
+    assert!(
+        film(got) == film(want),
+        "film.png differs from the host render's"
+    );
+    assert!(frame_png(want, 0) != frame_png(want, 1) && frame_png(want, 1) != frame_png(want, 2));
+}
+
+#[test]
+fn a_film_uploaded_with_frames_reads_back_as_the_host_renders_it() {
+    let (want, got) = (tmp("host"), tmp("board"));
+    host_render(&want);
+    let (o, served) = upload_film(&got, FilmFaults::default());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let served = served.expect("the RC served the film");
+    assert_same_film(&got, &want);
+    assert_one_frame_ahead(&served.log);
+    assert_eq!((served.naks, served.resends), (0, 0));
+    for k in 0..FRAMES {
+        assert!(err.contains(&format!("frame {k}: rendering")), "{err}");
+        assert!(err.contains(&format!("frame-{k:04}.png 32x30")), "{err}");
+    }
+    assert!(err.contains("film: 3 frames (0..3)"), "{err}");
+}
+
+#[test]
+fn a_corrupted_chunk_and_pixel_run_of_frame_2_are_sent_again() {
+    let (want, got) = (tmp("host-faults"), tmp("board-faults"));
+    host_render(&want);
+    let faults = FilmFaults {
+        corrupt_chunk_of: Some(2),
+        corrupt_run_of: Some(2),
+        ..FilmFaults::default()
+    };
+    let (o, served) = upload_film(&got, faults);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let served = served.expect("the RC served the film");
+    assert_eq!(served.bad_packets, 1, "the corrupted chunk");
+    assert_eq!(served.naks, 1, "one retransmit request for it");
+    assert_eq!(served.resends, 1, "one pixel retransmit request");
+    assert_same_film(&got, &want);
+    assert_one_frame_ahead(&served.log);
+    assert!(err.contains("1 retransmit requests"), "{err}");
+}
+
+#[test]
+fn a_frame_that_fails_its_crc_is_named() {
+    let got = tmp("board-crc");
+    let faults = FilmFaults {
+        wrong_crc_of: Some(2),
+        ..FilmFaults::default()
+    };
+    let (o, _) = upload_film(&got, faults);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("film frame 2: frame 2 failed its CRC check"),
+        "{err}"
+    );
+    // The frames before it were written.
+    frame_png(&got, 0);
+    frame_png(&got, 1);
+}
