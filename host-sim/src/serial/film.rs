@@ -240,24 +240,48 @@ impl Stream<'_> {
                 Ok(None)
             }
             ToPc::FrameStarted { frame } => {
-                if self.awaiting_start == Some(frame) {
-                    self.awaiting_start = None;
-                    (self.events)(FilmEvent::Started { frame });
-                    self.begin_next(line, compile)?;
-                }
+                self.started(line, compile, frame)?;
                 Ok(None)
             }
-            _ => {
-                let r = reading.message(line, msg);
-                r.map_err(|e| {
-                    let frame = reading.frame().map_or(self.next_read, u32::from);
-                    HostSerialError::Film {
-                        frame,
-                        error: Box::new(e),
-                    }
-                })
+            // A lost `FrameStarted`: the frame's header says it too.
+            ToPc::FrameHeader { frame, .. } if self.awaiting_start == Some(frame) => {
+                self.started(line, compile, frame)?;
+                self.read(line, reading, msg)
             }
+            _ => self.read(line, reading, msg),
         }
+    }
+
+    /// A readback message, to the frame being read.
+    fn read<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+        reading: &mut Reading<'_>,
+        msg: &ToPc<'_>,
+    ) -> Result<Option<Readback>, HostSerialError> {
+        reading
+            .message(line, msg)
+            .map_err(|e| self.blame_read(reading, e))
+    }
+
+    /// The RC started `frame`: if it is the one stored (or still being sent: the RC had it
+    /// whole and our `SceneDone` was lost), begin the next.
+    fn started<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+        compile: &mut dyn FnMut(u16) -> Result<Vec<u8>, String>,
+        frame: u16,
+    ) -> Result<(), HostSerialError> {
+        if let Some(s) = self.up.take_if(|s| s.frame == frame) {
+            self.report.bytes += s.up.bytes() as u64;
+            self.awaiting_start = Some(frame);
+        }
+        if self.awaiting_start != Some(frame) {
+            return Ok(());
+        }
+        self.awaiting_start = None;
+        (self.events)(FilmEvent::Started { frame });
+        self.begin_next(line, compile)
     }
 
     /// Compile and begin the next frame's upload, if any is left.
