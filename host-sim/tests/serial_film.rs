@@ -12,6 +12,8 @@ use std::process::{Command, Output};
 use std::time::Duration;
 
 const FRAMES: usize = 3;
+/// The simulated RC's patience with a silent PC.
+const LONG: Duration = Duration::from_secs(20);
 
 fn links() -> Command {
     Command::new(env!("CARGO_BIN_EXE_links"))
@@ -43,7 +45,11 @@ fn host_render(dir: &Path) {
 
 /// Upload frames 0..3 to a simulated RC with `faults` over a pty; the command's output and
 /// what the RC saw.
-fn upload_film(dir: &Path, faults: FilmFaults) -> (Output, std::io::Result<FilmServed>) {
+fn upload_film(
+    dir: &Path,
+    faults: FilmFaults,
+    rc_timeout: Duration,
+) -> (Output, std::io::Result<FilmServed>) {
     let (mut master, slave) = TTYPort::pair().expect("a pseudo-terminal pair");
     master.set_timeout(Duration::from_secs(30)).unwrap();
     let name = slave.name().expect("the slave has a path");
@@ -54,13 +60,7 @@ fn upload_film(dir: &Path, faults: FilmFaults) -> (Output, std::io::Result<FilmS
     // Kept open for the whole run (see tests/serial.rs: the PC's last flush races a close).
     std::mem::forget(master.try_clone_native().expect("a third descriptor"));
     let rc = std::thread::spawn(move || {
-        serve_film(
-            &mut rx,
-            &mut master,
-            62 * 1024,
-            &faults,
-            Duration::from_secs(20),
-        )
+        serve_film(&mut rx, &mut master, 62 * 1024, &faults, rc_timeout)
     });
     let o = links()
         .args(["upload"])
@@ -71,8 +71,9 @@ fn upload_film(dir: &Path, faults: FilmFaults) -> (Output, std::io::Result<FilmS
         .arg(dir)
         .output()
         .unwrap();
+    let served = rc.join().unwrap();
     drop(slave);
-    (o, rc.join().unwrap())
+    (o, served)
 }
 
 fn frame_png(dir: &Path, k: usize) -> Vec<u8> {
@@ -127,7 +128,7 @@ fn assert_same_film(got: &Path, want: &Path) {
 fn a_film_uploaded_with_frames_reads_back_as_the_host_renders_it() {
     let (want, got) = (tmp("host"), tmp("board"));
     host_render(&want);
-    let (o, served) = upload_film(&got, FilmFaults::default());
+    let (o, served) = upload_film(&got, FilmFaults::default(), LONG);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     let served = served.expect("the RC served the film");
@@ -150,7 +151,7 @@ fn a_corrupted_chunk_and_pixel_run_of_frame_2_are_sent_again() {
         corrupt_run_of: Some(2),
         ..FilmFaults::default()
     };
-    let (o, served) = upload_film(&got, faults);
+    let (o, served) = upload_film(&got, faults, LONG);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     let served = served.expect("the RC served the film");
@@ -163,13 +164,66 @@ fn a_corrupted_chunk_and_pixel_run_of_frame_2_are_sent_again() {
 }
 
 #[test]
+fn a_lost_frame_started_is_read_from_the_frame_header() {
+    let (want, got) = (tmp("host-started"), tmp("board-started"));
+    host_render(&want);
+    let faults = FilmFaults {
+        lose_started_of: Some(1),
+        ..FilmFaults::default()
+    };
+    let (o, served) = upload_film(&got, faults, LONG);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_one_frame_ahead(&served.expect("the RC served the film").log);
+    assert_same_film(&got, &want);
+}
+
+#[test]
+fn readback_with_frames_collects_the_frames_an_rc_streams() {
+    let (want, got) = (tmp("host-rb"), tmp("board-rb"));
+    host_render(&want);
+    let frames: Vec<Vec<u8>> = (0..FRAMES)
+        .map(|k| {
+            links_host::frame::decode_png_rgb(&frame_png(&want, k))
+                .unwrap()
+                .2
+        })
+        .collect();
+    let (mut master, slave) = TTYPort::pair().expect("a pseudo-terminal pair");
+    master.set_timeout(Duration::from_secs(30)).unwrap();
+    let name = slave.name().expect("the slave has a path");
+    std::mem::forget(master.try_clone_native().expect("a second descriptor"));
+    let rc = std::thread::spawn(move || {
+        for (k, rgb) in frames.into_iter().enumerate() {
+            let mut rc = links_host::sim_rc::SimRc::new(k as u16, 32, 30, rgb).unwrap();
+            rc.stream(&mut master).unwrap();
+            rc.answer(&mut master, Duration::from_secs(20)).unwrap();
+        }
+    });
+    let o = links()
+        .args([
+            "readback", "--frames", "0..3", "--rate", "12", "--port", &name, "-o",
+        ])
+        .arg(&got)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    rc.join().unwrap();
+    drop(slave);
+    for k in 0..FRAMES {
+        assert!(frame_png(&got, k) == frame_png(&want, k), "frame {k}");
+    }
+    assert!(err.contains("film: 3 frames (0..3)"), "{err}");
+}
+
+#[test]
 fn a_frame_that_fails_its_crc_is_named() {
     let got = tmp("board-crc");
     let faults = FilmFaults {
         wrong_crc_of: Some(2),
         ..FilmFaults::default()
     };
-    let (o, _) = upload_film(&got, faults);
+    let (o, _) = upload_film(&got, faults, Duration::from_secs(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(!o.status.success(), "{err}");
     assert!(

@@ -6,7 +6,7 @@
 //! A..B -o DIR/` collects frames A..B-1 an RC is already streaming (e.g. after `links upload
 //! SCENE --render N`, frames 0..N-1), one CRC-checked readback each.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use links_core::anim::Film;
@@ -17,7 +17,7 @@ use super::readback::ReadbackArgs;
 use super::upload::UploadArgs;
 use super::{node, CliError};
 use crate::serial::cli::{deadline, open_checked};
-use crate::serial::film::{stream_film, FilmEvent, FilmOptions};
+use crate::serial::film::{stream_film, FilmEvent, FilmOptions, FilmReport};
 use crate::serial::{readback, Readback, ReadbackOptions, UploadOptions};
 
 /// The film's frame numbers on the wire (u16): first and count.
@@ -57,17 +57,7 @@ pub fn upload_film(a: &UploadArgs, range: FrameRange) -> Result<(), CliError> {
     // Bytes already waiting are no answers to this film.
     port.clear(serialport::ClearBuffer::Input)
         .map_err(|e| CliError::Failed(format!("serial port {}: {e}", a.port)))?;
-    let opts = FilmOptions {
-        upload: UploadOptions {
-            reply_timeout: Duration::from_millis(a.timeout_ms),
-            ..UploadOptions::default()
-        },
-        readback: ReadbackOptions {
-            timeout: Duration::from_millis(a.readback_timeout_ms),
-            deadline: deadline(a.deadline_s).flatten(),
-            ..ReadbackOptions::default()
-        },
-    };
+    let opts = film_options(a);
     let compile_opts = a.scene.compile_options();
     let shown = path.display().to_string();
     let mut compile = |k: u16| -> Result<Vec<u8>, String> {
@@ -124,24 +114,50 @@ pub fn upload_film(a: &UploadArgs, range: FrameRange) -> Result<(), CliError> {
     out.finish()?;
     if !quiet {
         let secs = t0.elapsed().as_secs_f64();
-        eprintln!(
-            "film: {} frames ({}..{}) of {shown} over {} in {secs:.2} s ({:.2} frames/s) | uploaded {} B ({:.0} B/frame, {} chunks, {} retransmit requests, {} time-outs) | read back with {} retransmit requests, {} malformed messages | {} (animated PNG)",
-            r.frames,
-            range.start,
-            range.end,
-            a.port,
-            f64::from(r.frames) / secs.max(1e-9),
-            r.bytes,
-            r.bytes as f64 / f64::from(r.frames.max(1)),
-            r.chunks_sent,
-            r.naks,
-            r.timeouts,
-            r.resends,
-            r.bad_packets,
-            film_path.display()
-        );
+        eprintln!("{}", summary(&r, range, &shown, &a.port, secs, &film_path));
     }
     Ok(())
+}
+
+/// The upload's and readback's settings from the command line.
+fn film_options(a: &UploadArgs) -> FilmOptions {
+    FilmOptions {
+        upload: UploadOptions {
+            reply_timeout: Duration::from_millis(a.timeout_ms),
+            ..UploadOptions::default()
+        },
+        readback: ReadbackOptions {
+            timeout: Duration::from_millis(a.readback_timeout_ms),
+            deadline: deadline(a.deadline_s).flatten(),
+            ..ReadbackOptions::default()
+        },
+    }
+}
+
+/// The film's line: frames, time, bytes uploaded, repairs.
+fn summary(
+    r: &FilmReport,
+    range: FrameRange,
+    scene: &str,
+    port: &str,
+    secs: f64,
+    film_path: &Path,
+) -> String {
+    format!(
+        "film: {} frames ({}..{}) of {scene} over {port} in {secs:.2} s ({:.2} frames/s) | uploaded {} B ({:.0} B/frame, {} chunks, {} retransmit requests, {} time-outs) | read back with {} retransmit requests, {} malformed messages | {} (animated PNG)",
+        r.frames,
+        range.start,
+        range.end,
+        f64::from(r.frames) / secs.max(1e-9),
+        r.bytes,
+        r.bytes as f64 / f64::from(r.frames.max(1)),
+        r.chunks_sent,
+        r.naks,
+        r.timeouts,
+        r.resends,
+        r.bad_packets,
+        film_path.display()
+    )
 }
 
 fn rate(film: &Film) -> f64 {

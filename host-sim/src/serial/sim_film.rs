@@ -25,6 +25,9 @@ pub struct FilmFaults {
     pub corrupt_run_of: Option<u16>,
     /// Announce a wrong CRC in every `FrameEnd` of this frame.
     pub wrong_crc_of: Option<u16>,
+    /// Lose this frame's `FrameStarted` on the line (the PC must take its header as the
+    /// start).
+    pub lose_started_of: Option<u16>,
 }
 
 /// A film event on the RC, in the order it happened.
@@ -211,7 +214,9 @@ impl<W: Write> Rc<'_, '_, W> {
         let Some((frame, n)) = self.session.start_next() else {
             return Ok(());
         };
-        self.tx.write_all(self.session.reply(n))?;
+        if self.faults.lose_started_of != Some(frame) {
+            self.tx.write_all(self.session.reply(n))?;
+        }
         self.served.log.push(FilmLog::Started(frame));
         let image = self
             .session
