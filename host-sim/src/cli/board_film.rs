@@ -168,6 +168,12 @@ fn rate(film: &Film) -> f64 {
 /// numbered below A are skipped, a frame past the one due is an error naming both.
 pub fn readback_film(a: &ReadbackArgs, range: FrameRange) -> Result<(), CliError> {
     let (first, count) = wire_range(range)?;
+    if !(a.rate.is_finite() && a.rate > 0.0) {
+        return Err(CliError::Usage(format!(
+            "--rate {}: frames per second must be a positive number",
+            a.rate
+        )));
+    }
     let dir = output_dir(&film_output(&a.output))?;
     let mut port = open_checked(&a.port, a.baud, a.timeout_ms)?;
     let opts = ReadbackOptions {

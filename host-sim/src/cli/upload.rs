@@ -41,7 +41,7 @@ pub struct UploadArgs {
     /// frame-NNNN.png plus the animated film.png. A still scene has the one frame 0..1
     #[arg(long, value_parser = parse_frames, value_name = "A..B")]
     pub frames: Option<FrameRange>,
-    /// With --frames: the directory the frames are written to
+    /// With --frames: the directory the frames are written to (default film/)
     #[arg(short, long, requires = "frames", value_name = "DIR")]
     pub output: Option<PathBuf>,
     /// With --frames: longest silence from the RC while reading a frame back before asking
