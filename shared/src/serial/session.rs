@@ -116,6 +116,18 @@ impl<'b> Session<'b> {
                     len,
                     crc,
                 } => self.frame_begin(frame, frames, len, crc),
+                // A still upload ends a film's upload: a frame loaded and not started is
+                // dropped (the still goes to the even bank).
+                msg @ ToRc::SceneBegin { .. } => {
+                    self.film.loading = None;
+                    to_bank(
+                        &mut self.film,
+                        [&mut self.upload, &mut self.odd],
+                        &mut self.enc,
+                        &mut self.out,
+                        &msg,
+                    )
+                }
                 msg => to_bank(
                     &mut self.film,
                     [&mut self.upload, &mut self.odd],
@@ -356,5 +368,19 @@ mod tests {
         assert_eq!(s.start_next().map(|(f, _)| f), Some(1));
         assert_eq!(film_frame(&mut s, &mut pc, 2, &frames[2]), done(&frames[2]));
         assert_eq!(s.upload.image(), Some(&frames[2][..]));
+        // A still upload drops frame 2 (stored, not started) and takes the even bank.
+        let still = &frames[0][..300];
+        let (len, crc) = (still.len() as u32, CRC32.checksum(still));
+        let (r, _) = feed(&mut s, &pc_frame(&mut pc, &ToRc::SceneBegin { len, crc }));
+        assert_eq!(r, ["Ack { offset: 0 }"]);
+        assert_eq!(s.film.loading, None);
+        let chunk = ToRc::SceneChunk {
+            offset: 0,
+            data: still,
+        };
+        let (r, _) = feed(&mut s, &pc_frame(&mut pc, &chunk));
+        assert_eq!(r, [format!("SceneDone {{ len: {len}, crc: {crc} }}")]);
+        assert_eq!(s.upload.image(), Some(still));
+        assert_eq!(s.start_next(), None, "a still is no film frame");
     }
 }
