@@ -215,41 +215,17 @@ pub fn readback_with_clock<P: Read + Write>(
             Some(Ok(p)) => p,
         };
         deadline = line.after(opts.timeout);
-        let kind = kind(&packet.msg);
-        // Whether this (non-pixel) message is progress.
-        let mut news = false;
         match packet.msg {
-            ToPc::FrameHeader {
-                frame,
-                width,
-                height,
-            } => news = rb.header(frame, width, height)?,
-            ToPc::Progress { frame, done, total } => {
-                progress(ReadbackEvent::Rendering { done, total });
-                news = rb
-                    .asm
-                    .as_ref()
-                    .is_some_and(|a| rb.watch.progressed(a, frame, done, total));
-            }
             ToPc::Error {
                 code: RcError::Version { found },
             } => return Err(HostSerialError::Version { found }),
             ToPc::Error { code } => return Err(HostSerialError::Rc(code)),
-            m @ (ToPc::Pixels { .. } | ToPc::PixelsRle { .. }) => {
-                rb.pixels(&m)?;
-                continue;
-            }
-            ToPc::FrameEnd { frame, crc } => {
-                if let Some(done) = rb.frame_end(&mut line, frame, crc)? {
+            ref m => {
+                if let Some(done) = rb.message(&mut line, m)? {
                     return Ok(done);
                 }
             }
-            ToPc::Ack { .. }
-            | ToPc::Nak { .. }
-            | ToPc::SceneDone { .. }
-            | ToPc::FrameStarted { .. } => {}
         }
-        rb.watch.message(news, kind, opts.idle_messages)?;
     }
 }
 
