@@ -50,6 +50,16 @@ fn upload_film(
     faults: FilmFaults,
     rc_timeout: Duration,
 ) -> (Output, std::io::Result<FilmServed>) {
+    upload_film_to(dir, faults, rc_timeout, 62 * 1024)
+}
+
+/// [`upload_film`] to an RC whose scene banks hold `bank` bytes each.
+fn upload_film_to(
+    dir: &Path,
+    faults: FilmFaults,
+    rc_timeout: Duration,
+    bank: usize,
+) -> (Output, std::io::Result<FilmServed>) {
     let (mut master, slave) = TTYPort::pair().expect("a pseudo-terminal pair");
     master.set_timeout(Duration::from_secs(30)).unwrap();
     let name = slave.name().expect("the slave has a path");
@@ -59,9 +69,8 @@ fn upload_film(
     rx.set_timeout(Duration::from_millis(2)).unwrap();
     // Kept open for the whole run (see tests/serial.rs: the PC's last flush races a close).
     std::mem::forget(master.try_clone_native().expect("a third descriptor"));
-    let rc = std::thread::spawn(move || {
-        serve_film(&mut rx, &mut master, 62 * 1024, &faults, rc_timeout)
-    });
+    let rc =
+        std::thread::spawn(move || serve_film(&mut rx, &mut master, bank, &faults, rc_timeout));
     let o = links()
         .args(["upload"])
         .arg(orbit())
@@ -233,4 +242,21 @@ fn a_frame_that_fails_its_crc_is_named() {
     // The frames before it were written.
     frame_png(&got, 0);
     frame_png(&got, 1);
+}
+
+#[test]
+fn a_frame_the_rc_refuses_is_named() {
+    let got = tmp("board-refused");
+    // photo1-orbit's frames at 32x30 are 18,292, 18,272 and 18,452 bytes: the third does
+    // not fit banks of 18,400.
+    let (o, _) = upload_film_to(&got, FilmFaults::default(), Duration::from_secs(1), 18_400);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains(
+            "film frame 2: the RC refused: scene of 18452 bytes does not fit the RC's 18400-byte scene buffer"
+        ),
+        "{err}"
+    );
+    frame_png(&got, 0);
 }
