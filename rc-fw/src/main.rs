@@ -253,17 +253,18 @@ mod fw {
             Step::Resend { frame, start, len } => {
                 // A film frame's scene is in its bank until its FrameAck; a still's in the
                 // even bank.
-                let bank = session.film.resend_bank(frame).unwrap_or(0);
-                let (fs, image) = (last.as_ref(), session.bank(bank).image());
-                match (fs, image) {
+                let image = match session.film.resend_bank(frame) {
+                    Some(1) => session.odd.image(),
+                    _ => session.upload.image(),
+                };
+                match (last.as_ref(), image) {
                     (Some(fs), Some(image)) if fs.frame() == frame => {
-                        let mut enc = Encoder::new();
                         let r = resend_span(
                             fs,
                             image,
                             start,
                             len,
-                            &mut enc,
+                            &mut session.enc,
                             &PipeQueue(&USB_QUEUE),
                             &mut PipeQueue(&USB_QUEUE),
                         )

@@ -70,6 +70,14 @@ impl FilmState {
                 });
             }
         }
+        // A rendered frame whose successor is not the one begun was given up by the PC (a
+        // failed film, begun again): its bank is free.
+        if self
+            .current
+            .is_some_and(|c| c.rendered && c.frame.wrapping_add(1) != frame)
+        {
+            self.current = None;
+        }
         if let Some(c) = self.current.filter(|c| bank_of(c.frame) == bank) {
             return Err(RcError::FilmBusy {
                 frame,
@@ -182,5 +190,10 @@ mod tests {
                 holder: 5
             })
         );
+        // The PC gave up after frame 5 rendered (no FrameAck) and begins the film again:
+        // frame 5's bank is free for frame 1.
+        f.rendered(5);
+        assert_eq!(f.begin(1, 3), Ok(Begin::New { bank: 1 }));
+        assert_eq!(f.current, None);
     }
 }

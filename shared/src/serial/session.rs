@@ -77,9 +77,11 @@ impl<'b> Session<'b> {
         self.dec.bad_packets()
     }
 
-    /// The line was reset (USB reconnect): forget a partial frame.
+    /// The line was reset (USB reconnect): forget a partial frame, and any film (a new
+    /// connection begins its own).
     pub fn line_reset(&mut self) {
         self.dec.reset();
+        self.film = FilmState::default();
     }
 
     /// If the cluster is free and a film frame is stored, start it: returns its number and
