@@ -29,7 +29,8 @@ pub struct UploadArgs {
     /// How long to wait for the RC's answer to one message before sending it again, in ms
     #[arg(long, default_value_t = 1000)]
     pub timeout_ms: u64,
-    /// Give up after this many seconds in all (default: from the scene size and baud rate; 0: never)
+    /// Give up after this many seconds in all (default: from the scene size and baud rate; with
+    /// --frames: none; 0: never)
     #[arg(long)]
     pub deadline_s: Option<u64>,
     /// Then ask the RC to render this many frames (of the one scene)
