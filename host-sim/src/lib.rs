@@ -19,6 +19,7 @@ pub mod vec3;
 pub use cli::image_file as cli_image;
 pub use serial::cli as cli_serial;
 pub use serial::host as serial_host;
+pub use serial::sim_film;
 pub use serial::sim_rc;
 pub use sim::cluster;
 pub use sim::cost;

@@ -45,11 +45,18 @@ pub mod plan {
     /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
     /// through the TX bank): what the DMA banks leave, in whole KB.
     pub const SCENE: usize = (SRAM - LINK_BANKS) / 1024 * 1024;
+    /// A film's two scene banks split [`SCENE`]: frame k is uploaded into one while frame
+    /// k - 1 renders from the other (`links_core::serial::film`). Each holds more than a
+    /// node's scene bank, so a film frame the nodes can take fits the RC too; a still scene
+    /// uses the first. No RAM is added: the 123 KB region is shared out.
+    pub const FILM_BANK: usize = SCENE / 2;
     /// Bytes of serial frames queued for USB (in CCM).
     pub const USB_QUEUE: usize = 8 * 1024;
 
     const _: () = assert!(LINK_BANKS + SCENE <= SRAM);
     const _: () = assert!(SCENE <= links_core::wire::MAX_SCENE);
+    // Every SceneImage a node's bank holds fits one film bank of the RC.
+    const _: () = assert!(FILM_BANK >= crate::link::PROFILE.node.bank(0));
     const _: () = assert!(USB_QUEUE >= 4 * links_core::serial::MAX_TO_PC);
     // The throttle holds two exchanges' runs back (one may be in flight, double buffering)
     // plus a frame header.

@@ -23,6 +23,7 @@ mod relay_role;
 mod fw {
     use defmt::{info, unwrap, warn};
     use embassy_executor::{InterruptExecutor, Spawner};
+    use embassy_futures::select::{select, Either};
     use embassy_stm32::exti::{self, ExtiInput};
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
     use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -37,13 +38,16 @@ mod fw {
     use embassy_usb::{Builder, UsbDevice};
     use links_board::rs485::Rs485;
     use links_core::backup;
-    use links_core::serial::FrameStreamer;
+    use links_core::serial::film::bank_of;
+    use links_core::serial::readback::ByteQueue;
+    use links_core::serial::throttle::Room;
+    use links_core::serial::{Encoder, FrameStreamer};
     use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
     use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS};
     use rc_fw::pins::NODES;
-    use rc_fw::plan::SCENE;
+    use rc_fw::plan::{FILM_BANK, SCENE};
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
-    use rc_fw::render::{render_frames, resend_span};
+    use rc_fw::render::{render_film_frame, render_frames, reply_room, resend_span};
     use rc_fw::session::{Session, Step};
     use static_cell::{ConstStaticCell, StaticCell};
     use {defmt_rtt as _, panic_probe as _};
@@ -72,6 +76,11 @@ mod fw {
     }
 
     static USB_QUEUE: UsbPipe = Pipe::new();
+    static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+    static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+    static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
+    static CONTROL: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
+    static CDC: StaticCell<State<'static>> = StaticCell::new();
     /// The bus link's two halves share this: the front (`serial_task`, thread mode) hands
     /// transfers over, the bus task clocks them.
     static BUS: MasterShared<'static> = MasterShared::new();
@@ -92,11 +101,6 @@ mod fw {
         let mut port = port;
         MasterTask::new().run(&mut port, &BUS).await
     }
-    static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
-    static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
-    static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
-    static CONTROL: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
-    static CDC: StaticCell<State<'static>> = StaticCell::new();
 
     #[embassy_executor::task]
     async fn usb_task(mut device: UsbDevice<'static, UsbDriver>) {
@@ -145,15 +149,83 @@ mod fw {
         USB_QUEUE.write_all(bytes).await;
     }
 
-    /// The PC protocol: scene upload, render requests, readback acknowledgements
-    /// (`rc_fw::session`, host-tested), acted on here.
+    /// Film frames the session has ready: each rendered from its bank (lent out of the
+    /// session) while the PC's bytes go on into the session, so the next frame's upload
+    /// lands in the other bank meanwhile. Upload replies wait until the queue keeps the
+    /// pixel runs' room after them (`render::reply_room`).
+    async fn film_frames(
+        rx: &mut Receiver<'static, UsbDriver>,
+        link: &mut Link,
+        session: &mut Session<'static>,
+        film_enc: &mut Encoder,
+        last: &mut Option<FrameStreamer>,
+    ) {
+        while let Some((frame, n)) = session.start_next() {
+            queue(session.reply(n)).await;
+            let bank = bank_of(frame);
+            let Some((buf, len)) = session.bank(bank).lend() else {
+                warn!("film frame {}: its bank holds no scene", frame);
+                continue;
+            };
+            info!(
+                "film frame {} of {}: {} bytes",
+                frame, session.film.frames, len
+            );
+            let (room, mut out) = (PipeQueue(&USB_QUEUE), PipeQueue(&USB_QUEUE));
+            let render = render_film_frame(
+                link,
+                &Clock,
+                &room,
+                &mut out,
+                &buf[..len],
+                frame,
+                NODES as u16,
+                film_enc,
+                last,
+            );
+            match select(render, receive_during_render(rx, session)).await {
+                Either::First(Ok(report)) => info!("frame {}: {}", frame, report),
+                Either::First(Err(e)) => warn!("film frame {} failed: {}", frame, e),
+                Either::Second(()) => warn!("PC disconnected during film frame {}", frame),
+            }
+            session.bank(bank).restore(buf);
+            session.film.rendered(frame);
+        }
+    }
+
+    /// The PC's bytes while a film frame renders: uploads (the next frame) are answered;
+    /// anything else waits for the frame's end (the PC asks again after its time-out).
+    /// Returns when the PC disconnects.
+    async fn receive_during_render(
+        rx: &mut Receiver<'static, UsbDriver>,
+        session: &mut Session<'static>,
+    ) {
+        let mut pkt = [0u8; 64];
+        while let Ok(n) = rx.read_packet(&mut pkt).await {
+            for &b in &pkt[..n] {
+                if let Step::Reply(len) = session.feed(b) {
+                    let room = PipeQueue(&USB_QUEUE);
+                    room.wait_room(reply_room(len)).await;
+                    if !PipeQueue(&USB_QUEUE).push(session.reply(len)) {
+                        warn!("upload reply dropped");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The PC protocol: scene upload, render requests, readback acknowledgements, film
+    /// frames (`rc_fw::session`, host-tested), acted on here.
     #[embassy_executor::task]
     async fn serial_task(
         mut rx: Receiver<'static, UsbDriver>,
         mut link: Link,
         scene: &'static mut [u8],
     ) {
-        let mut session = Session::new(scene);
+        // Two banks: still scenes and even film frames, odd film frames.
+        let (even, odd) = scene.split_at_mut(FILM_BANK);
+        let mut session = Session::with_banks(even, odd);
+        let mut film_enc = Encoder::new();
         let mut pkt = [0u8; 64];
         let mut last: Option<FrameStreamer> = None;
         loop {
@@ -161,58 +233,77 @@ mod fw {
             info!("PC connected");
             while let Ok(n) = rx.read_packet(&mut pkt).await {
                 for &b in &pkt[..n] {
-                    match session.feed(b) {
-                        Step::Nothing => {}
-                        Step::Reply(len) => queue(session.reply(len)).await,
-                        Step::Acked { frame } => info!("PC has frame {}", frame),
-                        Step::Render { frames } => {
-                            let Some(image) = session.upload.image() else {
-                                continue;
-                            };
-                            info!("render {} frame(s) of a {}-byte scene", frames, image.len());
-                            let r = render_frames(
-                                &mut link,
-                                &Clock,
-                                &PipeQueue(&USB_QUEUE),
-                                &mut PipeQueue(&USB_QUEUE),
-                                image,
-                                frames,
-                                NODES as u16,
-                                &mut session.enc,
-                                &mut last,
-                            )
+                    let step = session.feed(b);
+                    on_step(step, &mut link, &mut session, &mut last).await;
+                    if session.film.current.is_none() && session.film.loading.is_some() {
+                        film_frames(&mut rx, &mut link, &mut session, &mut film_enc, &mut last)
                             .await;
-                            match r {
-                                Ok(report) => {
-                                    info!("rendered: {} / link {}", report, link.counters())
-                                }
-                                Err(e) => warn!("render failed: {}", e),
-                            }
-                        }
-                        Step::Resend { frame, start, len } => {
-                            match (last.as_ref(), session.upload.image()) {
-                                (Some(fs), Some(image)) if fs.frame() == frame => {
-                                    let r = resend_span(
-                                        fs,
-                                        image,
-                                        start,
-                                        len,
-                                        &mut session.enc,
-                                        &PipeQueue(&USB_QUEUE),
-                                        &mut PipeQueue(&USB_QUEUE),
-                                    )
-                                    .await;
-                                    if let Err(e) = r {
-                                        warn!("resend failed: {}", e);
-                                    }
-                                }
-                                _ => warn!("resend of frame {}: not the last frame", frame),
-                            }
-                        }
                     }
                 }
             }
             session.line_reset();
+        }
+    }
+
+    /// Act on one step of the session (not film frames).
+    async fn on_step(
+        step: Step,
+        link: &mut Link,
+        session: &mut Session<'static>,
+        last: &mut Option<FrameStreamer>,
+    ) {
+        match step {
+            Step::Nothing => {}
+            Step::Reply(len) => queue(session.reply(len)).await,
+            Step::Acked { frame } => info!("PC has frame {}", frame),
+            Step::Render { frames } => {
+                let Some(image) = session.upload.image() else {
+                    return;
+                };
+                info!("render {} frame(s) of a {}-byte scene", frames, image.len());
+                let r = render_frames(
+                    link,
+                    &Clock,
+                    &PipeQueue(&USB_QUEUE),
+                    &mut PipeQueue(&USB_QUEUE),
+                    image,
+                    frames,
+                    NODES as u16,
+                    &mut session.enc,
+                    last,
+                )
+                .await;
+                match r {
+                    Ok(report) => info!("rendered: {} / link {}", report, link.counters()),
+                    Err(e) => warn!("render failed: {}", e),
+                }
+            }
+            Step::Resend { frame, start, len } => {
+                // A film frame's scene is in its bank until its FrameAck; a still's in the
+                // even bank.
+                let image = match session.film.resend_bank(frame) {
+                    Some(1) => session.odd.image(),
+                    _ => session.upload.image(),
+                };
+                match (last.as_ref(), image) {
+                    (Some(fs), Some(image)) if fs.frame() == frame => {
+                        let r = resend_span(
+                            fs,
+                            image,
+                            start,
+                            len,
+                            &mut session.enc,
+                            &PipeQueue(&USB_QUEUE),
+                            &mut PipeQueue(&USB_QUEUE),
+                        )
+                        .await;
+                        if let Err(e) = r {
+                            warn!("resend failed: {}", e);
+                        }
+                    }
+                    _ => warn!("resend of frame {}: not the last frame", frame),
+                }
+            }
         }
     }
 

@@ -26,6 +26,7 @@
 //! firmware and the host tests run the same code:
 //! - [`session`]: the PC's bytes in, upload replies out, render / resend / ack requests.
 //! - [`render`]: one render request over the cluster bus, and the answer to a `Resend`.
+//! - [`film`]: which scene bank holds which film frame, and the flow control of a film.
 //! - [`readback`]: the pixel sink that turns accepted bus runs into serial frames.
 //! - [`throttle`]: the bus wrapper that holds exchanges back while the byte queue is full.
 //!
@@ -37,6 +38,7 @@ mod protocol;
 mod streamer;
 mod upload;
 
+pub mod film;
 pub mod readback;
 pub mod render;
 pub mod session;

@@ -2349,6 +2349,101 @@ fn rc_serial_session(img: &[u8], rng: &mut Rng, input: &mut Vec<u8>, tally: &mut
     image.is_some()
 }
 
+/// The messages of a film of `frames` (each `FrameBegin` and its chunks, then its
+/// `FrameAck`), with stray film messages mixed in when `stray`.
+fn film_messages<'a>(frames: &'a [Vec<u8>], rng: &mut Rng, stray: bool) -> Vec<serial::ToRc<'a>> {
+    use serial::ToRc;
+    let mut msgs = Vec::new();
+    for (k, img) in frames.iter().enumerate() {
+        msgs.push(ToRc::FrameBegin {
+            frame: k as u16,
+            frames: frames.len() as u16,
+            len: img.len() as u32,
+            crc: CRC32.checksum(img),
+        });
+        for (c, data) in img.chunks(serial::MAX_CHUNK).enumerate() {
+            let offset = (c * serial::MAX_CHUNK) as u32;
+            msgs.push(ToRc::SceneChunk { offset, data });
+        }
+        if stray && rng.chance(30) {
+            msgs.push(ToRc::FrameBegin {
+                frame: small_or_edge(rng, 4) as u16,
+                frames: rng.u32() as u16,
+                len: small_or_edge(rng, 1 << 17),
+                crc: rng.u32(),
+            });
+        }
+        msgs.push(ToRc::FrameAck { frame: k as u16 });
+    }
+    msgs
+}
+
+/// The RC's session with two banks fed a film (frames `FrameBegin`, chunks, `FrameAck`),
+/// frames damaged with probability `pct`%, the cluster finishing each started frame at
+/// random moments. Every reply must be a valid frame; a stored frame never waits beside an
+/// idle cluster; the two frames held are in different banks; an intact film stores every
+/// frame with its bytes, in order.
+fn rc_film_session(img: &[u8], rng: &mut Rng, input: &mut Vec<u8>, tally: &mut Tally) -> bool {
+    use serial::film::bank_of;
+    let pct = *rng.pick(&[0, 0, 5, 20, 60]);
+    let frames: Vec<Vec<u8>> = (0..3u8)
+        .map(|k| img.iter().map(|&b| b ^ k).collect())
+        .collect();
+    let mut line = Vec::new();
+    for (seq, m) in film_messages(&frames, rng, pct > 0).iter().enumerate() {
+        let mut f = encode_to_rc(seq as u16, m);
+        if rng.chance(pct) {
+            mutate_serial(rng, &mut f, serial::MAX_TO_RC);
+        }
+        line.extend(f);
+    }
+    input.extend_from_slice(&line);
+    let (mut even, mut odd) = (vec![0u8; img.len() + 64], vec![0u8; img.len() + 64]);
+    let mut s = Session::with_banks(&mut even, &mut odd);
+    let mut replies = Vec::new();
+    let mut started = Vec::new();
+    for &b in &line {
+        if let Step::Reply(n) = s.feed(b) {
+            replies.extend_from_slice(s.reply(n));
+        }
+        // The cluster: finishes the frame it renders now and then (in an intact film,
+        // always before the PC's FrameAck for it arrives).
+        if let Some(c) = s.film.current {
+            if pct == 0 || rng.chance(10) {
+                s.film.rendered(c.frame);
+            }
+        }
+        if let Some((frame, n)) = s.start_next() {
+            replies.extend_from_slice(s.reply(n));
+            let image = s.bank(bank_of(frame)).image().map(<[u8]>::to_vec);
+            started.push((frame, image));
+        }
+        let f = s.film;
+        if let (Some(l), Some(c)) = (f.loading, f.current) {
+            assert_ne!(bank_of(l.frame), bank_of(c.frame), "{f:?}");
+        }
+        assert!(
+            !f.loading.is_some_and(|l| l.stored) || f.current.is_some(),
+            "a stored frame waits beside an idle cluster: {f:?}"
+        );
+    }
+    let replied = pc_reads(&replies);
+    tally.note("serial film RC replies", replied.len() as u64);
+    let whole = started.len() == frames.len()
+        && started
+            .iter()
+            .enumerate()
+            .all(|(k, (f, i))| *f as usize == k && i.as_deref() == Some(&frames[k][..]));
+    if pct == 0 {
+        assert!(
+            whole,
+            "an intact film starts every frame with its bytes: {replied:?}"
+        );
+        tally.note("serial films complete", 1);
+    }
+    whole
+}
+
 /// The PC's side fed a frame's readback (header, runs, end, progress, upload replies), its
 /// frames damaged with probability `pct`%: the frame assembly takes what fits and reports
 /// what does not; intact, it holds the frame exactly.
@@ -2385,7 +2480,7 @@ fn pc_serial_session(rng: &mut Rng, input: &mut Vec<u8>, tally: &mut Tally) -> b
     for _ in 0..extra {
         let n = rng.below(3 * serial::MAX_RUN);
         let data = rng.bytes(n);
-        let m = match rng.below(6) {
+        let m = match rng.below(7) {
             0 => ToPc::Ack {
                 offset: small_or_edge(rng, 4096),
             },
@@ -2411,6 +2506,9 @@ fn pc_serial_session(rng: &mut Rng, input: &mut Vec<u8>, tally: &mut Tally) -> b
                 frame,
                 done: rng.u32(),
                 total: rng.u32(),
+            },
+            5 => ToPc::FrameStarted {
+                frame: small_or_edge(rng, 4) as u16,
             },
             _ => ToPc::Error {
                 code: serial::RcError::SceneTooLarge {
@@ -2481,9 +2579,12 @@ fn pc_serial_session(rng: &mut Rng, input: &mut Vec<u8>, tally: &mut Tally) -> b
 fn serial() {
     let mut images = small_images(2);
     let t = fuzz("serial", &mut images, |images, rng, input, tally| {
-        let ok = if rng.chance(50) {
+        let ok = if rng.chance(35) {
             let img = images[rng.below(images.len())].clone();
             rc_serial_session(&img, rng, input, tally)
+        } else if rng.chance(40) {
+            let img = images[rng.below(images.len())].clone();
+            rc_film_session(&img, rng, input, tally)
         } else {
             pc_serial_session(rng, input, tally)
         };
@@ -2502,6 +2603,7 @@ fn serial() {
             .notes
             .get("serial readbacks complete")
             .is_some_and(|&n| n > 0));
+        assert!(t.notes.get("serial films complete").is_some_and(|&n| n > 0));
     }
 }
 

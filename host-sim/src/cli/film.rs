@@ -80,7 +80,7 @@ pub fn run(a: &RenderArgs, range: FrameRange) -> Result<(), CliError> {
 }
 
 /// Frames `range` must lie within the film's.
-fn check_range(film: &Film, range: FrameRange, path: &Path) -> Result<(), CliError> {
+pub(super) fn check_range(film: &Film, range: FrameRange, path: &Path) -> Result<(), CliError> {
     let frames = film.timeline().frames();
     if range.start >= frames.start && range.end <= frames.end {
         return Ok(());
@@ -99,7 +99,7 @@ fn check_range(film: &Film, range: FrameRange, path: &Path) -> Result<(), CliErr
 }
 
 /// The output directory, created if missing; anything else at the path is refused.
-fn output_dir(dir: &Path) -> Result<PathBuf, CliError> {
+pub(super) fn output_dir(dir: &Path) -> Result<PathBuf, CliError> {
     match std::fs::metadata(dir) {
         Ok(m) if m.is_dir() => Ok(dir.to_path_buf()),
         Ok(_) => Err(CliError::Usage(format!(
@@ -127,25 +127,44 @@ struct Job<'a> {
 }
 
 /// One rendered frame and a note on how it went.
-struct Picture {
-    width: u32,
-    height: u32,
-    rgb: Vec<u8>,
-    note: String,
+pub(super) struct Picture {
+    pub(super) width: u32,
+    pub(super) height: u32,
+    pub(super) rgb: Vec<u8>,
+    pub(super) note: String,
 }
 
 /// Writes the frames as they come: a PNG each, the animated PNG, a line per frame.
-struct Output<'a> {
+pub(super) struct Output<'a> {
     dir: &'a Path,
-    film_path: PathBuf,
+    pub(super) film_path: PathBuf,
     count: u32,
     rate: f64,
     apng: Option<ApngWriter<BufWriter<File>>>,
     quiet: bool,
 }
 
-impl Output<'_> {
-    fn push(&mut self, k: usize, frame: u32, pic: &Picture, secs: f64) -> Result<(), CliError> {
+impl<'a> Output<'a> {
+    /// Frames of a `count`-frame film at `rate` frames/s into `dir`.
+    pub(super) fn new(dir: &'a Path, count: u32, rate: f64, quiet: bool) -> Self {
+        Output {
+            dir,
+            film_path: dir.join(FILM_FILE_NAME),
+            count,
+            rate,
+            apng: None,
+            quiet,
+        }
+    }
+
+    /// Write frame `frame` (the `k`th of the film) as its PNG and into the animated one.
+    pub(super) fn push(
+        &mut self,
+        k: usize,
+        frame: u32,
+        pic: &Picture,
+        secs: f64,
+    ) -> Result<(), CliError> {
         let out = self.dir.join(frame_file_name(frame));
         let png = encode_png(pic.width, pic.height, &pic.rgb).map_err(CliError::failed)?;
         write_file(&out, png)?;
@@ -182,7 +201,7 @@ impl Output<'_> {
         Ok(())
     }
 
-    fn finish(self) -> Result<(), CliError> {
+    pub(super) fn finish(self) -> Result<(), CliError> {
         match self.apng {
             Some(w) => w.finish().map_err(apng_error(&self.film_path)),
             None => Ok(()),
@@ -194,14 +213,7 @@ impl Job<'_> {
     fn render(&self, range: FrameRange, dir: &Path) -> Result<(), CliError> {
         let start = Instant::now();
         let count = range.end - range.start;
-        let mut out = Output {
-            dir,
-            film_path: dir.join(FILM_FILE_NAME),
-            count,
-            rate: self.film.timeline().rate,
-            apng: None,
-            quiet: self.quiet,
-        };
+        let mut out = Output::new(dir, count, self.film.timeline().rate, self.quiet);
         let summary = match &self.cluster {
             Some(cfg) => Some(self.render_on_cluster(range, cfg, &mut out)?),
             None => {

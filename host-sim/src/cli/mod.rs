@@ -23,6 +23,7 @@ macro_rules! outln {
 
 pub mod args;
 pub use crate::studies::backend;
+pub mod board_film;
 pub mod calibrate;
 pub mod chart;
 pub mod check_image;

@@ -10,7 +10,7 @@ use std::io::IsTerminal;
 use std::path::Path;
 use std::time::Duration;
 
-fn bar(quiet: bool, len: u64, template: &str) -> ProgressBar {
+pub fn bar(quiet: bool, len: u64, template: &str) -> ProgressBar {
     if quiet || !std::io::stderr().is_terminal() {
         return ProgressBar::hidden();
     }
@@ -22,12 +22,12 @@ fn bar(quiet: bool, len: u64, template: &str) -> ProgressBar {
 }
 
 /// `--deadline-s`: `None` when absent, `Some(None)` for 0 (no overall deadline).
-fn deadline(deadline_s: Option<u64>) -> Option<Option<Duration>> {
+pub fn deadline(deadline_s: Option<u64>) -> Option<Option<Duration>> {
     deadline_s.map(|s| (s > 0).then(|| Duration::from_secs(s)))
 }
 
 /// Open `port` for a command whose reply time-out is `timeout_ms` (which must be > 0).
-fn open_checked(
+pub fn open_checked(
     port: &str,
     baud: u32,
     timeout_ms: u64,

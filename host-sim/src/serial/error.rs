@@ -8,6 +8,11 @@ use std::fmt;
 pub enum HostSerialError {
     /// No such port (nothing plugged in, or a wrong name).
     PortMissing { port: String },
+    /// Film frame `frame` failed (upload or readback) for `error`.
+    Film {
+        frame: u32,
+        error: Box<HostSerialError>,
+    },
     /// The port exists but cannot be opened (permissions, busy, not a tty).
     Open { port: String, reason: String },
     /// Reading or writing the port failed.
@@ -100,6 +105,7 @@ impl fmt::Display for HostSerialError {
                 links_core::serial::VERSION
             ),
             HostSerialError::Rc(e) => write!(f, "the RC refused: {e}"),
+            HostSerialError::Film { frame, error } => write!(f, "film frame {frame}: {error}"),
             HostSerialError::Retries { what, tries } => {
                 write!(f, "gave up after {tries} tries: {what}")
             }

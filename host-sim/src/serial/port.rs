@@ -229,5 +229,6 @@ pub(super) fn kind(msg: &ToPc<'_>) -> &'static str {
         ToPc::FrameEnd { .. } => "FrameEnd",
         ToPc::Progress { .. } => "Progress",
         ToPc::Error { .. } => "Error",
+        ToPc::FrameStarted { .. } => "FrameStarted",
     }
 }

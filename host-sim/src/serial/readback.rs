@@ -105,7 +105,12 @@ impl Watch {
     }
 
     /// A pixel message of `n` pixels, `fresh` of them new to `frame` (the frame being read).
-    fn pixels(&mut self, frame: Option<u16>, n: u64, fresh: u64) -> Result<(), HostSerialError> {
+    pub(super) fn pixels(
+        &mut self,
+        frame: Option<u16>,
+        n: u64,
+        fresh: u64,
+    ) -> Result<(), HostSerialError> {
         self.idle = 0;
         self.stale = self.stale.saturating_add(n.saturating_sub(fresh));
         if self.stale > self.allowed {
@@ -190,15 +195,7 @@ pub fn readback_with_clock<P: Read + Write>(
     let ms = u64::try_from(opts.timeout.as_millis()).unwrap_or(u64::MAX);
     let mut line = Line::new(port, name, clock, opts.deadline);
     let mut dec = Decoder::<MAX_TO_PC>::new();
-    let mut rb = Reading {
-        opts,
-        progress,
-        asm: None,
-        bad_packets: 0,
-        resends: 0,
-        crc_retry: false,
-        watch: Watch::new(),
-    };
+    let mut rb = Reading::new(opts, progress);
     let mut deadline = line.after(opts.timeout);
     loop {
         let Some(b) = line.byte(deadline)? else {
@@ -218,48 +215,27 @@ pub fn readback_with_clock<P: Read + Write>(
             Some(Ok(p)) => p,
         };
         deadline = line.after(opts.timeout);
-        let kind = kind(&packet.msg);
-        // Whether this (non-pixel) message is progress.
-        let mut news = false;
         match packet.msg {
-            ToPc::FrameHeader {
-                frame,
-                width,
-                height,
-            } => news = rb.header(frame, width, height)?,
-            ToPc::Progress { frame, done, total } => {
-                progress(ReadbackEvent::Rendering { done, total });
-                news = rb
-                    .asm
-                    .as_ref()
-                    .is_some_and(|a| rb.watch.progressed(a, frame, done, total));
-            }
             ToPc::Error {
                 code: RcError::Version { found },
             } => return Err(HostSerialError::Version { found }),
             ToPc::Error { code } => return Err(HostSerialError::Rc(code)),
-            m @ (ToPc::Pixels { .. } | ToPc::PixelsRle { .. }) => {
-                rb.pixels(&m)?;
-                continue;
-            }
-            ToPc::FrameEnd { frame, crc } => {
-                if let Some(done) = rb.frame_end(&mut line, frame, crc)? {
+            ref m => {
+                if let Some(done) = rb.message(&mut line, m)? {
                     return Ok(done);
                 }
             }
-            ToPc::Ack { .. } | ToPc::Nak { .. } | ToPc::SceneDone { .. } => {}
         }
-        rb.watch.message(news, kind, opts.idle_messages)?;
     }
 }
 
 /// A readback under way: the frame being assembled and the counts that bound the session.
-struct Reading<'o> {
+pub(super) struct Reading<'o> {
     opts: &'o ReadbackOptions,
     progress: &'o dyn Fn(ReadbackEvent),
     /// The frame being read (`None` before the first header).
     asm: Option<FrameAssembly>,
-    bad_packets: u32,
+    pub(super) bad_packets: u32,
     /// Retransmit requests sent for the frame being read.
     resends: u32,
     /// Whether the whole frame was asked for again after a CRC mismatch.
@@ -267,9 +243,71 @@ struct Reading<'o> {
     watch: Watch,
 }
 
-impl Reading<'_> {
+impl<'o> Reading<'o> {
+    /// A readback waiting for its first frame.
+    pub(super) fn new(opts: &'o ReadbackOptions, progress: &'o dyn Fn(ReadbackEvent)) -> Self {
+        Reading {
+            opts,
+            progress,
+            asm: None,
+            bad_packets: 0,
+            resends: 0,
+            crc_retry: false,
+            watch: Watch::new(),
+        }
+    }
+
+    /// The frame being read, if one began.
+    pub(super) fn frame(&self) -> Option<u16> {
+        self.asm.as_ref().map(|a| a.frame)
+    }
+
+    /// The frame just returned is done: wait for the next one's header (a film).
+    pub(super) fn next_frame(&mut self) {
+        self.asm = None;
+        (self.resends, self.crc_retry) = (0, false);
+        self.watch = Watch::new();
+    }
+
+    /// Take one RC message other than an upload answer: `Some` once a frame is whole and
+    /// acknowledged.
+    pub(super) fn message<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+        msg: &ToPc<'_>,
+    ) -> Result<Option<Readback>, HostSerialError> {
+        let kind = kind(msg);
+        let mut news = false;
+        match *msg {
+            ToPc::FrameHeader {
+                frame,
+                width,
+                height,
+            } => news = self.header(frame, width, height)?,
+            ToPc::Progress { frame, done, total } => {
+                (self.progress)(ReadbackEvent::Rendering { done, total });
+                news = self
+                    .asm
+                    .as_ref()
+                    .is_some_and(|a| self.watch.progressed(a, frame, done, total));
+            }
+            ToPc::Pixels { .. } | ToPc::PixelsRle { .. } => {
+                self.pixels(msg)?;
+                return Ok(None);
+            }
+            ToPc::FrameEnd { frame, crc } => {
+                if let Some(done) = self.frame_end(line, frame, crc)? {
+                    return Ok(Some(done));
+                }
+            }
+            _ => {}
+        }
+        self.watch.message(news, kind, self.opts.idle_messages)?;
+        Ok(None)
+    }
+
     /// Ask for `len` pixels of `frame` from raster position `start` again.
-    fn resend<P: Read + Write>(
+    pub(super) fn resend<P: Read + Write>(
         &mut self,
         line: &mut Line<'_, P>,
         frame: u16,
@@ -285,7 +323,7 @@ impl Reading<'_> {
 
     /// Nothing arrived in time: past the overall deadline, or before any frame, give up;
     /// otherwise ask for what is missing (up to `opts.resend_rounds` times).
-    fn silence<P: Read + Write>(
+    pub(super) fn silence<P: Read + Write>(
         &mut self,
         line: &mut Line<'_, P>,
         ms: u64,
@@ -326,7 +364,12 @@ impl Reading<'_> {
 
     /// A `FrameHeader`: whether it begins a new frame (progress); a frame begun before the
     /// one being read was finished counts as a restart.
-    fn header(&mut self, frame: u16, width: u16, height: u16) -> Result<bool, HostSerialError> {
+    pub(super) fn header(
+        &mut self,
+        frame: u16,
+        width: u16,
+        height: u16,
+    ) -> Result<bool, HostSerialError> {
         if self.asm.as_ref().is_some_and(|a| a.frame == frame) {
             return Ok(false);
         }
@@ -372,7 +415,7 @@ impl Reading<'_> {
 
     /// A `FrameEnd` of the frame being read: ask for what is missing, or check the CRC and
     /// acknowledge the frame (`Some`), or, once, ask for the whole frame again.
-    fn frame_end<P: Read + Write>(
+    pub(super) fn frame_end<P: Read + Write>(
         &mut self,
         line: &mut Line<'_, P>,
         frame: u16,

@@ -28,27 +28,27 @@ pub fn render_scene(path: &Path, width: u32, height: u32) -> Result<Vec<u8>, Str
 
 /// Flip one byte in the middle of a frame on the line (never to zero, so the frame keeps
 /// its length and only its CRC can catch it).
-fn corrupt(frame: &mut [u8]) {
+pub(super) fn corrupt(frame: &mut [u8]) {
     let i = frame.len() / 2;
     frame[i] = if frame[i] == 0x55 { 0x2a } else { 0x55 };
 }
 
 /// The line faults to inject into the RC's frames to the PC.
 #[derive(Clone, Debug, Default)]
-struct Faults {
+pub(super) struct Faults {
     /// Indices (0-based) of the pixel messages of the first pass to corrupt.
-    corrupt_runs: Vec<usize>,
+    pub(super) corrupt_runs: Vec<usize>,
     /// Announce a wrong frame CRC (flip its lowest bit) in every `FrameEnd`.
-    wrong_crc: bool,
+    pub(super) wrong_crc: bool,
     /// Corrupt the first `FrameEnd`.
-    corrupt_first_end: bool,
+    pub(super) corrupt_first_end: bool,
     /// Pixel messages seen so far (first pass and resends).
-    runs: usize,
+    pub(super) runs: usize,
 }
 
 impl Faults {
     /// Apply the faults to one frame the RC queues (`bytes`, one whole frame).
-    fn apply(&mut self, bytes: &[u8]) -> Vec<u8> {
+    pub(super) fn apply(&mut self, bytes: &[u8]) -> Vec<u8> {
         let mut frame = bytes.to_vec();
         let mut dec = Decoder::<MAX_TO_PC>::new();
         let mut end = None;
@@ -123,7 +123,7 @@ impl<W> Line<'_, W> {
 }
 
 /// Poll `f` to completion (the RC's futures here only yield, never wait).
-fn block_on<F: Future>(f: F) -> F::Output {
+pub(super) fn block_on<F: Future>(f: F) -> F::Output {
     let mut f = pin!(f);
     let mut cx = Context::from_waker(std::task::Waker::noop());
     loop {
@@ -290,7 +290,7 @@ impl SimRc {
 }
 
 /// Room that is always there (the host line never fills).
-struct Room0;
+pub(super) struct Room0;
 
 impl Room for Room0 {
     fn has_room(&self, _: usize) -> bool {
@@ -302,7 +302,7 @@ impl Room for Room0 {
 
 /// Read one byte into `byte`: `Ok(false)` when none came yet (time-out or end of input,
 /// after a short sleep for the latter).
-fn read_byte<P: Read>(port: &mut P, byte: &mut [u8; 1]) -> io::Result<bool> {
+pub(super) fn read_byte<P: Read>(port: &mut P, byte: &mut [u8; 1]) -> io::Result<bool> {
     match port.read(byte) {
         Ok(0) => {
             std::thread::sleep(Duration::from_millis(1));

@@ -72,7 +72,7 @@ pub struct UploadReport {
 pub const MAX_STALE_ANSWERS: u32 = 16;
 
 /// The answers an upload waits for, owned.
-enum Answer {
+pub(super) enum Answer {
     Ack(u32),
     Nak(u32),
     Done {
@@ -101,26 +101,29 @@ fn answer<P: Read + Write>(
                 report.bad_packets += 1;
                 return Ok(Some(Answer::Other("malformed frame")));
             }
-            Some(Ok(p)) => {
-                return match p.msg {
-                    ToPc::Ack { offset } => Ok(Some(Answer::Ack(offset))),
-                    ToPc::Nak { offset } => Ok(Some(Answer::Nak(offset))),
-                    ToPc::SceneDone { len, crc } => Ok(Some(Answer::Done { len, crc })),
-                    ToPc::Error {
-                        code: RcError::Version { found },
-                    } => Err(HostSerialError::Version { found }),
-                    ToPc::Error { code } => Err(HostSerialError::Rc(code)),
-                    m => Ok(Some(Answer::Other(kind(&m)))),
-                }
-            }
+            Some(Ok(p)) => return answer_of(&p.msg).map(Some),
         }
     }
     Ok(None)
 }
 
+/// What an RC message means to an upload (an `Error` ends it).
+pub(super) fn answer_of(msg: &ToPc<'_>) -> Result<Answer, HostSerialError> {
+    match *msg {
+        ToPc::Ack { offset } => Ok(Answer::Ack(offset)),
+        ToPc::Nak { offset } => Ok(Answer::Nak(offset)),
+        ToPc::SceneDone { len, crc } => Ok(Answer::Done { len, crc }),
+        ToPc::Error {
+            code: RcError::Version { found },
+        } => Err(HostSerialError::Version { found }),
+        ToPc::Error { code } => Err(HostSerialError::Rc(code)),
+        ref m => Ok(Answer::Other(kind(m))),
+    }
+}
+
 /// What the RC did during the sends since the acknowledged offset last grew.
 #[derive(Default)]
-struct Stall {
+pub(super) struct Stall {
     /// `Nak`s at or past the acknowledged offset (retransmit requests).
     naks: u32,
     /// The last `Nak` below the acknowledged offset: (its offset, the acknowledged one).
@@ -133,7 +136,7 @@ struct Stall {
 }
 
 /// The error once `tries` sends brought no progress: named after what the RC did.
-fn stalled<P: Read + Write>(
+pub(super) fn stalled<P: Read + Write>(
     line: &Line<'_, P>,
     stall: &Stall,
     next: Option<u32>,
@@ -195,25 +198,10 @@ pub fn upload_with_clock<P: Read + Write>(
     clock: &dyn Clock,
     progress: &dyn Fn(u64),
 ) -> Result<UploadReport, HostSerialError> {
-    let len = u32::try_from(image.len())
-        .map_err(|_| HostSerialError::Protocol("scene larger than 4 GiB".into()))?;
     let ms = u64::try_from(opts.reply_timeout.as_millis()).unwrap_or(u64::MAX);
     let mut line = Line::new(port, name, clock, opts.deadline);
     let mut dec = Decoder::<MAX_TO_PC>::new();
-    let mut up = Upload {
-        image,
-        len,
-        crc: CRC32.checksum(image),
-        chunk: opts.chunk.clamp(1, MAX_CHUNK),
-        next: None,
-        acked: 0,
-        sent: 0,
-        report: UploadReport {
-            bytes: image.len(),
-            ..UploadReport::default()
-        },
-        stall: Stall::default(),
-    };
+    let mut up = Upload::new(image, opts.chunk, None)?;
     // Sends since `acked` last grew.
     let mut tries = 0u32;
     loop {
@@ -239,25 +227,27 @@ pub fn upload_with_clock<P: Read + Write>(
 }
 
 /// An upload under way: where it stands, and what the RC did since it last moved.
-struct Upload<'i> {
-    image: &'i [u8],
+pub(super) struct Upload<I> {
+    image: I,
     len: u32,
     crc: u32,
+    /// A film frame: (its number, the film's length): begun with `FrameBegin`.
+    film: Option<(u16, u16)>,
     /// Scene bytes per chunk.
     chunk: usize,
     /// `None`: the SceneBegin is not acknowledged yet; `Some(o)`: send from offset `o`.
-    next: Option<u32>,
+    pub(super) next: Option<u32>,
     /// The highest offset the RC acknowledged (progress), and the end of the bytes sent so
     /// far (or of those the RC already had): answers past it are about bytes never sent.
-    acked: u32,
+    pub(super) acked: u32,
     sent: u32,
-    report: UploadReport,
+    pub(super) report: UploadReport,
     /// What the RC did since `acked` last grew.
-    stall: Stall,
+    pub(super) stall: Stall,
 }
 
 /// What an answer means for the wait it arrived in.
-enum Heard {
+pub(super) enum Heard {
     /// The acknowledged offset grew: the wait ends and the tries start again.
     Grew,
     /// The wait ends without progress (a time-out, a `Nak`, an `Ack` that took nothing).
@@ -268,14 +258,59 @@ enum Heard {
     Stored,
 }
 
-impl Upload<'_> {
-    /// Send the current message: the SceneBegin, or the chunk at `next`. Returns the end of
-    /// the bytes it carries (0 for the SceneBegin).
-    fn send<P: Read + Write>(&mut self, line: &mut Line<'_, P>) -> Result<u32, HostSerialError> {
-        let (len, chunk, image) = (self.len, self.chunk, self.image);
+impl<I: AsRef<[u8]>> Upload<I> {
+    /// An upload of `image` in chunks of `chunk` bytes (clamped to 1..=[`MAX_CHUNK`]); a
+    /// film frame when `film` gives (its number, the film's length).
+    pub(super) fn new(
+        image: I,
+        chunk: usize,
+        film: Option<(u16, u16)>,
+    ) -> Result<Self, HostSerialError> {
+        let bytes = image.as_ref();
+        let (len, crc, n) = (bytes.len(), CRC32.checksum(bytes), bytes.len());
+        let len = u32::try_from(len)
+            .map_err(|_| HostSerialError::Protocol("scene larger than 4 GiB".into()))?;
+        Ok(Upload {
+            image,
+            len,
+            crc,
+            film,
+            chunk: chunk.clamp(1, MAX_CHUNK),
+            next: None,
+            acked: 0,
+            sent: 0,
+            report: UploadReport {
+                bytes: n,
+                ..UploadReport::default()
+            },
+            stall: Stall::default(),
+        })
+    }
+
+    /// The image's length in bytes.
+    pub(super) fn bytes(&self) -> usize {
+        self.image.as_ref().len()
+    }
+
+    /// Send the current message: the SceneBegin (or FrameBegin), or the chunk at `next`.
+    /// Returns the end of the bytes it carries (0 for the begin).
+    pub(super) fn send<P: Read + Write>(
+        &mut self,
+        line: &mut Line<'_, P>,
+    ) -> Result<u32, HostSerialError> {
+        let (len, chunk, crc) = (self.len, self.chunk, self.crc);
+        let image = self.image.as_ref();
         match self.next {
             None => {
-                line.send(&ToRc::SceneBegin { len, crc: self.crc })?;
+                match self.film {
+                    Some((frame, frames)) => line.send(&ToRc::FrameBegin {
+                        frame,
+                        frames,
+                        len,
+                        crc,
+                    })?,
+                    None => line.send(&ToRc::SceneBegin { len, crc })?,
+                }
                 Ok(0)
             }
             Some(o) => {
@@ -332,7 +367,7 @@ impl Upload<'_> {
     }
 
     /// Take in one answer to the message that was sent up to `sent_end`.
-    fn heard(
+    pub(super) fn heard(
         &mut self,
         heard: Answer,
         sent_end: u32,

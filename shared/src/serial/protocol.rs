@@ -53,8 +53,21 @@ pub enum ToRc<'a> {
     /// Readback: send pixels `start .. start + len` (raster order) of `frame` again, then
     /// [`ToPc::FrameEnd`] again (`len` = 0 asks for the `FrameEnd` only).
     Resend { frame: u16, start: u32, len: u32 },
-    /// Readback: `frame` arrived whole and passed its CRC.
+    /// Readback: `frame` arrived whole and passed its CRC. In a film this also releases
+    /// the frame's scene bank on the RC (the next frame may start rendering).
     FrameAck { frame: u16 },
+    /// Film: begin the upload of frame `frame` (one of `frames` frames of a film) as a
+    /// SceneImage of `len` bytes whose CRC-32 is `crc`, into the RC's free scene bank; the
+    /// chunks follow as [`ToRc::SceneChunk`]s. Answered as [`ToRc::SceneBegin`], or by
+    /// [`ToPc::Error`] with [`RcError::FilmBusy`] when no bank is free (the PC is more than
+    /// one frame ahead). Once stored, the RC starts the frame as soon as the cluster is
+    /// free and says so with [`ToPc::FrameStarted`].
+    FrameBegin {
+        frame: u16,
+        frames: u16,
+        len: u32,
+        crc: u32,
+    },
 }
 
 /// RC -> PC messages.
@@ -92,6 +105,9 @@ pub enum ToPc<'a> {
     Progress { frame: u16, done: u32, total: u32 },
     /// The RC refused a request.
     Error { code: RcError },
+    /// Film: frame `frame` (uploaded with [`ToRc::FrameBegin`]) started rendering; its
+    /// bank is taken until its [`ToRc::FrameAck`], and the PC may begin the next frame.
+    FrameStarted { frame: u16 },
 }
 
 /// Why the RC refused a request (sent in [`ToPc::Error`]).
@@ -111,6 +127,10 @@ pub enum RcError {
     Version { found: u8 },
     /// A render was asked for before a scene was uploaded.
     NoScene,
+    /// Film: `frame` was begun while frame `holder` still holds the scene bank it needs
+    /// (rendering, or rendered and not yet acknowledged, or stored and not yet started):
+    /// the PC went more than one frame ahead.
+    FilmBusy { frame: u16, holder: u16 },
 }
 
 impl fmt::Display for RcError {
@@ -131,6 +151,10 @@ impl fmt::Display for RcError {
                 "the RC received protocol version {found} (it speaks {VERSION})"
             ),
             RcError::NoScene => write!(f, "no scene uploaded"),
+            RcError::FilmBusy { frame, holder } => write!(
+                f,
+                "film frame {frame} begun while frame {holder} still holds a scene bank (the PC is more than one frame ahead)"
+            ),
         }
     }
 }

@@ -46,6 +46,30 @@ async fn send<R: Room, Q: ByteQueue>(room: &R, queue: &mut Q, bytes: &[u8]) -> b
     queue.push(bytes)
 }
 
+/// The frame size of `image` for the readback, or (after telling the PC `NoScene`) why not.
+async fn frame_dims<R: Room, Q: ByteQueue>(
+    image: &[u8],
+    enc: &mut Encoder,
+    room: &R,
+    queue: &mut Q,
+) -> Result<(u16, u16), RenderFail> {
+    let dims = SceneView::new(image).ok().and_then(|v| {
+        let f = v.camera::<f32>();
+        let w = u16::try_from(f.width).ok()?;
+        let h = u16::try_from(f.height).ok()?;
+        FrameStreamer::new(0, w, h).ok().map(|_| (w, h))
+    });
+    if let Some(d) = dims {
+        return Ok(d);
+    }
+    let mut out = [0u8; MAX_TO_PC];
+    let code = RcError::NoScene;
+    if let Ok(n) = enc.encode(&ToPc::Error { code }, &mut out) {
+        send(room, queue, &out[..n]).await;
+    }
+    Err(RenderFail::BadScene)
+}
+
 /// Render `frames` frames of `image` on the `nodes` nodes of `bus` and stream them to
 /// `queue` (frames numbered 0.. for the PC). `last` keeps the last frame's streamer for a
 /// later `Resend`. Returns the last frame's root report.
@@ -61,20 +85,54 @@ pub async fn render_frames<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
     enc: &mut Encoder,
     last: &mut Option<FrameStreamer>,
 ) -> Result<RootReport, RenderFail> {
-    let dims = SceneView::new(image).ok().and_then(|v| {
-        let f = v.camera::<f32>();
-        let w = u16::try_from(f.width).ok()?;
-        let h = u16::try_from(f.height).ok()?;
-        FrameStreamer::new(0, w, h).ok().map(|_| (w, h))
-    });
-    let Some((w, h)) = dims else {
-        let mut out = [0u8; MAX_TO_PC];
-        let code = RcError::NoScene;
-        if let Ok(n) = enc.encode(&ToPc::Error { code }, &mut out) {
-            send(room, queue, &out[..n]).await;
-        }
-        return Err(RenderFail::BadScene);
-    };
+    let dims = frame_dims(image, enc, room, queue).await?;
+    let mut report = RootReport::default();
+    for frame in 0..frames.max(1) {
+        let mut out = Out { room, queue, enc };
+        report = render_one(bus, clock, &mut out, image, dims, frame, nodes, last).await?;
+    }
+    Ok(report)
+}
+
+/// Render film frame `frame` from `image` (its own scene) and stream it to `queue` tagged
+/// with its number; `last` keeps its streamer for a `Resend`.
+#[allow(clippy::too_many_arguments)]
+pub async fn render_film_frame<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
+    bus: &mut B,
+    clock: &C,
+    room: &R,
+    queue: &mut Q,
+    image: &[u8],
+    frame: u16,
+    nodes: u16,
+    enc: &mut Encoder,
+    last: &mut Option<FrameStreamer>,
+) -> Result<RootReport, RenderFail> {
+    let dims = frame_dims(image, enc, room, queue).await?;
+    let mut out = Out { room, queue, enc };
+    render_one(bus, clock, &mut out, image, dims, frame, nodes, last).await
+}
+
+/// Where a frame's messages go: the queue, the room it waits for, the numbering.
+struct Out<'a, R, Q> {
+    room: &'a R,
+    queue: &'a mut Q,
+    enc: &'a mut Encoder,
+}
+
+/// One frame: a full `run_bus` of `image` as bus frame 0 (the nodes' even bank), its runs
+/// streamed as serial frame `frame`.
+#[allow(clippy::too_many_arguments)]
+async fn render_one<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
+    bus: &mut B,
+    clock: &C,
+    out: &mut Out<'_, R, Q>,
+    image: &[u8],
+    (w, h): (u16, u16),
+    frame: u16,
+    nodes: u16,
+    last: &mut Option<FrameStreamer>,
+) -> Result<RootReport, RenderFail> {
     let cfg = RootConfig {
         policy: Policy::DECREASING,
         nodes,
@@ -83,28 +141,32 @@ pub async fn render_frames<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
         double_buffer: true,
     };
     let scenes = [image];
-    let mut report = RootReport::default();
-    for frame in 0..frames.max(1) {
-        let root = RefCell::new(RootState::new(cfg, &scenes[..]).map_err(RenderFail::Root)?);
-        // Room for the frame header first (the sink itself never waits).
-        room.wait_room(MAX_TO_PC).await;
-        let mut rb = Readback::new(&mut *queue, core::mem::take(enc), frame, w, h)
-            .map_err(RenderFail::Incomplete)?;
-        rb.bus_frame = 0;
-        let sink = RefCell::new(rb);
-        let mut throttled = Throttle {
-            bus: &mut *bus,
-            room,
-            need: RUN_RESERVE,
-        };
-        let r = run_bus(0, &mut throttled, clock, &root, &scenes[..], &sink).await;
-        let ended = sink.into_inner().end();
-        *enc = ended.enc;
-        *last = Some(ended.streamer);
-        report = r.map_err(RenderFail::Root)?;
-        ended.result.map_err(RenderFail::Incomplete)?;
-    }
+    let root = RefCell::new(RootState::new(cfg, &scenes[..]).map_err(RenderFail::Root)?);
+    // Room for the frame header first (the sink itself never waits).
+    out.room.wait_room(MAX_TO_PC).await;
+    let mut rb = Readback::new(&mut *out.queue, core::mem::take(out.enc), frame, w, h)
+        .map_err(RenderFail::Incomplete)?;
+    rb.bus_frame = 0;
+    let sink = RefCell::new(rb);
+    let mut throttled = Throttle {
+        bus: &mut *bus,
+        room: out.room,
+        need: RUN_RESERVE,
+    };
+    let r = run_bus(0, &mut throttled, clock, &root, &scenes[..], &sink).await;
+    let ended = sink.into_inner().end();
+    *out.enc = ended.enc;
+    *last = Some(ended.streamer);
+    let report = r.map_err(RenderFail::Root)?;
+    ended.result.map_err(RenderFail::Incomplete)?;
     Ok(report)
+}
+
+/// Queue space an upload reply may take while a frame renders: the reply only goes out
+/// when, after it, the two exchanges' worth the throttle reserves ([`RUN_RESERVE`] each)
+/// are still free, so a reply never costs a pixel run its room.
+pub const fn reply_room(reply: usize) -> usize {
+    2 * RUN_RESERVE + reply
 }
 
 /// Answer a `Resend { start, len }` of the frame `fs` streamed: render the span again from

@@ -1,9 +1,13 @@
-//! The RC's side of the PC conversation, byte by byte: scene upload (answered at once), and
-//! the requests the firmware acts on (render, resend, acknowledgement). The firmware feeds it
-//! the bytes of USB CDC packets; host tests feed it what the PC side of `crate::serial`
-//! encodes.
+//! The RC's side of the PC conversation, byte by byte: scene upload (answered at once), film
+//! frames into two scene banks ([`super::film`]), and the requests the firmware acts on
+//! (render, resend, acknowledgement). The firmware feeds it the bytes of USB CDC packets;
+//! host tests feed it what the PC side of `crate::serial` encodes.
 
-use crate::serial::{Decoder, Encoder, RcError, ToPc, ToRc, UploadReceiver, MAX_TO_PC, MAX_TO_RC};
+use crate::serial::film::{Begin, FilmState};
+use crate::serial::{
+    Decoder, Encoder, RcError, Reply, SerialError, ToPc, ToRc, UploadEvent, UploadReceiver,
+    MAX_TO_PC, MAX_TO_RC,
+};
 
 /// What one byte from the PC asks the firmware to do.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -16,13 +20,19 @@ pub enum Step {
     Render { frames: u16 },
     /// Send pixels `start .. start + len` of `frame` again, then its `FrameEnd`.
     Resend { frame: u16, start: u32, len: u32 },
-    /// The PC has frame `frame`.
+    /// The PC has frame `frame` (in a film, its bank is free again: see
+    /// [`Session::start_next`]).
     Acked { frame: u16 },
 }
 
 /// The PC conversation's state.
 pub struct Session<'b> {
+    /// The even scene bank: still scenes, and the even frames of a film.
     pub upload: UploadReceiver<'b>,
+    /// The odd scene bank: the odd frames of a film.
+    pub odd: UploadReceiver<'b>,
+    /// Which film frame holds which bank.
+    pub film: FilmState,
     dec: Decoder<MAX_TO_RC>,
     /// The RC's frame numbering (shared with the readback, which takes it for a render).
     pub enc: Encoder,
@@ -30,13 +40,30 @@ pub struct Session<'b> {
 }
 
 impl<'b> Session<'b> {
-    /// A session storing uploaded scenes in `scene`.
+    /// A session storing uploaded scenes in `scene` (no odd bank: films need
+    /// [`Session::with_banks`]).
     pub fn new(scene: &'b mut [u8]) -> Self {
+        Self::with_banks(scene, &mut [])
+    }
+
+    /// A session with two scene banks: `even` (still scenes and even film frames) and `odd`.
+    pub fn with_banks(even: &'b mut [u8], odd: &'b mut [u8]) -> Self {
         Session {
-            upload: UploadReceiver::new(scene),
+            upload: UploadReceiver::new(even),
+            odd: UploadReceiver::new(odd),
+            film: FilmState::default(),
             dec: Decoder::new(),
             enc: Encoder::new(),
             out: [0; MAX_TO_PC],
+        }
+    }
+
+    /// The receiver of scene bank `bank` (0 even, otherwise odd).
+    pub fn bank(&mut self, bank: usize) -> &mut UploadReceiver<'b> {
+        if bank == 0 {
+            &mut self.upload
+        } else {
+            &mut self.odd
         }
     }
 
@@ -50,9 +77,23 @@ impl<'b> Session<'b> {
         self.dec.bad_packets()
     }
 
-    /// The line was reset (USB reconnect): forget a partial frame.
+    /// The line was reset (USB reconnect): forget a partial frame, and any film (a new
+    /// connection begins its own).
     pub fn line_reset(&mut self) {
         self.dec.reset();
+        self.film = FilmState::default();
+    }
+
+    /// If the cluster is free and a film frame is stored, start it: returns its number and
+    /// the length of the [`ToPc::FrameStarted`] reply to send (in [`Session::reply`]). The
+    /// firmware calls this after every step and after each frame it finishes.
+    pub fn start_next(&mut self) -> Option<(u16, usize)> {
+        let frame = self.film.start_next()?;
+        let n = self
+            .enc
+            .encode(&ToPc::FrameStarted { frame }, &mut self.out)
+            .unwrap_or(0);
+        Some((frame, n))
     }
 
     /// Take one byte from the PC.
@@ -65,27 +106,107 @@ impl<'b> Session<'b> {
                         frames: frames.max(1),
                     }
                 }
-                ToRc::StartRender { .. } => {
-                    let code = RcError::NoScene;
-                    self.enc.encode(&ToPc::Error { code }, &mut self.out)
+                ToRc::StartRender { .. } => self.error(RcError::NoScene),
+                ToRc::FrameAck { frame } => {
+                    self.film.acked(frame);
+                    return Step::Acked { frame };
                 }
-                ToRc::FrameAck { frame } => return Step::Acked { frame },
                 ToRc::Resend { frame, start, len } => return Step::Resend { frame, start, len },
-                msg => self
-                    .upload
-                    .on_message(&msg, &mut self.enc, &mut self.out)
-                    .map(|r| r.len),
+                ToRc::FrameBegin {
+                    frame,
+                    frames,
+                    len,
+                    crc,
+                } => self.frame_begin(frame, frames, len, crc),
+                // A still upload ends a film's upload: a frame loaded and not started is
+                // dropped (the still goes to the even bank).
+                msg @ ToRc::SceneBegin { .. } => {
+                    self.film.loading = None;
+                    to_bank(
+                        &mut self.film,
+                        [&mut self.upload, &mut self.odd],
+                        &mut self.enc,
+                        &mut self.out,
+                        &msg,
+                    )
+                }
+                msg => to_bank(
+                    &mut self.film,
+                    [&mut self.upload, &mut self.odd],
+                    &mut self.enc,
+                    &mut self.out,
+                    &msg,
+                ),
             },
-            Some(Err(e)) => self
-                .upload
-                .on_bad_frame(e, &mut self.enc, &mut self.out)
-                .map(|r| r.len),
+            Some(Err(e)) => {
+                let bank = self.film.loading_bank().unwrap_or(0);
+                let (r, enc, out) = self.parts(bank);
+                r.on_bad_frame(e, enc, out).map(|r| r.len)
+            }
         };
         match reply {
             Ok(n) if n > 0 => Step::Reply(n),
             _ => Step::Nothing,
         }
     }
+
+    fn error(&mut self, code: RcError) -> Result<usize, SerialError> {
+        self.enc.encode(&ToPc::Error { code }, &mut self.out)
+    }
+
+    /// The receiver of `bank`, the encoder and the reply buffer, borrowed apart.
+    fn parts(&mut self, bank: usize) -> (&mut UploadReceiver<'b>, &mut Encoder, &mut [u8]) {
+        let r = if bank == 0 {
+            &mut self.upload
+        } else {
+            &mut self.odd
+        };
+        (r, &mut self.enc, &mut self.out)
+    }
+
+    fn frame_begin(
+        &mut self,
+        frame: u16,
+        frames: u16,
+        len: u32,
+        crc: u32,
+    ) -> Result<usize, SerialError> {
+        match self.film.begin(frame, frames) {
+            // The begin goes to the new loading frame's bank; a refusal there (too large,
+            // empty) frees it again.
+            Ok(Begin::New { .. } | Begin::Again { .. }) => to_bank(
+                &mut self.film,
+                [&mut self.upload, &mut self.odd],
+                &mut self.enc,
+                &mut self.out,
+                &ToRc::SceneBegin { len, crc },
+            ),
+            Err(code) => self.error(code),
+        }
+    }
+}
+
+/// Upload messages: to the loading film frame's bank, else the even bank (`banks`: even,
+/// odd); the film learns whether the frame was stored or refused.
+fn to_bank(
+    film: &mut FilmState,
+    banks: [&mut UploadReceiver<'_>; 2],
+    enc: &mut Encoder,
+    out: &mut [u8],
+    msg: &ToRc<'_>,
+) -> Result<usize, SerialError> {
+    let bank = film.loading_bank();
+    let [even, odd] = banks;
+    let r = if bank == Some(1) { odd } else { even };
+    let Reply { len, event } = r.on_message(msg, enc, out)?;
+    if bank.is_some() {
+        match event {
+            UploadEvent::Complete { .. } => film.stored(),
+            UploadEvent::Failed(_) => film.failed(),
+            _ => {}
+        }
+    }
+    Ok(len)
 }
 
 #[cfg(test)]
@@ -183,5 +304,85 @@ mod tests {
         // Garbage between frames costs at most the frame it hits.
         let (r, _) = feed(&mut s, &[0, 1, 2, 3, 0]);
         assert_eq!(r.len(), 1, "one NAK for the garbled frame: {r:?}");
+    }
+
+    /// Upload `image` as film frame `frame` of 3; the replies.
+    fn film_frame(s: &mut Session<'_>, pc: &mut Encoder, frame: u16, image: &[u8]) -> Vec<String> {
+        let (len, crc) = (image.len() as u32, CRC32.checksum(image));
+        let msg = ToRc::FrameBegin {
+            frame,
+            frames: 3,
+            len,
+            crc,
+        };
+        let (mut r, _) = feed(s, &pc_frame(pc, &msg));
+        if r != ["Ack { offset: 0 }"] {
+            return r;
+        }
+        for (k, c) in image.chunks(MAX_CHUNK).enumerate() {
+            let offset = (k * MAX_CHUNK) as u32;
+            r = feed(s, &pc_frame(pc, &ToRc::SceneChunk { offset, data: c })).0;
+        }
+        r
+    }
+
+    #[test]
+    fn film_frames_alternate_banks_and_wait_for_their_turn() {
+        let frames: Vec<Vec<u8>> = (0..3u32)
+            .map(|f| (0..700 + 100 * f).map(|i| (i * 7 + f) as u8).collect())
+            .collect();
+        let (mut even, mut odd) = (vec![0u8; 1024], vec![0u8; 1024]);
+        let mut s = Session::with_banks(&mut even, &mut odd);
+        let mut pc = Encoder::new();
+        let done = |f: &[u8]| {
+            let crc = CRC32.checksum(f);
+            vec![format!("SceneDone {{ len: {}, crc: {crc} }}", f.len())]
+        };
+        assert_eq!(film_frame(&mut s, &mut pc, 0, &frames[0]), done(&frames[0]));
+        // The cluster is free: frame 0 starts at once, and says so.
+        let (f, n) = s.start_next().expect("frame 0 starts");
+        assert_eq!(f, 0);
+        let mut dec = Decoder::<MAX_TO_PC>::new();
+        let mut said = Vec::new();
+        for &b in s.reply(n) {
+            if let Some(r) = dec.feed::<ToPc>(b) {
+                let p: Packet<ToPc> = r.expect("valid reply");
+                said.push(format!("{:?}", p.msg));
+            }
+        }
+        assert_eq!(said, ["FrameStarted { frame: 0 }"]);
+        // Frame 1 goes to the odd bank while frame 0 renders from the even one.
+        let (buf, len) = s.upload.lend().expect("frame 0 stored");
+        assert_eq!(&buf[..len], &frames[0][..]);
+        assert_eq!(film_frame(&mut s, &mut pc, 1, &frames[1]), done(&frames[1]));
+        assert_eq!(s.odd.image(), Some(&frames[1][..]));
+        assert_eq!(s.start_next(), None, "frame 0 still renders");
+        // Frame 2 would need frame 0's bank: refused, the PC is too far ahead.
+        assert_eq!(
+            film_frame(&mut s, &mut pc, 2, &frames[2]),
+            ["Error { code: FilmBusy { frame: 2, holder: 1 } }"]
+        );
+        s.film.rendered(0);
+        assert_eq!(s.start_next(), None, "frame 0 waits for its FrameAck");
+        let (_, steps) = feed(&mut s, &pc_frame(&mut pc, &ToRc::FrameAck { frame: 0 }));
+        assert_eq!(steps, [Step::Acked { frame: 0 }]);
+        s.upload.restore(buf);
+        assert_eq!(s.start_next().map(|(f, _)| f), Some(1));
+        assert_eq!(film_frame(&mut s, &mut pc, 2, &frames[2]), done(&frames[2]));
+        assert_eq!(s.upload.image(), Some(&frames[2][..]));
+        // A still upload drops frame 2 (stored, not started) and takes the even bank.
+        let still = &frames[0][..300];
+        let (len, crc) = (still.len() as u32, CRC32.checksum(still));
+        let (r, _) = feed(&mut s, &pc_frame(&mut pc, &ToRc::SceneBegin { len, crc }));
+        assert_eq!(r, ["Ack { offset: 0 }"]);
+        assert_eq!(s.film.loading, None);
+        let chunk = ToRc::SceneChunk {
+            offset: 0,
+            data: still,
+        };
+        let (r, _) = feed(&mut s, &pc_frame(&mut pc, &chunk));
+        assert_eq!(r, [format!("SceneDone {{ len: {len}, crc: {crc} }}")]);
+        assert_eq!(s.upload.image(), Some(still));
+        assert_eq!(s.start_next(), None, "a still is no film frame");
     }
 }

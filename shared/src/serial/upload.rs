@@ -70,6 +70,23 @@ impl<'b> UploadReceiver<'b> {
         }
     }
 
+    /// Take the buffer out with the stored scene's length, to render from while this session
+    /// goes on receiving into its other bank (`None`: no complete scene). Until
+    /// [`UploadReceiver::restore`] the receiver holds no buffer: [`UploadReceiver::image`] is
+    /// `None` and an upload into it is refused as too large.
+    pub fn lend(&mut self) -> Option<(&'b mut [u8], usize)> {
+        let UploadState::Done { len, .. } = self.state else {
+            return None;
+        };
+        let len = len as usize;
+        (len <= self.buf.len()).then(|| (core::mem::take(&mut self.buf), len))
+    }
+
+    /// Give back the buffer [`UploadReceiver::lend`] took out.
+    pub fn restore(&mut self, buf: &'b mut [u8]) {
+        self.buf = buf;
+    }
+
     /// Bytes stored so far in the current upload.
     pub fn received(&self) -> u32 {
         self.received
