@@ -386,6 +386,7 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
         )));
     }
     cfg.noise.check().map_err(SimError::Config)?;
+    check_link(cfg)?;
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
     if !cfg.dm_frame_s.is_empty() && cfg.dm_frame_s.len() != scenes.len() {
@@ -408,6 +409,38 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
         });
     }
     Ok(frames)
+}
+
+/// Refuse a link the board cannot run: the firmware's code needs the firmware's framing,
+/// and only it has handshake lines to stick.
+fn check_link(cfg: &SimConfig) -> Result<(), SimError> {
+    let link = &cfg.profile.link;
+    if cfg.link == LinkModel::Firmware && !LinkModel::firmware_framing(link) {
+        return Err(SimError::Config(format!(
+            "the firmware link frames transfers with an {}-byte header and a {}-byte trailer; the {} board's are {} and {}: use the ideal link",
+            links_core::spi::HEADER,
+            links_core::spi::TRAILER,
+            cfg.profile.name,
+            link.header_bytes,
+            link.trailer_bytes
+        )));
+    }
+    if cfg.link == LinkModel::Ideal && !cfg.stuck.is_empty() {
+        return Err(SimError::Config(
+            "a stuck handshake line needs the firmware link (the idealised star has none)".into(),
+        ));
+    }
+    if let Some(st) = cfg
+        .stuck
+        .iter()
+        .find(|s| s.node >= cfg.nodes || !(s.at_s.is_finite() && s.at_s >= 0.0))
+    {
+        return Err(SimError::Config(format!(
+            "node {}'s handshake line cannot stick at {} s",
+            st.node, st.at_s
+        )));
+    }
+    Ok(())
 }
 
 /// The SPI star with the configuration's faults: deaths, dropped broadcasts, bit errors.
@@ -714,6 +747,7 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
                 keep_frames: false,
                 deaths: Vec::new(),
                 spi_dead: Vec::new(),
+                stuck: Vec::new(),
                 backup_line: false,
                 ..cfg
             },

@@ -117,6 +117,8 @@ struct NodePins {
     /// The level the node drives on its handshake line.
     driven: bool,
     selected: bool,
+    /// The bus the node sits on.
+    bus: usize,
     stuck: Option<(Ps, bool)>,
 }
 
@@ -128,6 +130,8 @@ struct BusPins {
     phase: u32,
     since: Ps,
     clocked: u64,
+    /// Rising edges the nodes drove on their handshake lines so far.
+    edges: u64,
 }
 
 /// The chip-select, handshake and DMA state of every bus and node.
@@ -156,11 +160,17 @@ impl Wire {
                     phase: 0,
                     since: 0,
                     clocked: 0,
+                    edges: 0,
                 }
             })
             .collect();
         let n = buses.last().map_or(0, |b| (b.first + b.count) as usize);
         let mut nodes: Vec<NodePins> = (0..n).map(|_| NodePins::default()).collect();
+        for (b, bus) in buses.iter().enumerate() {
+            for p in &mut nodes[bus.first as usize..(bus.first + bus.count) as usize] {
+                p.bus = b;
+            }
+        }
         for st in stuck {
             let at = (st.at_s * 1e12).round() as Ps;
             if let Some(p) = nodes.get_mut(st.node as usize) {
@@ -344,8 +354,17 @@ impl MasterPort for SpiMaster {
     }
 
     async fn wait_any_ready(&mut self) {
-        // Level-sensitive: an edge interrupt that cannot be lost.
-        PollFn(|| (0..self.count()).any(|i| self.ready(i)).then_some(())).await
+        // The edge interrupt: a rising edge the nodes drive, or a line found high that was
+        // low when the wait began (a line sticking high). A line stuck high from before
+        // does not wake it (the link ignores such a node until it is seen low).
+        let edges = self.wire.borrow().buses[self.bus].edges;
+        let low: Vec<bool> = (0..self.count()).map(|i| !self.ready(i)).collect();
+        PollFn(|| {
+            let rose = self.wire.borrow().buses[self.bus].edges != edges;
+            let high = low.iter().enumerate().any(|(i, &l)| l && self.ready(i as u16));
+            (rose || high).then_some(())
+        })
+        .await
     }
 
     async fn select(&mut self, sel: Select) {
@@ -462,6 +481,10 @@ impl SlavePort for SpiSlave {
         let high = high && !w.dead(self.node);
         if w.nodes[self.node].driven != high {
             w.nodes[self.node].driven = high;
+            if high {
+                let b = w.nodes[self.node].bus;
+                w.buses[b].edges += 1;
+            }
             w.touch();
         }
     }
