@@ -27,6 +27,7 @@ use links_core::spi::{
     Armed, Bank, MasterCounters, MasterLink, MasterPort, PortError, Select, SlaveCounters,
     SlavePort, HEADER, TRAILER,
 };
+use links_core::spi::nc_header;
 use std::cell::RefCell;
 use std::future::Future;
 use std::pin::Pin;
@@ -130,6 +131,9 @@ struct BusPins {
     phase: u32,
     since: Ps,
     clocked: u64,
+    /// The frame lengths an exchange's headers announced: the RC's, the node's (the
+    /// every-`n` body faults hit only frame bytes, not the padding).
+    frames: (usize, usize),
     /// Rising edges the nodes drove on their handshake lines so far.
     edges: u64,
 }
@@ -160,6 +164,7 @@ impl Wire {
                     phase: 0,
                     since: 0,
                     clocked: 0,
+                    frames: (0, 0),
                     edges: 0,
                 }
             })
@@ -236,14 +241,18 @@ impl Wire {
     }
 
     /// One full-duplex transfer on `bus`: MOSI into every selected armed node, MISO from
-    /// the one selected node (none: the line floats high).
-    fn transfer(&mut self, bus: usize, tx: &[u8], rx: &mut [u8]) {
+    /// the one selected node (none: the line floats high). Returns its duration: the bytes
+    /// of a selection are clocked back to back, so their time is rounded once per selection.
+    fn transfer(&mut self, bus: usize, tx: &[u8], rx: &mut [u8]) -> Ps {
         let Some(sel) = self.buses[bus].selected else {
-            return;
+            return 0;
         };
         let phase = self.buses[bus].phase;
         self.buses[bus].phase += 1;
+        let before = self.buses[bus].clocked;
         self.buses[bus].clocked += tx.len() as u64;
+        let after = self.buses[bus].clocked;
+        let d = self.timing.bytes_ps(after as usize) - self.timing.bytes_ps(before as usize);
         let first = self.buses[bus].first;
         rx.fill(0xFF);
         match sel {
@@ -251,13 +260,26 @@ impl Wire {
             Select::All => self.broadcast_bytes(bus, tx, rx),
         }
         self.touch();
+        d
     }
 
     fn exchange_bytes(&mut self, bus: usize, n: usize, phase: u32, tx: &[u8], rx: &mut [u8]) {
         let mut down = tx.to_vec();
+        if phase == 0 {
+            let rc = tx.get(2..4).map_or(0, |l| u16::from_le_bytes([l[0], l[1]]) as usize);
+            let nc = self.nodes[n]
+                .arm
+                .as_ref()
+                .and_then(|a| nc_header(&a.tx))
+                .filter(|h| h.kind & 1 != 0)
+                .map_or(0, |h| h.len as usize);
+            self.buses[bus].frames = (rc, nc);
+        }
+        let (rc_len, nc_len) = self.buses[bus].frames;
         let mut star = self.star.borrow_mut();
         if phase == 1 {
-            star.body_fault(1, &mut down, bus);
+            let k = rc_len.min(down.len());
+            star.body_fault(1, &mut down[..k], bus);
         }
         let hit_down = star.wire_noise(0, &mut down);
         if let Some(a) = self.nodes[n].arm.as_mut().filter(|a| !a.done) {
@@ -270,7 +292,8 @@ impl Wire {
             a.pos += down.len();
         }
         if phase == 1 {
-            star.body_fault(0, rx, bus);
+            let k = nc_len.min(rx.len());
+            star.body_fault(0, &mut rx[..k], bus);
         }
         let hit_up = star.wire_noise(1, rx);
         if let Some(c) = star.counters_mut(bus) {
@@ -399,8 +422,7 @@ impl MasterPort for SpiMaster {
         if tx.len() != rx.len() {
             return Err(PortError);
         }
-        self.wire.borrow_mut().transfer(self.bus, tx, rx);
-        let d = self.wire.borrow().timing.bytes_ps(tx.len());
+        let d = self.wire.borrow_mut().transfer(self.bus, tx, rx);
         self.delay(d).await;
         Ok(())
     }
