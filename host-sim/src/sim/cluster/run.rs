@@ -530,10 +530,7 @@ impl LinkReport {
     fn new(buses: usize, nodes: u16) -> Self {
         Self {
             master: Rc::new(RefCell::new(vec![MasterCounters::default(); buses])),
-            slaves: Rc::new(RefCell::new(vec![
-                SlaveCounters::default();
-                nodes as usize
-            ])),
+            slaves: Rc::new(RefCell::new(vec![SlaveCounters::default(); nodes as usize])),
         }
     }
 
@@ -593,9 +590,8 @@ fn node_tasks<'a>(
                 let mut link = SimNodeLink::new(star, i as u16);
                 Box::pin(async move {
                     // A link error ends the node; the report keeps what it did.
-                    let _ =
-                        run_node(node_cfg, &mut link, &mut work, &mut renderer, scene, report)
-                            .await;
+                    let _ = run_node(node_cfg, &mut link, &mut work, &mut renderer, scene, report)
+                        .await;
                 })
             }
             Some(wire) => {
@@ -615,8 +611,14 @@ fn node_tasks<'a>(
                         node: i,
                     };
                     let mut handle = shared.handle();
-                    let logic =
-                        run_node(node_cfg, &mut handle, &mut work, &mut renderer, scene, report);
+                    let logic = run_node(
+                        node_cfg,
+                        &mut handle,
+                        &mut work,
+                        &mut renderer,
+                        scene,
+                        report,
+                    );
                     let _ = NodeOnLink {
                         link: Box::pin(task.run(&mut port, &shared)),
                         logic: Box::pin(logic),

@@ -23,11 +23,11 @@ use super::exec::{Delay, PollFn, Ps, SharedClock};
 use super::star::SharedStar;
 use links_core::board::LinkProfile;
 use links_core::link::{LinkError, NodeId, RootBus, Transfer};
+use links_core::spi::nc_header;
 use links_core::spi::{
     Armed, Bank, MasterCounters, MasterLink, MasterPort, PortError, Select, SlaveCounters,
     SlavePort, HEADER, TRAILER,
 };
-use links_core::spi::nc_header;
 use std::cell::RefCell;
 use std::future::Future;
 use std::pin::Pin;
@@ -266,7 +266,9 @@ impl Wire {
     fn exchange_bytes(&mut self, bus: usize, n: usize, phase: u32, tx: &[u8], rx: &mut [u8]) {
         let mut down = tx.to_vec();
         if phase == 0 {
-            let rc = tx.get(2..4).map_or(0, |l| u16::from_le_bytes([l[0], l[1]]) as usize);
+            let rc = tx
+                .get(2..4)
+                .map_or(0, |l| u16::from_le_bytes([l[0], l[1]]) as usize);
             let nc = self.nodes[n]
                 .arm
                 .as_ref()
@@ -348,6 +350,8 @@ impl Wire {
 pub struct SpiMaster {
     wire: SharedWire,
     bus: usize,
+    /// Wire time of the open selection not yet waited for (set-up and bytes).
+    owed: Ps,
 }
 
 impl SpiMaster {
@@ -355,6 +359,7 @@ impl SpiMaster {
         Self {
             wire: wire.clone(),
             bus,
+            owed: 0,
         }
     }
 
@@ -384,7 +389,10 @@ impl MasterPort for SpiMaster {
         let low: Vec<bool> = (0..self.count()).map(|i| !self.ready(i)).collect();
         PollFn(|| {
             let rose = self.wire.borrow().buses[self.bus].edges != edges;
-            let high = low.iter().enumerate().any(|(i, &l)| l && self.ready(i as u16));
+            let high = low
+                .iter()
+                .enumerate()
+                .any(|(i, &l)| l && self.ready(i as u16));
             (rose || high).then_some(())
         })
         .await
@@ -392,11 +400,18 @@ impl MasterPort for SpiMaster {
 
     async fn select(&mut self, sel: Select) {
         self.wire.borrow_mut().select(self.bus, sel);
-        let setup = self.wire.borrow().timing.cs_setup_ps;
-        self.delay(setup).await;
+        self.owed = self.wire.borrow().timing.cs_setup_ps;
     }
 
     async fn deselect(&mut self) {
+        // The set-up and the bytes of this selection, charged in one step: nothing the
+        // master or the nodes do depends on the time inside a selection (a node sees its
+        // transfer only when the chip-select rises), and one event instead of one per phase
+        // keeps large clusters fast to simulate.
+        let owed = std::mem::take(&mut self.owed);
+        if owed > 0 {
+            self.delay(owed).await;
+        }
         let done = self.wire.borrow_mut().deselect(self.bus);
         let (hold, star) = {
             let w = self.wire.borrow();
@@ -423,7 +438,7 @@ impl MasterPort for SpiMaster {
             return Err(PortError);
         }
         let d = self.wire.borrow_mut().transfer(self.bus, tx, rx);
-        self.delay(d).await;
+        self.owed += d;
         Ok(())
     }
 }

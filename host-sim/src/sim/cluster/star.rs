@@ -561,9 +561,7 @@ impl Star {
 
     /// Bus `bus`'s nodes: the first and how many.
     pub fn bus_nodes(&self, bus: usize) -> (NodeId, u16) {
-        self.buses
-            .get(bus)
-            .map_or((0, 0), |b| (b.first, b.count))
+        self.buses.get(bus).map_or((0, 0), |b| (b.first, b.count))
     }
 
     pub fn counters_mut(&mut self, bus: usize) -> Option<&mut BusCounters> {
