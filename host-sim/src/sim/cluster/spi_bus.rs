@@ -468,13 +468,12 @@ impl SlavePort for SpiSlave {
         if tx.len() != rx.len() {
             return Err(PortError);
         }
+        if self.wire.borrow().dead(self.node) {
+            // A node that stopped answering never re-arms its DMA.
+            return core::future::pending().await;
+        }
         {
             let mut w = self.wire.borrow_mut();
-            if w.dead(self.node) {
-                drop(w);
-                // A node that stopped answering never re-arms its DMA.
-                return core::future::pending().await;
-            }
             let p = &mut w.nodes[self.node];
             let touched = p.selected;
             p.arm = Some(Arm {
