@@ -5,12 +5,14 @@
 //! computed by hand from the F407 profile; the frame time beside the idealised link's.
 
 use links_core::board::BoardProfile;
-use links_core::link::{NodeLink, RootBus, Transfer};
+use links_core::link::{Incoming, NodeLink, RootBus, Transfer};
 use links_core::sched::{Policy, Split};
 use links_core::spi::{Bank, SlaveBanks, SlaveShared, BANK};
 use links_host::cluster::exec::{self, Clock, SharedClock, Task};
 use links_host::cluster::relay::Topology;
-use links_host::cluster::spi_bus::{FirmwareBus, LinkModel, StuckReady, Wire, WireTiming};
+use links_host::cluster::spi_bus::{
+    FirmwareBus, LinkModel, NodeOnLink, SharedWire, SpiSlave, StuckReady, Wire, WireTiming,
+};
 use links_host::cluster::star::{BusTiming, Faults, NodeDeath, Noise, Star};
 use links_host::cluster::{simulate_frame, SimConfig, SimReport};
 use links_tests::{bundled_image as image, host_reference as reference};
@@ -97,21 +99,22 @@ fn frames_are_bit_identical_on_the_firmware_link_for_every_count_policy_and_topo
     }
 }
 
-/// Every fault kind of the wire: the frame stays exact, and the link's counters show the
-/// protocol at work.
-#[test]
-fn wire_faults_keep_the_frame_exact() {
-    let img = image("photo1.ron", 64, 60);
-    let want = reference(&img);
-    let t0 = run(&img, f407(8)).time_s;
+/// Every fault kind of the wire, each a named configuration (`t0`: the fault-free frame).
+fn fault_cases(t0: f64) -> Vec<(&'static str, SimConfig)> {
+    let mut cases = noise_cases();
+    cases.extend(line_cases(t0));
+    cases
+}
+
+/// Faults of the bytes on the wire.
+fn noise_cases() -> Vec<(&'static str, SimConfig)> {
     let noise = |up, down, drop| Noise {
         ber_up: up,
         ber_down: down,
         drop_broadcast: drop,
         seed: 7,
     };
-    let stuck = |node, at_s, high| vec![StuckReady { node, at_s, high }];
-    let cases: Vec<(&str, SimConfig)> = vec![
+    vec![
         (
             "bit errors up",
             SimConfig {
@@ -145,14 +148,26 @@ fn wire_faults_keep_the_frame_exact() {
                 ..f407(6)
             },
         ),
+    ]
+}
+
+/// Faults of the handshake lines and the nodes (and all at once on a relay tree).
+fn line_cases(t0: f64) -> Vec<(&'static str, SimConfig)> {
+    let noise = |up, down, drop| Noise {
+        ber_up: up,
+        ber_down: down,
+        drop_broadcast: drop,
+        seed: 7,
+    };
+    let stuck = |node, at_s, high| vec![StuckReady { node, at_s, high }];
+    let death = |node, at_s| vec![NodeDeath { node, at_s }];
+    let timeout = t0 / 4.0;
+    vec![
         (
             "node stops answering",
             SimConfig {
-                deaths: vec![NodeDeath {
-                    node: 3,
-                    at_s: t0 / 2.0,
-                }],
-                node_timeout_s: t0 / 4.0,
+                deaths: death(3, t0 / 2.0),
+                node_timeout_s: timeout,
                 ..f407(8)
             },
         ),
@@ -160,7 +175,7 @@ fn wire_faults_keep_the_frame_exact() {
             "ready stuck low mid-frame",
             SimConfig {
                 stuck: stuck(2, t0 / 3.0, false),
-                node_timeout_s: t0 / 4.0,
+                node_timeout_s: timeout,
                 ..f407(8)
             },
         ),
@@ -168,7 +183,7 @@ fn wire_faults_keep_the_frame_exact() {
             "ready stuck high mid-frame",
             SimConfig {
                 stuck: stuck(2, t0 / 3.0, true),
-                node_timeout_s: t0 / 4.0,
+                node_timeout_s: timeout,
                 ..f407(8)
             },
         ),
@@ -183,44 +198,121 @@ fn wire_faults_keep_the_frame_exact() {
             "relay tree, noise and a death",
             SimConfig {
                 noise: noise(1e-5, 1e-5, 0.02),
-                deaths: vec![NodeDeath {
-                    node: 20,
-                    at_s: t0 / 3.0,
-                }],
-                node_timeout_s: t0 / 4.0,
+                deaths: death(20, t0 / 3.0),
+                node_timeout_s: timeout,
                 ..SimConfig::buildable(BoardProfile::F407, 64)
             },
         ),
-    ];
-    for (name, cfg) in cases {
+    ]
+}
+
+/// What each fault kind must have made the link and the root count.
+fn check_counters(name: &str, r: &SimReport) {
+    let l = r.link.expect("firmware link");
+    match name {
+        "bit errors up" => assert!(l.naks > 0 && l.retransmits > 0, "{name}: {l:?}"),
+        "bit errors down" => assert!(l.node_bad_bodies + l.node_bad_headers > 0, "{l:?}"),
+        "lost broadcasts" => {
+            let lost: u64 = r.bus.iter().map(|b| b.dropped_broadcast).sum();
+            assert!(lost > 0 && r.root.repairs > 0, "{name}: {lost}");
+        }
+        "every-n body faults" => {
+            let up: u64 = r.bus.iter().map(|b| b.corrupted_up).sum();
+            // Each damaged node frame is NAKed once and sent again; the root sees it as one
+            // bad (empty) frame.
+            assert!(up > 5, "{up}");
+            assert_eq!(l.naks, up, "{l:?}");
+            assert_eq!(r.root.bad_messages as u64, up);
+        }
+        "node stops answering" => assert_eq!(r.root.timeouts, 1, "{:?}", r.root),
+        "ready stuck high mid-frame" | "ready stuck high from the start" => {
+            // Selected once, the line did not drop: the RC ignores the node from then on.
+            assert_eq!(l.no_ack, 1, "{name}: {l:?}")
+        }
+        _ => {}
+    }
+}
+
+/// Every fault kind of the wire: the frame stays exact, and the link's counters show the
+/// protocol at work.
+#[test]
+fn wire_faults_keep_the_frame_exact() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let t0 = run(&img, f407(8)).time_s;
+    for (name, cfg) in fault_cases(t0) {
         let r = run(&img, cfg);
         assert!(r.frames[0] == want, "{name}");
-        let l = r.link.expect("firmware link");
-        match name {
-            "bit errors up" => assert!(l.naks > 0 && l.retransmits > 0, "{name}: {l:?}"),
-            "bit errors down" => {
-                assert!(l.node_bad_bodies + l.node_bad_headers > 0, "{name}: {l:?}")
-            }
-            "lost broadcasts" => {
-                let lost: u64 = r.bus.iter().map(|b| b.dropped_broadcast).sum();
-                assert!(lost > 0 && r.root.repairs > 0, "{name}: {lost}");
-            }
-            "every-n body faults" => {
-                let up: u64 = r.bus.iter().map(|b| b.corrupted_up).sum();
-                // Each damaged node frame is NAKed once and sent again; the root sees it
-                // as one bad (empty) frame.
-                assert!(up > 5, "{up}");
-                assert_eq!(l.naks, up, "{l:?}");
-                assert_eq!(r.root.bad_messages as u64, up);
-            }
-            "node stops answering" => assert_eq!(r.root.timeouts, 1, "{:?}", r.root),
-            "ready stuck high mid-frame" | "ready stuck high from the start" => {
-                // Selected once, the line did not drop: the RC ignores the node from then on.
-                assert_eq!(l.no_ack, 1, "{name}: {l:?}")
-            }
-            _ => {}
-        }
+        check_counters(name, &r);
     }
+}
+
+/// The RC's side of the timing test: wait for the node, clock an exchange of `rc_len`
+/// bytes, then a broadcast of as many; records (start, after the exchange, after the
+/// broadcast) and the length of the node frame it took.
+fn timed_master(
+    clock: &SharedClock,
+    wire: &SharedWire,
+    rc_len: usize,
+    times: Rc<RefCell<Vec<u64>>>,
+    got: Rc<Cell<usize>>,
+) -> Task<'static> {
+    let (clock, wire) = (clock.clone(), wire.clone());
+    Box::pin(async move {
+        let mut banks = Box::new([[0u8; BANK]; 3]);
+        let report = Rc::new(RefCell::new(vec![Default::default()]));
+        let mut bus = FirmwareBus::new(&wire, 0, &mut banks, report);
+        let node = bus.wait_ready().await;
+        let mut rx = vec![0u8; 2000];
+        bus.tx_bank()[..rc_len].fill(0x11);
+        let t0 = clock.borrow().now;
+        bus.start(Transfer::Exchange(node), rc_len).unwrap();
+        got.set(bus.finish(&mut rx).await.unwrap());
+        let t1 = clock.borrow().now;
+        bus.tx_bank()[..rc_len].fill(0x22);
+        bus.start(Transfer::Broadcast, rc_len).unwrap();
+        bus.finish(&mut rx).await.unwrap();
+        let t2 = clock.borrow().now;
+        times.borrow_mut().extend([t0, t1, t2]);
+    })
+}
+
+/// Node 0 of the timing test: the NC firmware's link task and a logic that posts an
+/// `nc_len`-byte frame and records the next two frames it receives (exchanged?, length).
+fn timed_node(
+    wire: &SharedWire,
+    nc_len: usize,
+    heard: Rc<RefCell<Vec<(bool, usize)>>>,
+) -> Task<'static> {
+    let wire = wire.clone();
+    Box::pin(async move {
+        let mut banks: Box<[Bank; 5]> = Box::new([[0u8; BANK]; 5]);
+        let [t0, t1, r0, r1, scratch] = &mut *banks;
+        let (shared, task) = SlaveShared::new(SlaveBanks {
+            tx: [t0, t1],
+            rx: [r0, r1],
+            scratch,
+        });
+        let mut port = SpiSlave::new(&wire, 0);
+        let mut h = shared.handle();
+        let logic = async {
+            h.post(&vec![0x33; nc_len]).unwrap();
+            let mut rx = vec![0u8; 2000];
+            for _ in 0..2 {
+                heard
+                    .borrow_mut()
+                    .push(match h.recv(&mut rx).await.unwrap() {
+                        Incoming::Exchanged { len } => (true, len),
+                        Incoming::Broadcast { len } => (false, len),
+                    });
+            }
+        };
+        NodeOnLink {
+            link: Box::pin(task.run(&mut port, &shared)),
+            logic: Box::pin(logic),
+        }
+        .await;
+    })
 }
 
 /// One exchange and one broadcast on the emulated peripheral take exactly the wire's time:
@@ -241,57 +333,16 @@ fn one_exchange_takes_the_analytic_wire_time() {
     let times = Rc::new(RefCell::new(Vec::<u64>::new()));
     let got = Rc::new(Cell::new(0usize));
     let heard = Rc::new(RefCell::new(Vec::<(bool, usize)>::new()));
-    let master: Task<'static> = {
-        let (clock, wire, times, got) = (clock.clone(), wire.clone(), times.clone(), got.clone());
-        Box::pin(async move {
-            let mut banks = Box::new([[0u8; BANK]; 3]);
-            let report = Rc::new(RefCell::new(vec![Default::default()]));
-            let mut bus = FirmwareBus::new(&wire, 0, &mut banks, report);
-            let node = bus.wait_ready().await;
-            let mut rx = vec![0u8; 2000];
-            bus.tx_bank()[..rc_len].fill(0x11);
-            let t0 = clock.borrow().now;
-            bus.start(Transfer::Exchange(node), rc_len).unwrap();
-            got.set(bus.finish(&mut rx).await.unwrap());
-            let t1 = clock.borrow().now;
-            bus.tx_bank()[..rc_len].fill(0x22);
-            bus.start(Transfer::Broadcast, rc_len).unwrap();
-            bus.finish(&mut rx).await.unwrap();
-            let t2 = clock.borrow().now;
-            times.borrow_mut().extend([t0, t1, t2]);
-        })
-    };
-    let node: Task<'static> = {
-        let (wire, heard) = (wire.clone(), heard.clone());
-        Box::pin(async move {
-            let mut banks: Box<[Bank; 5]> = Box::new([[0u8; BANK]; 5]);
-            let [t0, t1, r0, r1, scratch] = &mut *banks;
-            let (shared, task) = SlaveShared::new(SlaveBanks {
-                tx: [t0, t1],
-                rx: [r0, r1],
-                scratch,
-            });
-            let mut port = links_host::cluster::spi_bus::SpiSlave::new(&wire, 0);
-            let mut h = shared.handle();
-            let logic = async {
-                h.post(&[0x33; 40][..nc_len]).unwrap();
-                let mut rx = vec![0u8; 2000];
-                for _ in 0..2 {
-                    let m = h.recv(&mut rx).await.unwrap();
-                    heard.borrow_mut().push(match m {
-                        links_core::link::Incoming::Exchanged { len } => (true, len),
-                        links_core::link::Incoming::Broadcast { len } => (false, len),
-                    });
-                }
-            };
-            links_host::cluster::spi_bus::NodeOnLink {
-                link: Box::pin(task.run(&mut port, &shared)),
-                logic: Box::pin(logic),
-            }
-            .await;
-        })
-    };
-    let mut tasks = vec![Some(master), Some(node)];
+    let mut tasks = vec![
+        Some(timed_master(
+            &clock,
+            &wire,
+            rc_len,
+            times.clone(),
+            got.clone(),
+        )),
+        Some(timed_node(&wire, nc_len, heard.clone())),
+    ];
     let done = times.clone();
     exec::run(
         &clock,

@@ -6,6 +6,9 @@
 //! - [`dm`]: the DM stage (each frame's scene appears after the DM's time for it).
 //! - [`dmcost`]: the DM's time per frame from a model of its work.
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
+//! - [`spi_bus`]: the firmware's link (`links_core::spi`) over an emulated SPI peripheral,
+//!   the default wherever the board frames transfers as the firmware does; [`star`] is then
+//!   the idealised alternative (`LinkModel::Ideal`).
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
 //! - [`relay`]: the topology: a star, or a tree of relay RCs (the links between RCs, the

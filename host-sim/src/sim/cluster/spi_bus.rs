@@ -1,5 +1,5 @@
 //! The firmware's own link in the simulator: an emulated SPI peripheral in virtual time under
-//! `links_core::spi` (the RC's [`MasterLink`], each node's [`SlaveTask`] and [`SlaveHandle`]),
+//! `links_core::spi` (the RC's [`MasterLink`], each node's `SlaveTask` and `SlaveHandle`),
 //! so the cluster runs the code the boards run.
 //!
 //! - **RC side** ([`SpiMaster`], a [`MasterPort`] per bus): chip-selects asserted with the
@@ -636,7 +636,7 @@ impl RootBus for FirmwareBus<'_> {
     }
 }
 
-/// A node on the firmware link: its link task ([`SlaveTask::run`]) and its logic (`run_node`
+/// A node on the firmware link: its link task (`SlaveTask::run`) and its logic (`run_node`
 /// over a [`SlaveHandle`]) polled together, the link again after the logic (so a frame the
 /// logic posts or a bank it frees re-arms the DMA in the same pass); done when the logic is.
 pub struct NodeOnLink<L, N> {
