@@ -541,7 +541,11 @@ mod tests {
         assert!(!f.rc_double_buffer);
         assert_eq!(f.overloaded_bus(), Some(64));
         let text = board_text(&f);
-        assert!(text.starts_with("board f407: 21 MHz, 23.0 us"), "{text}");
+        assert!(
+            text.starts_with("board f407, firmware link: 21 MHz, 23.0 us"),
+            "{text}"
+        );
+        assert_eq!(f.link, LinkModel::Firmware);
         assert!(topology_note(&f).contains("drives 8"));
         let i = config(
             BoardProfile::IDEAL,
@@ -553,6 +557,11 @@ mod tests {
         );
         assert_eq!((i.timing.bit_rate_hz, i.timing.overhead_ns), (10e6, 500.0));
         assert!(i.rc_double_buffer && i.overloaded_bus().is_none());
+        assert_eq!(i.link, LinkModel::Ideal);
+        assert_eq!(parse_link("ideal"), Ok(LinkModel::Ideal));
+        assert_eq!(parse_link("firmware"), Ok(LinkModel::Firmware));
+        let e = parse_link("fast").unwrap_err().to_string();
+        assert!(e.contains("unknown link 'fast'"), "{e}");
         assert_eq!(topology_note(&i), "");
         let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
         assert_eq!(eight.overloaded_bus(), None);
