@@ -901,7 +901,11 @@ fn cluster_render_names_its_board_and_draws_the_timeline() {
             std::fs::read(&host).unwrap(),
             std::fs::read(&cluster).unwrap()
         );
-        assert!(err.contains(&format!("board {board}: ")), "{err}");
+        let link = if board == "f407" { "firmware" } else { "ideal" };
+        assert!(
+            err.contains(&format!("board {board}, {link} link: ")),
+            "{err}"
+        );
         let x = err
             .split("speed-up ")
             .nth(1)
