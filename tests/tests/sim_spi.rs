@@ -299,12 +299,11 @@ fn timed_node(
             h.post(&vec![0x33; nc_len]).unwrap();
             let mut rx = vec![0u8; 2000];
             for _ in 0..2 {
-                heard
-                    .borrow_mut()
-                    .push(match h.recv(&mut rx).await.unwrap() {
-                        Incoming::Exchanged { len } => (true, len),
-                        Incoming::Broadcast { len } => (false, len),
-                    });
+                let got = match h.recv(&mut rx).await.unwrap() {
+                    Incoming::Exchanged { len } => (true, len),
+                    Incoming::Broadcast { len } => (false, len),
+                };
+                heard.borrow_mut().push(got);
             }
         };
         NodeOnLink {
