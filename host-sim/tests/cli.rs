@@ -901,7 +901,11 @@ fn cluster_render_names_its_board_and_draws_the_timeline() {
             std::fs::read(&host).unwrap(),
             std::fs::read(&cluster).unwrap()
         );
-        assert!(err.contains(&format!("board {board}: ")), "{err}");
+        let link = if board == "f407" { "firmware" } else { "ideal" };
+        assert!(
+            err.contains(&format!("board {board}, {link} link: ")),
+            "{err}"
+        );
         let x = err
             .split("speed-up ")
             .nth(1)
@@ -910,7 +914,7 @@ fn cluster_render_names_its_board_and_draws_the_timeline() {
         assert!(matches!(x, Some(Ok(v)) if v > 1.0 && v <= 4.0), "{err}");
         let pic = std::fs::read_to_string(&svg).unwrap();
         assert!(pic.starts_with("<svg") && pic.trim_end().ends_with("</svg>"));
-        assert!(pic.contains(&format!("board {board}: ")) && pic.contains("node 3"));
+        assert!(pic.contains(&format!("board {board}, {link} link: ")) && pic.contains("node 3"));
     }
     let o = render_64x60("photo1.ron", &cluster)
         .args(["--nodes", "4", "--board", "f429"])

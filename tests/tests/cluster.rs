@@ -7,6 +7,7 @@ use links_core::node::NodeConfig;
 use links_core::sched::{Policy, Split};
 use links_core::wire::{self, Down, SCENE_CHUNK};
 use links_host::cluster::relay::{Topology, TreeShape};
+use links_host::cluster::spi_bus::LinkModel;
 use links_host::cluster::star::{BroadcastDrop, Faults, NodeDeath, Noise};
 use links_host::cluster::{simulate, simulate_frame, Collect, SimConfig, SimError, SimReport};
 
@@ -838,8 +839,12 @@ mod hostile_bus {
 fn a_slow_dm_sets_the_frame_interval_and_a_fast_one_changes_nothing() {
     use links_host::cluster::steady_state_interval;
     let img = image("photo1.ron", 64, 60);
+    // The idealised link: on the firmware's, a node drains its two RX banks only between
+    // runs, so the next frame's scene broadcast mostly overflows and is repaired point to
+    // point (tests/tests/sim_spi.rs, docs/cluster.md); this test is about the DM's pacing.
     let cfg = SimConfig {
         nodes: 8,
+        link: LinkModel::Ideal,
         ..SimConfig::default()
     };
     let render = steady_state_interval(&img, &cfg, 8).expect("simulates");
@@ -989,9 +994,12 @@ fn a_death_during_an_animation_and_false_alarms_keep_every_frame_exact() {
     let a = image("photo1.ron", 64, 60);
     let b = image("reflections.ron", 64, 60);
     let scenes = [a.clone(), b.clone(), a.clone()];
+    // The idealised link (the death's timing assumes the pipelined broadcast; the firmware
+    // link's animation with a death is in tests/tests/sim_spi.rs).
     let cfg = SimConfig {
         nodes: 8,
         keep_frames: true,
+        link: LinkModel::Ideal,
         ..SimConfig::default()
     };
     let t = simulate(&scenes, &cfg).expect("simulates").frame_done_s;
@@ -1039,10 +1047,13 @@ fn rc_double_buffering_hides_the_rcs_work_and_keeps_the_frame() {
     use links_host::cluster::rccost::RcCost;
     let img = image("photo1.ron", 64, 60);
     let want = reference(&img);
+    // The idealised link: the firmware's MasterLink clocks the wire only inside `finish`
+    // (links_core::spi::RC_OVERLAPS), so on it buffering has nothing to hide behind.
     let cfg = |double, rc_cost| SimConfig {
         nodes: 16,
         rc_double_buffer: double,
         rc_cost,
+        link: LinkModel::Ideal,
         ..SimConfig::default()
     };
     let double = run(&img, cfg(true, RcCost::CORTEX_M4F));

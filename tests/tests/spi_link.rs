@@ -138,6 +138,30 @@ fn garbled_headers_never_deliver_and_the_link_recovers() {
     }
 }
 
+/// A handshake line stuck high (node 0's: high, but no DMA armed, so selecting it does not
+/// drop it) is clocked once, found not to acknowledge, and ignored until it is seen low;
+/// then it counts again. Before, `ready()` kept answering it and the root, which broadcasts
+/// only while no node is ready, could never broadcast.
+#[test]
+fn a_ready_line_stuck_high_is_ignored_until_seen_low() {
+    let bus = bus(2);
+    let mut master = master_link(&bus, 0);
+    bus.borrow_mut().nodes[0].ready = true;
+    assert_eq!(master.ready(), Some(0));
+    let mut rx = [0u8; MAX_MESSAGE];
+    assert_eq!(run(master.exchange(0, b"x", &mut rx)).unwrap(), 0);
+    assert_eq!(master.counters.no_ack, 1);
+    assert_eq!(bus.borrow().transfers, 0, "nothing clocked");
+    assert_eq!(master.ready(), None, "still high, ignored");
+    bus.borrow_mut().nodes[1].ready = true;
+    assert_eq!(master.ready(), Some(1), "the others are served");
+    bus.borrow_mut().nodes[1].ready = false;
+    bus.borrow_mut().nodes[0].ready = false;
+    assert_eq!(master.ready(), None);
+    bus.borrow_mut().nodes[0].ready = true;
+    assert_eq!(master.ready(), Some(0), "seen low: counted again");
+}
+
 #[test]
 fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
     let bus = bus(2);

@@ -71,6 +71,13 @@ pub struct ClusterArgs {
     /// itself) or relay (a relay tree whatever the count)
     #[arg(long, default_value = "buildable", value_parser = |s: &str| s.parse::<cli_cluster::TopologyArg>())]
     pub topology: cli_cluster::TopologyArg,
+    /// Which link code the buses run (cluster only): firmware (the firmware's links_core::spi
+    /// master and slave state machines and frames over an emulated SPI peripheral: DMA
+    /// banks, chip-selects, handshake lines, the MISO multiplexer; needs the f407 board's
+    /// framing) or ideal (the idealised star: the same wire time, no protocol). Default: the
+    /// board's (firmware on f407, ideal on ideal)
+    #[arg(long, value_parser = cli_cluster::parse_link)]
+    pub link: Option<crate::cluster::spi_bus::LinkModel>,
     /// SPI buses from the root computer of a star (cluster only)
     #[arg(long, default_value_t = 1)]
     pub buses: u16,
@@ -142,6 +149,9 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
         ));
     }
     cfg.board = c.node;
+    if let Some(link) = c.link {
+        cfg.link = link;
+    }
     cfg.dm_s_per_frame = c.dm_ms * 1e-3;
     cfg.node_timeout_s = timeout_ms * 1e-3;
     cfg.rc_double_buffer = cfg.rc_double_buffer && !c.rc_single_buffer;

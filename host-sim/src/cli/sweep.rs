@@ -65,6 +65,11 @@ pub enum SweepCmd {
         /// Node counts at which each F407 limit is lifted in turn
         #[arg(long, value_delimiter = ',', default_value = "64,256")]
         lift_at: Vec<u16>,
+        /// The F407's link code: firmware (links_core::spi over the emulated SPI
+        /// peripheral, the default) or ideal (the idealised star); the ideal board always
+        /// runs the idealised one
+        #[arg(long, value_parser = cli_cluster::parse_link)]
+        link: Option<crate::cluster::spi_bus::LinkModel>,
     },
     /// A film's DM pipeline on f407 and ideal: one simulation of all its frames (frame n+1
     /// broadcast while frame n renders), steady-state speed-up against one node, the DM's
@@ -133,11 +138,13 @@ pub fn run(cmd: SweepCmd) -> Result<(), CliError> {
             scene,
             counts,
             lift_at,
+            link,
         } => {
             let image = SceneArgs::plain(&scene).compile()?;
-            let text = crate::studies::board_study::board_study(&image, &counts, &lift_at, &|s| {
-                eprintln!("simulating {s} ...")
-            })?;
+            let text =
+                crate::studies::board_study::board_study(&image, &counts, &lift_at, link, &|s| {
+                    eprintln!("simulating {s} ...")
+                })?;
             outln!("{text}");
             Ok(())
         }

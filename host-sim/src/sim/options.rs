@@ -3,6 +3,7 @@
 //! over [`crate::sim::cluster`]; every number is virtual time.
 
 use crate::sim::cluster::relay::Topology;
+use crate::sim::cluster::spi_bus::{LinkModel, StuckReady};
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
 use links_core::board::BoardProfile;
@@ -59,8 +60,9 @@ pub fn parse_board_arg(s: &str) -> Result<&'static BoardProfile, OptionError> {
 pub fn board_text(cfg: &SimConfig) -> String {
     let (p, t) = (&cfg.profile, &cfg.timing);
     format!(
-        "board {}: {} MHz, {:.1} us CS set-up+hold, {}+{} B header+trailer, {} nodes/bus, RC {}",
+        "board {}, {} link: {} MHz, {:.1} us CS set-up+hold, {}+{} B header+trailer, {} nodes/bus, RC {}",
         p.name,
+        cfg.link.name(),
         t.bit_rate_hz / 1e6,
         t.overhead_ns * 1e-3,
         t.header_bytes,
@@ -72,6 +74,16 @@ pub fn board_text(cfg: &SimConfig) -> String {
             "serial"
         }
     )
+}
+
+/// `--link NAME`: the firmware's link code over the emulated SPI peripheral (`firmware`)
+/// or the idealised star (`ideal`).
+pub fn parse_link(s: &str) -> Result<LinkModel, OptionError> {
+    match s {
+        "firmware" => Ok(LinkModel::Firmware),
+        "ideal" => Ok(LinkModel::Ideal),
+        _ => Err(OptionError::UnknownLink(s.into())),
+    }
 }
 
 /// A `--topology` value: `buildable` (what the board can be wired as: a relay tree when
@@ -228,6 +240,8 @@ pub enum OptionError {
     UnknownPolicy(String),
     /// `--topology` with no such topology.
     UnknownTopology(String),
+    /// `--link` with no such link.
+    UnknownLink(String),
     /// `--board NAME` with no such profile.
     UnknownBoard(String),
     /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
@@ -263,6 +277,9 @@ impl fmt::Display for OptionError {
                 f,
                 "unknown topology '{s}' (expected buildable, star or relay)"
             ),
+            OptionError::UnknownLink(s) => {
+                write!(f, "unknown link '{s}' (expected firmware or ideal)")
+            }
             OptionError::UnknownBoard(s) => {
                 let known: Vec<&str> = BoardProfile::ALL.iter().map(|b| b.name).collect();
                 write!(f, "unknown board '{s}' (known: {})", known.join(", "))
@@ -328,6 +345,13 @@ pub struct FaultArgs {
     /// dead) even without --spi-dead (cluster only)
     #[arg(long)]
     pub backup_line: bool,
+    /// A node whose handshake (ready) line sticks low from then on, whatever it drives:
+    /// NODE@SECONDS or FIRST-LAST@SECONDS (repeatable; firmware link only)
+    #[arg(long = "stuck-low", value_name = "NODE@SECONDS")]
+    pub stuck_low: Vec<String>,
+    /// A node whose handshake line sticks high (repeatable; firmware link only)
+    #[arg(long = "stuck-high", value_name = "NODE@SECONDS")]
+    pub stuck_high: Vec<String>,
 }
 
 /// Set the faults of `args` on `cfg` (whose node count is already set), with errors that
@@ -351,6 +375,16 @@ pub fn apply_faults(cfg: &mut SimConfig, args: &FaultArgs) -> Result<(), OptionE
     cfg.deaths = node_times(&args.kills, cfg.nodes)?;
     cfg.spi_dead = node_times(&args.spi_dead, cfg.nodes)?;
     cfg.backup_line = args.backup_line;
+    cfg.stuck.clear();
+    for (values, high) in [(&args.stuck_low, false), (&args.stuck_high, true)] {
+        for d in node_times(values, cfg.nodes)? {
+            cfg.stuck.push(StuckReady {
+                node: d.node,
+                at_s: d.at_s,
+                high,
+            });
+        }
+    }
     Ok(())
 }
 
@@ -396,9 +430,9 @@ pub fn fault_summary(r: &SimReport) -> String {
     let corrupted: u64 = r.bus.iter().map(|b| b.corrupted()).sum();
     let dropped: u64 = r.bus.iter().map(|b| b.dropped_broadcast).sum();
     if root.timeouts == 0 && corrupted == 0 && dropped == 0 && root.repairs == 0 {
-        return backup_summary(r);
+        return backup_summary(r) + &link_summary(r);
     }
-    backup_summary(r) + &format!(
+    backup_summary(r) + &link_summary(r) + &format!(
         " | faults: {} declared dead ({} revived), {} sub-screens re-issued, time-out {:.3} s; {corrupted} messages corrupted, {} rejected by CRC at the RC; {dropped} broadcast copies lost, {} scene repairs",
         root.timeouts,
         root.revived,
@@ -407,6 +441,25 @@ pub fn fault_summary(r: &SimReport) -> String {
         root.bad_messages,
         root.repairs
     )
+}
+
+/// What the firmware link's ends counted, for the render's stats line ("" on the idealised
+/// link or when nothing went wrong).
+pub fn link_summary(r: &SimReport) -> String {
+    match &r.link {
+        Some(c) if c.any() => format!(
+            " | firmware link: {} NAKs, {} retransmits, {} bad node headers at the RC, {} bad RC headers and {} bad bodies at the nodes, {} not ready, {} no ack, {} RX overflows",
+            c.naks,
+            c.retransmits,
+            c.rc_bad_headers,
+            c.node_bad_headers,
+            c.node_bad_bodies,
+            c.not_ready,
+            c.no_ack,
+            c.overflows
+        ),
+        _ => String::new(),
+    }
 }
 
 /// A cluster configuration from the command line's settings: the board profile's, with
@@ -491,7 +544,11 @@ mod tests {
         );
         assert_eq!(f.overloaded_bus(), Some(64));
         let text = board_text(&f);
-        assert!(text.starts_with("board f407: 21 MHz, 23.0 us"), "{text}");
+        assert!(
+            text.starts_with("board f407, firmware link: 21 MHz, 23.0 us"),
+            "{text}"
+        );
+        assert_eq!(f.link, LinkModel::Firmware);
         assert!(topology_note(&f).contains("drives 8"));
         let i = config(
             BoardProfile::IDEAL,
@@ -503,6 +560,11 @@ mod tests {
         );
         assert_eq!((i.timing.bit_rate_hz, i.timing.overhead_ns), (10e6, 500.0));
         assert!(i.rc_double_buffer && i.overloaded_bus().is_none());
+        assert_eq!(i.link, LinkModel::Ideal);
+        assert_eq!(parse_link("ideal"), Ok(LinkModel::Ideal));
+        assert_eq!(parse_link("firmware"), Ok(LinkModel::Firmware));
+        let e = parse_link("fast").unwrap_err().to_string();
+        assert!(e.contains("unknown link 'fast'"), "{e}");
         assert_eq!(topology_note(&i), "");
         let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
         assert_eq!(eight.overloaded_bus(), None);
@@ -581,8 +643,17 @@ mod tests {
             fault_seed: 9,
             spi_dead: vec!["3@0.05".into()],
             backup_line: false,
+            stuck_low: vec!["1@0.01".into()],
+            stuck_high: vec!["4-5@0.02".into()],
         };
         apply_faults(&mut cfg, &args).unwrap();
+        assert_eq!(
+            cfg.stuck
+                .iter()
+                .map(|s| (s.node, s.at_s, s.high))
+                .collect::<Vec<_>>(),
+            vec![(1, 0.01, false), (4, 0.02, true), (5, 0.02, true)]
+        );
         assert_eq!(
             cfg.spi_dead
                 .iter()

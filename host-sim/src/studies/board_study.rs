@@ -6,6 +6,7 @@
 //! and hold; one bus per 8 nodes as the board is wired; the last two with the overlap).
 
 use crate::sim::cluster::relay::Topology;
+use crate::sim::cluster::spi_bus::LinkModel;
 use crate::sim::cluster::{RunCache, SimConfig, SimError, SimReport};
 use crate::sim::options::{board_text, topology_text};
 use crate::studies::report::table_head;
@@ -37,11 +38,13 @@ fn measure(image: &[u8], cfg: &SimConfig) -> Result<Point, SimError> {
 fn profiles_table(
     image: &[u8],
     counts: &[u16],
+    link: Option<LinkModel>,
     cache: &std::sync::Arc<RunCache>,
     progress: &dyn Fn(&str),
 ) -> Result<String, SimError> {
     let mut t = table_head([
         "board",
+        "link",
         "nodes",
         "topology (buildable)",
         "single frame (s)",
@@ -56,15 +59,18 @@ fn profiles_table(
     for board in BoardProfile::ALL {
         for &nodes in counts {
             progress(&format!("board {}, {nodes} nodes", board.name));
+            let base = SimConfig::buildable(board, nodes);
             let cfg = SimConfig {
                 cache: Some(cache.clone()),
-                ..SimConfig::buildable(board, nodes)
+                link: with_link(&base, link),
+                ..base
             };
             let p = measure(image, &cfg)?;
             let r = &p.report;
             t.push_str(&format!(
-                "| {} | {nodes} | {} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% | {} | {} |\n",
+                "| {} | {} | {nodes} | {} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {:.1}% | {} | {} |\n",
                 board.name,
+                cfg.link.name(),
                 topology_text(&cfg),
                 p.single_s,
                 p.speedup,
@@ -103,29 +109,36 @@ fn bus_split(cfg: &SimConfig, r: &SimReport) -> String {
 fn lifts_table(
     image: &[u8],
     nodes: u16,
+    link: Option<LinkModel>,
     cache: &std::sync::Arc<RunCache>,
     progress: &dyn Fn(&str),
 ) -> Result<String, SimError> {
+    let base = SimConfig::for_board(BoardProfile::F407);
     let f407 = SimConfig {
         nodes,
         cache: Some(cache.clone()),
-        ..SimConfig::for_board(BoardProfile::F407)
+        link: with_link(&base, link),
+        ..base
     };
     let wired = BoardProfile::F407.buses_for(nodes).min(MAX_BUSES as u16);
-    let mut no_cs = f407.clone();
+    // An overlapping RC and a link without chip-select time are not what the firmware's
+    // code does: those variants run on the idealised link (the same wire otherwise).
+    let mut no_cs = SimConfig {
+        link: LinkModel::Ideal,
+        ..f407.clone()
+    };
     no_cs.timing.overhead_ns = 0.0;
     let variants = [
         ("F407, one bus (a star)", f407.clone()),
         (
-            // The F407's RC overlaps (its bus task on an interrupt executor): this row is
-            // what that buys against the inline link (`spi::MasterLink`), clocked in `finish`.
-            "RC serial (inline link, no overlap)",
+            "RC overlaps the wire (idealised link)",
             SimConfig {
-                rc_double_buffer: false,
+                rc_double_buffer: true,
+                link: LinkModel::Ideal,
                 ..f407.clone()
             },
         ),
-        ("no chip-select set-up/hold", no_cs.clone()),
+        ("no chip-select set-up/hold (idealised link)", no_cs.clone()),
         (
             "8 nodes per bus (as wired), at most 8 buses",
             SimConfig {
@@ -134,7 +147,7 @@ fn lifts_table(
             },
         ),
         (
-            "no chip-select set-up/hold and 8 buses",
+            "all three (idealised link)",
             SimConfig {
                 buses: wired,
                 rc_double_buffer: true,
@@ -182,14 +195,17 @@ fn lifts_table(
 fn topology_table(
     image: &[u8],
     nodes: u16,
+    link: Option<LinkModel>,
     cache: &std::sync::Arc<RunCache>,
     progress: &dyn Fn(&str),
 ) -> Result<String, SimError> {
+    let base = SimConfig::for_board(BoardProfile::F407);
     let star = |buses| SimConfig {
         nodes,
         buses,
         cache: Some(cache.clone()),
-        ..SimConfig::for_board(BoardProfile::F407)
+        link: with_link(&base, link),
+        ..base.clone()
     };
     let variants = [
         ("(a) one RC, SPI1/2/3 (3 buses)", star(3)),
@@ -255,11 +271,23 @@ fn topology_table(
     Ok(format!("{nodes} nodes on the F407, by topology:\n\n{t}"))
 }
 
-/// The whole study as Markdown.
+/// The link a configuration runs: `link` if given and the board's framing allows it, the
+/// board's default otherwise.
+fn with_link(cfg: &SimConfig, link: Option<LinkModel>) -> LinkModel {
+    match link {
+        Some(LinkModel::Firmware) if !LinkModel::firmware_framing(&cfg.profile.link) => cfg.link,
+        Some(l) => l,
+        None => cfg.link,
+    }
+}
+
+/// The whole study as Markdown; `link` overrides the F407's link (the ideal board always
+/// runs the idealised one).
 pub fn board_study(
     image: &[u8],
     counts: &[u16],
     lift_at: &[u16],
+    link: Option<LinkModel>,
     progress: &dyn Fn(&str),
 ) -> Result<String, String> {
     let e = |e: SimError| e.to_string();
@@ -269,12 +297,12 @@ pub fn board_study(
         s.push_str(&format!("- {}\n", board_text(&SimConfig::for_board(b))));
     }
     s.push('\n');
-    s.push_str(&profiles_table(image, counts, &cache, progress).map_err(e)?);
+    s.push_str(&profiles_table(image, counts, link, &cache, progress).map_err(e)?);
     for &n in lift_at {
         s.push('\n');
-        s.push_str(&lifts_table(image, n, &cache, progress).map_err(e)?);
+        s.push_str(&lifts_table(image, n, link, &cache, progress).map_err(e)?);
         s.push('\n');
-        s.push_str(&topology_table(image, n, &cache, progress).map_err(e)?);
+        s.push_str(&topology_table(image, n, link, &cache, progress).map_err(e)?);
     }
     Ok(s)
 }

@@ -6,6 +6,9 @@
 //! - [`dm`]: the DM stage (each frame's scene appears after the DM's time for it).
 //! - [`dmcost`]: the DM's time per frame from a model of its work.
 //! - [`star`]: buses, ready lines, DMA banks, timing, fault injection, the snooping collector.
+//! - [`spi_bus`]: the firmware's link (`links_core::spi`) over an emulated SPI peripheral,
+//!   the default wherever the board frames transfers as the firmware does; [`star`] is then
+//!   the idealised alternative (`LinkModel::Ideal`).
 //! - [`framemem`]: the 1024 x 1024 RGB8 frame memory.
 //! - [`rccost`]: the RC's CPU (composing, checking, decoding frames) in virtual time.
 //! - [`relay`]: the topology: a star, or a tree of relay RCs (the links between RCs, the
@@ -29,6 +32,7 @@ pub mod framemem;
 pub mod rccost;
 pub mod relay;
 mod run;
+pub mod spi_bus;
 pub mod star;
 pub mod timeline;
 
@@ -51,6 +55,7 @@ use links_core::sched::Policy;
 use links_core::wire::{self, Job};
 use rccost::RcCost;
 use relay::{Topology, TreeReport, TreeShape};
+use spi_bus::{FirmwareLinkCounters, LinkModel, StuckReady};
 use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, Noise};
 use std::collections::HashMap;
 use std::fmt;
@@ -84,6 +89,13 @@ pub struct SimConfig {
     pub topology: Topology,
     pub policy: Policy,
     pub timing: BusTiming,
+    /// Which link the buses run: the firmware's `links_core::spi` over the emulated SPI
+    /// peripheral ([`spi_bus`]), or the idealised star ([`star`]). Default: the firmware's
+    /// wherever the profile frames transfers as the firmware does ([`LinkModel::for_link`]:
+    /// the F407 board), the idealised star otherwise (the ideal board).
+    pub link: LinkModel,
+    /// Handshake lines that stick high or low (firmware link only).
+    pub stuck: Vec<StuckReady>,
     /// Node core clock (Hz).
     pub clock_hz: f64,
     pub model: CycleModel,
@@ -154,6 +166,8 @@ impl SimConfig {
             topology: Topology::Star,
             policy: Policy::DECREASING,
             timing: BusTiming::of(&profile.link),
+            link: LinkModel::for_link(&profile.link),
+            stuck: Vec::new(),
             clock_hz: profile.core_clock_hz as f64,
             model: CycleModel::for_core(profile.core),
             techniques: Techniques::ALL,
@@ -252,6 +266,9 @@ pub struct SimReport {
     pub tree: Option<TreeReport>,
     /// What the serial backup line did, if it ran.
     pub backup: Option<LineCounters>,
+    /// What the firmware link's two ends counted (NAKs, retransmits, refused headers), if
+    /// it ran.
+    pub link: Option<FirmwareLinkCounters>,
 }
 
 impl SimReport {

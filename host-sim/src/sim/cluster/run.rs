@@ -8,6 +8,10 @@ use super::exec::{self, Delay, ExecError, Ps, SharedClock, Task};
 use super::framemem::{self, FrameMemory, ViaRoot};
 use super::rccost::RcClock;
 use super::relay::{Relays, Topology};
+use super::spi_bus::{
+    FirmwareBus, FirmwareLinkCounters, LinkModel, NodeOnLink, SharedWire, SpiSlave, Wire,
+    WireTiming,
+};
 use super::star::{SharedStar, SimBus, SimNodeLink, Star};
 use super::timeline::{SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
@@ -18,6 +22,7 @@ use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Trace
 use links_core::root::{
     run_bus, PixelSink, RootConfig, RootError, RootReport, RootState, MAX_BUSES,
 };
+use links_core::spi::{Bank, MasterCounters, SlaveBanks, SlaveCounters, SlaveShared, BANK};
 use links_core::wire;
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
@@ -176,6 +181,11 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let clock: SharedClock = Rc::new(RefCell::new(exec::Clock::default()));
     let fm = Rc::new(RefCell::new(FrameMemory::new()));
     let star = build_star(&clock, cfg, &fm);
+    let wire = (cfg.link == LinkModel::Firmware).then(|| {
+        let timing = WireTiming::of(&cfg.profile.link, cfg.timing.bit_rate_hz);
+        Wire::new(&star, timing, &cfg.stuck)
+    });
+    let counters = LinkReport::new(star.borrow().bus_count(), cfg.nodes);
     let dm_ps: Vec<Ps> = if cfg.dm_frame_s.is_empty() {
         vec![(cfg.dm_s_per_frame * 1e12).round() as Ps; scenes.len()]
     } else {
@@ -211,7 +221,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let mut tasks = bus_tasks(
         cfg,
         &clock,
-        &star,
+        (&star, &wire, &counters),
         (&rc_busy, &log),
         (&root, &sink, &bus_results, &dm),
     );
@@ -226,6 +236,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     tasks.extend(node_tasks(
         cfg,
         (&clock, &star, &log),
+        (&wire, &counters),
         &busy,
         &crcs,
         &mut banks,
@@ -263,7 +274,9 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let tree = star.borrow().relays().map(|r| r.report());
     let time_ps = done_at.last().copied().unwrap_or(0);
     drop(star);
+    drop(wire);
     let timeline = log.map(|l| l.borrow().clone());
+    let link = (cfg.link == LinkModel::Firmware).then(|| counters.sum());
     Ok(SimReport {
         profile: cfg.profile,
         nodes: cfg.nodes,
@@ -284,6 +297,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         timeline,
         tree,
         backup: line_on.then(|| line_counters.take()),
+        link,
     })
 }
 
@@ -372,6 +386,7 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
         )));
     }
     cfg.noise.check().map_err(SimError::Config)?;
+    check_link(cfg)?;
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
     if !cfg.dm_frame_s.is_empty() && cfg.dm_frame_s.len() != scenes.len() {
@@ -394,6 +409,38 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
         });
     }
     Ok(frames)
+}
+
+/// Refuse a link the board cannot run: the firmware's code needs the firmware's framing,
+/// and only it has handshake lines to stick.
+fn check_link(cfg: &SimConfig) -> Result<(), SimError> {
+    let link = &cfg.profile.link;
+    if cfg.link == LinkModel::Firmware && !LinkModel::firmware_framing(link) {
+        return Err(SimError::Config(format!(
+            "the firmware link frames transfers with an {}-byte header and a {}-byte trailer; the {} board's are {} and {}: use the ideal link",
+            links_core::spi::HEADER,
+            links_core::spi::TRAILER,
+            cfg.profile.name,
+            link.header_bytes,
+            link.trailer_bytes
+        )));
+    }
+    if cfg.link == LinkModel::Ideal && !cfg.stuck.is_empty() {
+        return Err(SimError::Config(
+            "a stuck handshake line needs the firmware link (the idealised star has none)".into(),
+        ));
+    }
+    if let Some(st) = cfg
+        .stuck
+        .iter()
+        .find(|s| s.node >= cfg.nodes || !(s.at_s.is_finite() && s.at_s >= 0.0))
+    {
+        return Err(SimError::Config(format!(
+            "node {}'s handshake line cannot stick at {} s",
+            st.node, st.at_s
+        )));
+    }
+    Ok(())
 }
 
 /// The SPI star with the configuration's faults: deaths, dropped broadcasts, bit errors.
@@ -429,7 +476,7 @@ type RootShared<'a, S> = (
 fn bus_tasks<'a, S: AsRef<[u8]>>(
     cfg: &SimConfig,
     clock: &SharedClock,
-    star: &SharedStar,
+    (star, wire, counters): (&SharedStar, &Option<SharedWire>, &LinkReport),
     (rc_busy, log): (&Rc<Cell<Ps>>, &Option<SharedTimeline>),
     (root, sink, bus_results, dm): RootShared<'a, S>,
 ) -> Vec<Option<Task<'a>>> {
@@ -451,19 +498,68 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
             busy: rc_busy.clone(),
             timeline: log.clone(),
         };
-        tasks.push(Some(Box::pin(async move {
-            let mut bus = SimBus::new(&star, b);
-            let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
-            bus_results.borrow_mut()[b] = Some(r);
-        })));
+        let task: Task<'a> = match wire {
+            None => Box::pin(async move {
+                let mut bus = SimBus::new(&star, b);
+                let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
+                bus_results.borrow_mut()[b] = Some(r);
+            }),
+            Some(wire) => {
+                let (wire, report) = (wire.clone(), counters.master.clone());
+                Box::pin(async move {
+                    let mut banks = Box::new([[0u8; BANK]; 3]);
+                    let mut bus = FirmwareBus::new(&wire, b, &mut banks, report);
+                    let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
+                    bus_results.borrow_mut()[b] = Some(r);
+                })
+            }
+        };
+        tasks.push(Some(task));
     }
     tasks
 }
 
-/// The nodes: one task each, rendering into its two scene banks and reporting into its slot.
+/// What the firmware link's ends counted, kept outside the tasks (a node's link task and
+/// the RC's link live inside theirs).
+struct LinkReport {
+    master: Rc<RefCell<Vec<MasterCounters>>>,
+    slaves: Rc<RefCell<Vec<SlaveCounters>>>,
+}
+
+impl LinkReport {
+    fn new(buses: usize, nodes: u16) -> Self {
+        Self {
+            master: Rc::new(RefCell::new(vec![MasterCounters::default(); buses])),
+            slaves: Rc::new(RefCell::new(vec![SlaveCounters::default(); nodes as usize])),
+        }
+    }
+
+    fn sum(&self) -> FirmwareLinkCounters {
+        FirmwareLinkCounters::of(&self.master.borrow(), &self.slaves.borrow())
+    }
+}
+
+/// Copies a node's link counters into the report when its task ends or is dropped.
+struct SlaveCountersOut<'s, 'b> {
+    shared: &'s SlaveShared<'b>,
+    slots: Rc<RefCell<Vec<SlaveCounters>>>,
+    node: usize,
+}
+
+impl Drop for SlaveCountersOut<'_, '_> {
+    fn drop(&mut self) {
+        if let Some(slot) = self.slots.borrow_mut().get_mut(self.node) {
+            *slot = self.shared.counters();
+        }
+    }
+}
+
+/// The nodes: one task each, rendering into its two scene banks and reporting into its slot;
+/// on the firmware link each node's task also runs its link task ([`NodeOnLink`]).
 fn node_tasks<'a>(
     cfg: &SimConfig,
     (clock, star, log): (&SharedClock, &SharedStar, &Option<SharedTimeline>),
+    (wire, counters): (&Option<SharedWire>, &LinkReport),
     busy: &Rc<RefCell<Vec<Ps>>>,
     crcs: &Rc<Vec<u32>>,
     banks: &'a mut [[Vec<u8>; 2]],
@@ -471,7 +567,6 @@ fn node_tasks<'a>(
 ) -> Vec<Option<Task<'a>>> {
     let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
     for (i, ([a, b], report)) in banks.iter_mut().zip(node_reports.iter_mut()).enumerate() {
-        let mut link = SimNodeLink::new(star, i as u16);
         let mut work = SimWork {
             clock: clock.clone(),
             model: cfg.model,
@@ -489,18 +584,50 @@ fn node_tasks<'a>(
             log: log.clone(),
         };
         let node_cfg = cfg.node;
-        tasks.push(Some(Box::pin(async move {
-            // A link error ends the node; the report keeps what it did.
-            let _ = run_node(
-                node_cfg,
-                &mut link,
-                &mut work,
-                &mut renderer,
-                [a.as_mut_slice(), b.as_mut_slice()],
-                report,
-            )
-            .await;
-        })));
+        let scene = [a.as_mut_slice(), b.as_mut_slice()];
+        let task: Task<'a> = match wire {
+            None => {
+                let mut link = SimNodeLink::new(star, i as u16);
+                Box::pin(async move {
+                    // A link error ends the node; the report keeps what it did.
+                    let _ = run_node(node_cfg, &mut link, &mut work, &mut renderer, scene, report)
+                        .await;
+                })
+            }
+            Some(wire) => {
+                let mut port = SpiSlave::new(wire, i as u16);
+                let slots = counters.slaves.clone();
+                Box::pin(async move {
+                    let mut banks: Box<[Bank; 5]> = Box::new([[0u8; BANK]; 5]);
+                    let [t0, t1, r0, r1, scratch] = &mut *banks;
+                    let (shared, task) = SlaveShared::new(SlaveBanks {
+                        tx: [t0, t1],
+                        rx: [r0, r1],
+                        scratch,
+                    });
+                    let _out = SlaveCountersOut {
+                        shared: &shared,
+                        slots,
+                        node: i,
+                    };
+                    let mut handle = shared.handle();
+                    let logic = run_node(
+                        node_cfg,
+                        &mut handle,
+                        &mut work,
+                        &mut renderer,
+                        scene,
+                        report,
+                    );
+                    let _ = NodeOnLink {
+                        link: Box::pin(task.run(&mut port, &shared)),
+                        logic: Box::pin(logic),
+                    }
+                    .await;
+                })
+            }
+        };
+        tasks.push(Some(task));
     }
     tasks
 }
@@ -622,6 +749,7 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
                 keep_frames: false,
                 deaths: Vec::new(),
                 spi_dead: Vec::new(),
+                stuck: Vec::new(),
                 backup_line: false,
                 ..cfg
             },

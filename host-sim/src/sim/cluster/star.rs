@@ -551,6 +551,97 @@ impl Star {
     }
 }
 
+/// What the firmware link's emulated wire ([`super::spi_bus`]) borrows from the star: the
+/// buses' node ranges and counters, the fault plan and noise, the collector, the relay tree
+/// and the timeline. (The star's own idealised transfers are not used then.)
+impl Star {
+    pub fn clock(&self) -> &SharedClock {
+        &self.clock
+    }
+
+    /// Bus `bus`'s nodes: the first and how many.
+    pub fn bus_nodes(&self, bus: usize) -> (NodeId, u16) {
+        self.buses.get(bus).map_or((0, 0), |b| (b.first, b.count))
+    }
+
+    pub fn counters_mut(&mut self, bus: usize) -> Option<&mut BusCounters> {
+        self.buses.get_mut(bus).map(|b| &mut b.counters)
+    }
+
+    /// Flip bits of `bytes` clocked in direction `dir` (0 = MOSI, 1 = MISO) at the noise's
+    /// bit-error rate (every byte exposed: header, body, trailer); whether any flipped.
+    pub fn wire_noise(&mut self, dir: usize, bytes: &mut [u8]) -> bool {
+        self.noise.corrupt(dir, 0, bytes) != Hit::None
+    }
+
+    /// The deterministic every-`n` faults on one frame body: `k` 0 = NC -> RC, 1 = RC -> NC.
+    pub fn body_fault(&mut self, k: usize, bytes: &mut [u8], bus: usize) {
+        let every = if k == 0 {
+            self.faults.up_every
+        } else {
+            self.faults.down_every
+        };
+        self.maybe_corrupt(k, every, bytes, bus);
+    }
+
+    /// Receiver `n` (index `i` of `count` on `bus`) of a broadcast copy `bytes`: whether it
+    /// is off the bus for it ([`BroadcastDrop`], [`Noise::drop_broadcast`]); otherwise the
+    /// every-`n` broadcast fault (one receiver per hit, in turn) and the MOSI noise hit it.
+    pub fn broadcast_copy(
+        &mut self,
+        bus: usize,
+        (n, i, count): (NodeId, u16, u16),
+        bytes: &mut [u8],
+    ) -> bool {
+        let index = self.buses[bus].counters.broadcasts;
+        let off = self
+            .drops
+            .iter()
+            .any(|d| d.node == n && (d.from..d.to).contains(&index))
+            || self.noise.drop_broadcast();
+        if off {
+            self.buses[bus].counters.dropped_broadcast += 1;
+            return false;
+        }
+        let every = self.faults.broadcast_every;
+        let victim = self.bcast_victim % count.max(1) as usize == i as usize;
+        if every > 0 && (victim || self.faults.random.is_some()) {
+            self.maybe_corrupt(2, every, bytes, bus);
+        }
+        if self.wire_noise(0, bytes) {
+            self.buses[bus].counters.corrupted_broadcast += 1;
+        }
+        true
+    }
+
+    /// A broadcast on `bus` ended (the next hit of the every-`n` fault goes to the next
+    /// receiver).
+    pub fn broadcast_done(&mut self, bus: usize) {
+        self.bcast_victim += 1;
+        if let Some(c) = self.counters_mut(bus) {
+            c.broadcasts += 1;
+        }
+    }
+
+    /// The collector's capture of a node frame off MISO.
+    pub fn snoop(&self, bytes: &[u8]) {
+        if let Some(fm) = &self.snoop {
+            fm.borrow_mut().snoop(bytes);
+        }
+    }
+
+    pub fn relays_mut(&mut self) -> Option<&mut Relays> {
+        self.relays.as_mut()
+    }
+
+    /// Log a transfer on the timeline, if one is recorded.
+    pub fn log_transfer(&self, bus: usize, node: Option<NodeId>, start: Ps, end: Ps) {
+        if let Some(log) = &self.timeline {
+            log.borrow_mut().transfer(bus, node, start, end);
+        }
+    }
+}
+
 /// A node's end of the link.
 pub struct SimNodeLink {
     star: SharedStar,

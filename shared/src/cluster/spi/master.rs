@@ -4,6 +4,7 @@ use super::clock::{Clocked, Wire};
 use super::framing::*;
 use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
 use crate::cluster::wire::MAX_MESSAGE;
+use core::cell::Cell;
 
 /// Which chip-selects to assert.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -80,6 +81,11 @@ pub struct MasterLink<'b, P> {
     /// bank that is not idle).
     started: Option<(Transfer, usize)>,
     next_scan: u16,
+    /// Nodes (bit per index, the first 256) whose handshake line stayed high through their
+    /// selection: a stuck line or a node not listening. They are not offered as ready until
+    /// their line is seen low again, so one stuck line cannot starve the bus (the root
+    /// broadcasts only while no node is ready).
+    ignored: Cell<[u32; 8]>,
     pub counters: MasterCounters,
 }
 
@@ -95,6 +101,7 @@ impl<'b, P: MasterPort> MasterLink<'b, P> {
             rx,
             started: None,
             next_scan: 0,
+            ignored: Cell::new([0; 8]),
             counters: MasterCounters::default(),
         }
     }
@@ -112,6 +119,36 @@ impl<'b, P: MasterPort> MasterLink<'b, P> {
         node.checked_sub(self.first)
             .filter(|&i| i < self.port.count())
             .ok_or(LinkError::NoSuchNode { node })
+    }
+
+    fn is_ignored(&self, i: u16) -> bool {
+        let m = self.ignored.get();
+        m.get(i as usize / 32)
+            .is_some_and(|w| w & (1 << (i % 32)) != 0)
+    }
+
+    fn set_ignored(&self, i: u16, on: bool) {
+        let mut m = self.ignored.get();
+        if let Some(w) = m.get_mut(i as usize / 32) {
+            if on {
+                *w |= 1 << (i % 32);
+            } else {
+                *w &= !(1 << (i % 32));
+            }
+        }
+        self.ignored.set(m);
+    }
+
+    /// Forget the ignored nodes whose line is low now (alive and listening again).
+    fn unignore_low(&self) {
+        if self.ignored.get() == [0; 8] {
+            return;
+        }
+        for i in 0..self.port.count() {
+            if self.is_ignored(i) && !self.port.ready(i) {
+                self.set_ignored(i, false);
+            }
+        }
     }
 }
 
@@ -131,11 +168,12 @@ impl<P: MasterPort> RootBus for MasterLink<'_, P> {
 
     fn ready(&self) -> Option<NodeId> {
         let count = self.port.count();
+        self.unignore_low();
         // A node whose exchange was handed over but not clocked still shows its line: it
         // is ready only after that exchange (the root logic then finishes it first).
         (0..count)
             .map(|i| (self.next_scan + i) % count)
-            .find(|&i| self.port.ready(i))
+            .find(|&i| self.port.ready(i) && !self.is_ignored(i))
             .map(|i| self.first + i)
     }
 
@@ -172,6 +210,7 @@ impl<P: MasterPort> RootBus for MasterLink<'_, P> {
             Transfer::Exchange(node) => Clocked::Exchange(self.index(node)?),
             Transfer::Broadcast => Clocked::Broadcast,
         };
+        let no_ack = self.counters.no_ack;
         let mut wire = Wire {
             port: &mut self.port,
             tx: &mut *self.tx[self.idle ^ 1],
@@ -179,6 +218,10 @@ impl<P: MasterPort> RootBus for MasterLink<'_, P> {
             counters: &mut self.counters,
         };
         let len = wire.clock(what, n).await;
+        if let (Clocked::Exchange(i), true) = (what, self.counters.no_ack != no_ack) {
+            // Its line stayed high through the selection: not offered again until low.
+            self.set_ignored(i, true);
+        }
         copy_frame(&self.rx[..], len, rx)
     }
 }
