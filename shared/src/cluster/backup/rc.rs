@@ -201,7 +201,7 @@ pub enum Turn {
     Scene { frame: u16, ready: bool },
     /// Sent a job; `taken`: the node acknowledged it.
     Work { job: Job, taken: bool },
-    /// Polled: no valid answer.
+    /// No valid answer (to the poll, or to the health asked after a scene).
     Silent,
     /// Polled: the node had nothing (rendering).
     Idle,
@@ -327,10 +327,7 @@ impl<const N: usize> BackupRc<N> {
             Some(job) if sv.sent != Some(job.id) => work_turn(&mut sv, line, job).await?,
             Some(job) => self.poll_turn(&mut sv, line, work, job, rgb).await?,
         };
-        let answered = !matches!(
-            turn,
-            Turn::Silent | Turn::Work { taken: false, .. } | Turn::Scene { ready: false, .. }
-        );
+        let answered = !matches!(turn, Turn::Silent | Turn::Work { taken: false, .. });
         sv.misses = if answered {
             0
         } else {
@@ -415,7 +412,10 @@ async fn scene_turn<L: RcLine, W: BackupWork>(
         let from = (sv.scene_from as usize).min(scene.len());
         send_scene(line, sv.addr, frame, scene, from).await?;
     }
-    let h = ask_health(line, sv.addr).await?;
+    let Some(h) = ask_health(line, sv.addr).await? else {
+        return Ok(Turn::Silent);
+    };
+    let h = Some(h);
     let ready = h.is_some_and(|h| h.scene_ok && h.frame == frame);
     sv.scene_from = match h {
         Some(h) if h.frame == frame && !ready => h.scene_bytes,
