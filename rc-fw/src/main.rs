@@ -23,19 +23,21 @@ mod fw {
     use embassy_stm32::time::Hertz;
     use embassy_stm32::usart::{self as uart, Uart};
     use embassy_stm32::{bind_interrupts, dma, interrupt, usb};
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use embassy_sync::mutex::Mutex;
     use embassy_sync::pipe::Pipe;
     use embassy_time::Timer;
     use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
     use embassy_usb::{Builder, UsbDevice};
     use links_board::rs485::Rs485;
-    use links_core::backup;
+    use links_core::backup::{self, PortLine};
     use links_core::serial::FrameStreamer;
     use links_core::spi::{Bank, MasterLink};
-    use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS};
+    use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS, SERVE};
     use rc_fw::pins::NODES;
     use rc_fw::plan::SCENE;
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
-    use rc_fw::render::{render_frames, resend_span};
+    use rc_fw::render::{render_frames_with_line, resend_span};
     use rc_fw::session::{Session, Step};
     use static_cell::{ConstStaticCell, StaticCell};
     use {defmt_rtt as _, panic_probe as _};
@@ -69,6 +71,10 @@ mod fw {
     static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static CONTROL: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
     static CDC: StaticCell<State<'static>> = StaticCell::new();
+    /// The backup line: the roll call's between renders, the render's (serving nodes dead on
+    /// SPI) during one.
+    type Line = Mutex<CriticalSectionRawMutex, Rs485>;
+    static LINE: StaticCell<Line> = StaticCell::new();
 
     #[embassy_executor::task]
     async fn usb_task(mut device: UsbDevice<'static, UsbDriver>) {
@@ -91,23 +97,24 @@ mod fw {
         }
     }
 
-    /// The serial backup line: call the roll of every node (`links_core::backup`) once a
-    /// period and log who is absent and each node's health.
+    /// The serial backup line between renders: call the roll of every node once a period
+    /// (`links_core::backup::rc::ask_health`, one node at a time: no table of 64 healths in
+    /// the task) and log who is absent and each node's health. During a render the serial
+    /// task holds the line.
     #[embassy_executor::task]
-    async fn backup_task(mut line: Rs485) {
+    async fn backup_task(line: &'static Line) {
         loop {
-            match backup::call_roll(&mut line, NODES as u8, REPLY_TIMEOUT_US).await {
-                Ok(rc) => {
-                    for a in rc.absent() {
-                        warn!("backup line: node {} absent", a);
-                    }
-                    for a in 1..=NODES as u8 {
-                        if let Some(h) = rc.health(a) {
-                            info!("backup line: node {}: {}", a, h);
-                        }
-                    }
+            for a in 1..=NODES as u8 {
+                let mut rs485 = line.lock().await;
+                let mut port = PortLine {
+                    port: &mut *rs485,
+                    timeout_us: REPLY_TIMEOUT_US,
+                };
+                match backup::rc::ask_health(&mut port, a).await {
+                    Ok(Some(h)) => info!("backup line: node {}: {}", a, h),
+                    Ok(None) => warn!("backup line: node {} absent", a),
+                    Err(e) => warn!("backup line: {}", e),
                 }
-                Err(e) => warn!("backup line: {}", e),
             }
             Timer::after_millis(ROLL_CALL_PERIOD_MS).await;
         }
@@ -124,6 +131,7 @@ mod fw {
         mut rx: Receiver<'static, UsbDriver>,
         mut link: Link,
         scene: &'static mut [u8],
+        line: &'static Line,
     ) {
         let mut session = Session::new(scene);
         let mut pkt = [0u8; 64];
@@ -142,7 +150,13 @@ mod fw {
                                 continue;
                             };
                             info!("render {} frame(s) of a {}-byte scene", frames, image.len());
-                            let r = render_frames(
+                            // Nodes whose SPI link fails are served over the backup line.
+                            let mut rs485 = line.lock().await;
+                            let mut port = PortLine {
+                                port: &mut *rs485,
+                                timeout_us: REPLY_TIMEOUT_US,
+                            };
+                            let r = render_frames_with_line(
                                 &mut link,
                                 &Clock,
                                 &PipeQueue(&USB_QUEUE),
@@ -152,8 +166,10 @@ mod fw {
                                 NODES as u16,
                                 &mut session.enc,
                                 &mut last,
+                                Some((&mut port, SERVE)),
                             )
                             .await;
+                            drop(rs485);
                             match r {
                                 Ok(report) => {
                                     info!("rendered: {} / link {}", report, link.counters)
@@ -261,9 +277,11 @@ mod fw {
             de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
         };
 
+        let line: &'static Line = LINE.init(Mutex::new(line));
+
         spawner.spawn(unwrap!(backup_task(line)));
         spawner.spawn(unwrap!(usb_task(device)));
         spawner.spawn(unwrap!(usb_tx_task(tx)));
-        spawner.spawn(unwrap!(serial_task(rx, link, &mut sram.scene)));
+        spawner.spawn(unwrap!(serial_task(rx, link, &mut sram.scene, line)));
     }
 }
