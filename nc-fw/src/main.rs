@@ -35,7 +35,7 @@ mod fw {
         self, BackupNode, BackupRender, BackupRenderError, FrameReader, Piece,
     };
     use links_core::board::Memory;
-    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
+    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
     use links_core::render::Rgb8;
     use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
     use nc_fw::backup_line::{IDLE_MS, PIECE};
@@ -99,7 +99,7 @@ mod fw {
                 node.lock(|n| {
                     let mut n = n.borrow_mut();
                     let r = n.handle(frame, reply);
-                    if n.wants_bank() {
+                    if n.take_bank_request() {
                         WANT_BANK.signal(());
                     }
                     r
@@ -189,6 +189,8 @@ mod fw {
                 Either::Second(()) => {
                     info!("backup line: the RC serves this node over the line");
                     serve_line(backup, &mut even, &mut renderer).await;
+                    // The even bank now holds the line's scene: no cache from it survives.
+                    renderer.forget();
                     info!("backup line: back to SPI");
                 }
             }

@@ -59,7 +59,7 @@ struct MemLine<'c> {
 
 impl MemLine<'_> {
     fn maybe_flip(&mut self, frame: &mut [u8]) {
-        if self.flip_one_in > 0 && self.rng.next() % self.flip_one_in == 0 {
+        if self.flip_one_in > 0 && self.rng.next().is_multiple_of(self.flip_one_in) {
             let bit = self.rng.next() as usize % (8 * frame.len());
             frame[bit / 8] ^= 1 << (bit % 8);
             self.flips += 1;
@@ -245,7 +245,7 @@ fn a_node_that_dies_mid_frame_has_its_job_reassigned() {
     let img = image("photo1.ron", 48, 45);
     let want = reference(&img);
     // Node 1 (address 2) goes silent after 250 exchanges: after it took work, well before
-    // the frame ends (378 exchanges with three nodes).
+    // the frame ends (536 exchanges with three nodes).
     let r = run(&img, 3, Some((1, 250)), 0);
     println!("{:?}, reissued {}", r.rc.counters, r.reissued);
     assert_eq!(r.frame, want);

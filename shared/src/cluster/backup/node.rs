@@ -156,10 +156,10 @@ impl<'b> BackupNode<'b> {
         core::mem::take(&mut self.scene.bank)
     }
 
-    /// Whether the RC sent work or a scene chunk while the node had no bank: the firmware
-    /// should lend it one ([`BackupNode::lend_bank`]).
-    pub fn wants_bank(&self) -> bool {
-        self.wants_bank
+    /// Whether the RC sent work or a scene chunk while the node had no bank (since the last
+    /// call): the firmware should lend it one ([`BackupNode::lend_bank`]).
+    pub fn take_bank_request(&mut self) -> bool {
+        core::mem::take(&mut self.wants_bank)
     }
 
     pub fn addr(&self) -> u8 {

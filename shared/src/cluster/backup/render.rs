@@ -143,7 +143,10 @@ impl BackupRender {
         let view = if self.checked == Some(piece.scene) {
             SceneView::open_validated(scene)
         } else {
+            // A new scene, perhaps in the bank (and frame number) of the last one: the
+            // renderer's caches go.
             self.checked = None;
+            renderer.forget();
             SceneView::new(scene)
         }
         .map_err(BackupRenderError::Scene)?;

@@ -543,3 +543,44 @@ fn the_rc_hands_out_work_and_expands_pixel_chunks_in_parts() {
     let (_, last) = decode(&line.requests.last().unwrap().1).unwrap();
     assert_eq!(last, Msg::Poll { ack: 1 });
 }
+
+/// A node without a bank (the firmware's SPI path holds it) asks for one when the RC sends
+/// work or a scene; a lent bank takes the scene; taken back, the scene's key stays (its
+/// bytes are out: `ready` is `None`, chunks are refused) until it is lent again.
+#[test]
+fn a_node_borrows_a_bank_for_the_line_and_keeps_the_scene_across_loans() {
+    let scene: Vec<u8> = (0..500u32).map(|i| (i * 7) as u8).collect();
+    let mut node = BackupNode::new(2, &mut []);
+    assert!(!node.take_bank_request());
+    assert_eq!(
+        ask(&mut node, 2, Msg::Work { job: job(1) }),
+        Some((2, {
+            let mut b = [0u8; MAX_FRAME];
+            let n = encode(2, &Msg::Ack, &mut b).unwrap();
+            b[..n].to_vec()
+        }))
+    );
+    assert!(node.take_bank_request());
+    assert!(!node.take_bank_request(), "asked once");
+    let mut reply = [0u8; MAX_FRAME];
+    let frames = scene_frames(&scene, 4, 2);
+    assert_eq!(
+        node.handle(&frames[0], &mut reply),
+        Err(BackupError::TooLong)
+    );
+    assert!(node.take_bank_request());
+    let mut bank = vec![0u8; 600];
+    node.lend_bank(&mut bank);
+    for f in &frames {
+        assert!(node.handle(f, &mut reply).unwrap().is_some());
+    }
+    assert_eq!(node.scene.ready(), Some((4, &scene[..])));
+    let key = (4, CRC32.checksum(&scene));
+    assert_eq!(node.scene.key(), Some(key));
+    let out = node.take_bank();
+    assert_eq!(&out[..500], &scene[..]);
+    assert_eq!((node.scene.ready(), node.scene.key()), (None, Some(key)));
+    assert_eq!(node.health().scene_bytes, 500);
+    node.lend_bank(out);
+    assert_eq!(node.scene.ready(), Some((4, &scene[..])));
+}
