@@ -88,6 +88,20 @@ pub const fn backup_address(straps: [bool; 6]) -> u8 {
     v + 1
 }
 
+/// The node served over the backup line (its SPI link dead): it renders the line's jobs in
+/// the even scene bank (the SPI path's, idle then: `docs/hardware.md`) with the SPI path's
+/// tracer.
+pub mod backup_line {
+    /// Pixels rendered per step: the line task waits for the node state no longer than one
+    /// step's bookkeeping, never for a render; 32 pixels of photo1 (~6,300 instructions a
+    /// pixel on the M4F) are ~1.2 ms of the 168 MHz core. At most
+    /// `links_core::backup::OUTBOX_PIXELS`.
+    pub const PIECE: usize = 32;
+    /// With no job for this long the node takes its bank back and returns to SPI (ms).
+    pub const IDLE_MS: u64 = 3000;
+    const _: () = assert!(PIECE <= links_core::backup::OUTBOX_PIXELS);
+}
+
 #[cfg(test)]
 mod tests {
     use links_core::board::BoardProfile;

@@ -14,9 +14,11 @@ fn main() {
 
 #[cfg(target_os = "none")]
 mod fw {
+    use core::cell::RefCell;
     use cortex_m_rt::entry;
     use defmt::{info, unwrap, warn};
     use embassy_executor::{Executor, InterruptExecutor};
+    use embassy_futures::select::{select, Either};
     use embassy_stm32::exti::ExtiInput;
     use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
     use embassy_stm32::interrupt;
@@ -24,11 +26,19 @@ mod fw {
     use embassy_stm32::peripherals::{DMA1_CH5, DMA1_CH6, USART2};
     use embassy_stm32::usart::{self, Uart};
     use embassy_stm32::{bind_interrupts, dma};
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use embassy_sync::blocking_mutex::Mutex;
+    use embassy_sync::signal::Signal;
+    use embassy_time::{Instant, Timer};
     use links_board::rs485::Rs485;
-    use links_core::backup::{self, BackupNode, FrameReader};
+    use links_core::backup::{
+        self, BackupNode, BackupRender, BackupRenderError, FrameReader, Piece,
+    };
     use links_core::board::Memory;
-    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
+    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
+    use links_core::render::Rgb8;
     use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
+    use nc_fw::backup_line::{IDLE_MS, PIECE};
     use nc_fw::plan::{BOARD, SCENE_EVEN, SCENE_ODD_CCM, SCENE_ODD_SRAM};
     use nc_fw::port::{Irqs, NcPort};
     use static_cell::{ConstStaticCell, StaticCell};
@@ -47,7 +57,13 @@ mod fw {
     static SCENE_ODD_BANK: ConstStaticCell<[u8; SCENE_ODD_CCM]> =
         ConstStaticCell::new([0; SCENE_ODD_CCM]);
     static SHARED: StaticCell<SlaveShared<'static>> = StaticCell::new();
-    static BACKUP_NODE: StaticCell<BackupNode<'static>> = StaticCell::new();
+    /// The node's backup-line state: the line task answers with it (interrupt executor),
+    /// the node task renders its jobs (thread mode); each holds it for one step at a time.
+    type Backup = Mutex<CriticalSectionRawMutex, RefCell<BackupNode<'static>>>;
+    static BACKUP_NODE: StaticCell<Backup> = StaticCell::new();
+    /// Raised by the line task when the RC sends work or a scene over the line: the RC
+    /// declared the SPI link dead, so the node task lends the line its even bank.
+    static WANT_BANK: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
     bind_interrupts!(struct BackupIrqs {
         USART2 => usart::InterruptHandler<USART2>;
@@ -73,16 +89,76 @@ mod fw {
         task.run(&mut port, shared).await
     }
 
-    /// The serial backup line: answer the RC (roll call, health, polls) with
-    /// `links_core::backup`'s node state. The node takes no scene over the line yet (its
-    /// banks are the render task's): scene chunks are refused and counted.
+    /// The serial backup line: answer the RC (roll call, health, scene, work, polls) with
+    /// `links_core::backup`'s node state, one frame at a time under its lock.
     #[embassy_executor::task]
-    async fn backup_task(mut line: Rs485, node: &'static mut BackupNode<'static>) {
+    async fn backup_task(mut line: Rs485, node: &'static Backup) {
         let mut reader = FrameReader::new();
         loop {
-            if let Err(e) = backup::serve(&mut line, node, &mut reader).await {
+            let served = backup::serve_with(&mut line, &mut reader, |frame, reply| {
+                node.lock(|n| {
+                    let mut n = n.borrow_mut();
+                    let r = n.handle(frame, reply);
+                    if n.take_bank_request() {
+                        WANT_BANK.signal(());
+                    }
+                    r
+                })
+            });
+            if let Err(e) = served.await {
                 warn!("backup line: {}", e);
                 reader.reset();
+            }
+        }
+    }
+
+    /// The node served over the backup line (its SPI link dead): lend the line the even
+    /// bank, render the jobs that arrive with the SPI path's tracer, piece by piece (the
+    /// bank taken out of the shared state while a piece renders, so the line task answers
+    /// meanwhile), until the line has had nothing for the node for [`IDLE_MS`].
+    async fn serve_line(
+        node: &'static Backup,
+        even: &mut &'static mut [u8],
+        renderer: &mut Tracing<f32>,
+    ) {
+        let bank = core::mem::take(even);
+        node.lock(|n| n.borrow_mut().lend_bank(bank));
+        let mut work = BackupRender::new();
+        let mut px = [Rgb8::default(); PIECE];
+        let mut last_work = Instant::now();
+        loop {
+            type Step = Result<Option<(Piece, usize, &'static mut [u8])>, BackupRenderError>;
+            let step: Step = node.lock(|n| {
+                let mut n = n.borrow_mut();
+                let piece = work.next(&mut n, PIECE)?;
+                let len = n.scene.ready().map_or(0, |s| s.1.len());
+                Ok(piece.map(|p| (p, len, n.take_bank())))
+            });
+            match step {
+                Ok(Some((piece, len, bank))) => {
+                    let scene = bank.get(..len).unwrap_or_default();
+                    let r = work.render(&piece, scene, renderer, &mut px);
+                    let done = node.lock(|n| {
+                        let mut n = n.borrow_mut();
+                        n.lend_bank(bank);
+                        r.and_then(|_| work.finish(&mut n, &piece, &px))
+                    });
+                    if let Err(e) = done {
+                        warn!("backup line: {}", e);
+                        Timer::after_millis(1).await;
+                    }
+                    last_work = Instant::now();
+                }
+                Ok(None) if work.job().is_none() && last_work.elapsed().as_millis() > IDLE_MS => {
+                    *even = node.lock(|n| n.borrow_mut().take_bank());
+                    WANT_BANK.reset();
+                    return;
+                }
+                Ok(None) => Timer::after_millis(1).await,
+                Err(e) => {
+                    warn!("backup line: {}", e);
+                    Timer::after_millis(1).await;
+                }
             }
         }
     }
@@ -90,25 +166,33 @@ mod fw {
     #[embassy_executor::task]
     async fn node_task(
         shared: &'static SlaveShared<'static>,
-        even: &'static mut [u8],
+        mut even: &'static mut [u8],
         odd: &'static mut [u8],
+        backup: &'static Backup,
     ) {
         let mut renderer = Tracing::<f32>::new();
         let mut link = shared.handle();
+        let mut clock = RealTime;
         loop {
             let mut report = NodeReport::default();
-            let r = run_node(
+            let spi = run_node(
                 NodeConfig::default(),
                 &mut link,
-                &mut RealTime,
+                &mut clock,
                 &mut renderer,
                 [&mut *even, &mut *odd],
                 &mut report,
-            )
-            .await;
-            match r {
-                Ok(()) => info!("stopped: {}", report),
-                Err(e) => warn!("node error {}: {}", e, report),
+            );
+            match select(spi, WANT_BANK.wait()).await {
+                Either::First(Ok(())) => info!("stopped: {}", report),
+                Either::First(Err(e)) => warn!("node error {}: {}", e, report),
+                Either::Second(()) => {
+                    info!("backup line: the RC serves this node over the line");
+                    serve_line(backup, &mut even, &mut renderer).await;
+                    // The even bank now holds the line's scene: no cache from it survives.
+                    renderer.forget();
+                    info!("backup line: back to SPI");
+                }
             }
             info!("link: {}", shared.counters());
         }
@@ -173,7 +257,9 @@ mod fw {
             uart,
             de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
         };
-        let backup_node = BACKUP_NODE.init(BackupNode::new(addr, &mut []));
+        // No bank until the RC serves the node over the line (then the even one).
+        let backup_node: &'static Backup =
+            BACKUP_NODE.init(Mutex::new(RefCell::new(BackupNode::new(addr, &mut []))));
 
         interrupt::UART4.set_priority(Priority::P6);
         let spawner = EXECUTOR_LINK.start(interrupt::UART4);
@@ -187,6 +273,6 @@ mod fw {
         } else {
             SCENE_ODD_BANK.take()
         };
-        executor.run(|s| s.spawn(unwrap!(node_task(shared, scene_even, odd))))
+        executor.run(|s| s.spawn(unwrap!(node_task(shared, scene_even, odd, backup_node))))
     }
 }

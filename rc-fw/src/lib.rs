@@ -182,6 +182,14 @@ pub mod backup_line {
     pub const REPLY_TIMEOUT_US: u32 = LINE.reply_timeout_us;
     /// The RC calls the roll this often (ms).
     pub const ROLL_CALL_PERIOD_MS: u64 = 1000;
+    /// During a render: nodes on the line, how often the RC calls one that failed on SPI,
+    /// how long the line rests when no served node has anything to do
+    /// (`links_core::backup::serve_root`).
+    pub const SERVE: links_core::backup::ServeConfig = links_core::backup::ServeConfig {
+        nodes: crate::link::NODES as u16,
+        call_gap_us: 100_000,
+        idle_us: 1_000,
+    };
 }
 
 // The PC conversation, render requests, readback and throttle are board-independent: they

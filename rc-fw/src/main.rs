@@ -32,22 +32,24 @@ mod fw {
     use embassy_stm32::time::Hertz;
     use embassy_stm32::usart::{self as uart, Uart};
     use embassy_stm32::{bind_interrupts, dma, interrupt, usb};
+    use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+    use embassy_sync::mutex::Mutex;
     use embassy_sync::pipe::Pipe;
     use embassy_time::Timer;
     use embassy_usb::class::cdc_acm::{CdcAcmClass, Receiver, Sender, State};
     use embassy_usb::{Builder, UsbDevice};
     use links_board::rs485::Rs485;
-    use links_core::backup;
+    use links_core::backup::{self, PortLine};
     use links_core::serial::film::bank_of;
     use links_core::serial::readback::ByteQueue;
     use links_core::serial::throttle::Room;
     use links_core::serial::{Encoder, FrameStreamer};
     use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
-    use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS};
+    use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS, SERVE};
     use rc_fw::pins::NODES;
     use rc_fw::plan::{FILM_BANK, SCENE};
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
-    use rc_fw::render::{render_film_frame, render_frames, reply_room, resend_span};
+    use rc_fw::render::{render_film_frame, render_frames_with_line, reply_room, resend_span};
     use rc_fw::session::{Session, Step};
     use static_cell::{ConstStaticCell, StaticCell};
     use {defmt_rtt as _, panic_probe as _};
@@ -81,6 +83,10 @@ mod fw {
     static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static CONTROL: ConstStaticCell<[u8; 64]> = ConstStaticCell::new([0; 64]);
     static CDC: StaticCell<State<'static>> = StaticCell::new();
+    /// The backup line: the roll call's between renders, the render's (serving nodes dead on
+    /// SPI) during one.
+    type Line = Mutex<CriticalSectionRawMutex, Rs485>;
+    static LINE: StaticCell<Line> = StaticCell::new();
     /// The bus link's two halves share this: the front (`serial_task`, thread mode) hands
     /// transfers over, the bus task clocks them.
     static BUS: MasterShared<'static> = MasterShared::new();
@@ -123,23 +129,24 @@ mod fw {
         }
     }
 
-    /// The serial backup line: call the roll of every node (`links_core::backup`) once a
-    /// period and log who is absent and each node's health.
+    /// The serial backup line between renders: call the roll of every node once a period
+    /// (`links_core::backup::rc::ask_health`, one node at a time: no table of 64 healths in
+    /// the task) and log who is absent and each node's health. During a render the serial
+    /// task holds the line.
     #[embassy_executor::task]
-    async fn backup_task(mut line: Rs485) {
+    async fn backup_task(line: &'static Line) {
         loop {
-            match backup::call_roll(&mut line, NODES as u8, REPLY_TIMEOUT_US).await {
-                Ok(rc) => {
-                    for a in rc.absent() {
-                        warn!("backup line: node {} absent", a);
-                    }
-                    for a in 1..=NODES as u8 {
-                        if let Some(h) = rc.health(a) {
-                            info!("backup line: node {}: {}", a, h);
-                        }
-                    }
+            for a in 1..=NODES as u8 {
+                let mut rs485 = line.lock().await;
+                let mut port = PortLine {
+                    port: &mut *rs485,
+                    timeout_us: REPLY_TIMEOUT_US,
+                };
+                match backup::rc::ask_health(&mut port, a).await {
+                    Ok(Some(h)) => info!("backup line: node {}: {}", a, h),
+                    Ok(None) => warn!("backup line: node {} absent", a),
+                    Err(e) => warn!("backup line: {}", e),
                 }
-                Err(e) => warn!("backup line: {}", e),
             }
             Timer::after_millis(ROLL_CALL_PERIOD_MS).await;
         }
@@ -221,6 +228,7 @@ mod fw {
         mut rx: Receiver<'static, UsbDriver>,
         mut link: Link,
         scene: &'static mut [u8],
+        line: &'static Line,
     ) {
         // Two banks: still scenes and even film frames, odd film frames.
         let (even, odd) = scene.split_at_mut(FILM_BANK);
@@ -234,7 +242,7 @@ mod fw {
             while let Ok(n) = rx.read_packet(&mut pkt).await {
                 for &b in &pkt[..n] {
                     let step = session.feed(b);
-                    on_step(step, &mut link, &mut session, &mut last).await;
+                    on_step(step, &mut link, &mut session, &mut last, line).await;
                     if session.film.current.is_none() && session.film.loading.is_some() {
                         film_frames(&mut rx, &mut link, &mut session, &mut film_enc, &mut last)
                             .await;
@@ -251,6 +259,7 @@ mod fw {
         link: &mut Link,
         session: &mut Session<'static>,
         last: &mut Option<FrameStreamer>,
+        line: &'static Line,
     ) {
         match step {
             Step::Nothing => {}
@@ -261,7 +270,13 @@ mod fw {
                     return;
                 };
                 info!("render {} frame(s) of a {}-byte scene", frames, image.len());
-                let r = render_frames(
+                // Nodes whose SPI link fails are served over the backup line.
+                let mut rs485 = line.lock().await;
+                let mut port = PortLine {
+                    port: &mut *rs485,
+                    timeout_us: REPLY_TIMEOUT_US,
+                };
+                let r = render_frames_with_line(
                     link,
                     &Clock,
                     &PipeQueue(&USB_QUEUE),
@@ -271,8 +286,10 @@ mod fw {
                     NODES as u16,
                     &mut session.enc,
                     last,
+                    Some((&mut port, SERVE)),
                 )
                 .await;
+                drop(rs485);
                 match r {
                     Ok(report) => info!("rendered: {} / link {}", report, link.counters()),
                     Err(e) => warn!("render failed: {}", e),
@@ -383,9 +400,10 @@ mod fw {
         interrupt::UART4.set_priority(Priority::P6);
         let bus_spawner = EXECUTOR_BUS.start(interrupt::UART4);
         bus_spawner.spawn(unwrap!(bus_task(port)));
+        let line: &'static Line = LINE.init(Mutex::new(line));
         spawner.spawn(unwrap!(backup_task(line)));
         spawner.spawn(unwrap!(usb_task(device)));
         spawner.spawn(unwrap!(usb_tx_task(tx)));
-        spawner.spawn(unwrap!(serial_task(rx, link, &mut sram.scene)));
+        spawner.spawn(unwrap!(serial_task(rx, link, &mut sram.scene, line)));
     }
 }

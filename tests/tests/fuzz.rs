@@ -10,6 +10,8 @@
 //!   the node's state machine and the RC's roll call fed mutated frames.
 //! - `relay`: the relay link (`links_core::relay`): its batch decoder (what decodes must
 //!   re-encode to the bytes it came from) and the relay's logic fed mutated parent frames.
+//! - `backup_rc`: the RC's side of the backup line's fallback (`backup::BackupRc`): its
+//!   pixel-chunk decoder fed valid, mutated and foreign node answers.
 //! - `serial`: the PC <-> RC serial protocol (`links_core::serial`) in both directions: the
 //!   RC's session (`rc_fw::session`) and the PC's frame assembly fed mutated byte streams.
 //!
@@ -2949,6 +2951,134 @@ fn relay_session(
     }
 }
 
+// ---------------------------------------------------------------------------------------
+// Target: backup_rc
+// ---------------------------------------------------------------------------------------
+
+/// The RC's side of the backup line ([`backup::BackupRc`]) against a node that answers with
+/// valid, mutated and foreign frames: the RC's pixel-chunk decoder (run-length expansion in
+/// parts into the work) never panics, hands the work only whole pixels inside the chunk it
+/// decoded, and takes a chunk only once every part was taken.
+struct FuzzLine<'r> {
+    rng: &'r mut Rng,
+    input: &'r mut Vec<u8>,
+}
+
+impl backup::RcLine for FuzzLine<'_> {
+    type Error = backup::BackupError;
+    async fn exchange(
+        &mut self,
+        to: u8,
+        buf: &mut [u8; backup::MAX_FRAME],
+        len: usize,
+    ) -> Result<Option<usize>, backup::BackupError> {
+        let (ack, work) = match backup::decode(&buf[..len]) {
+            Ok((_, backup::Msg::Poll { ack })) => (ack, false),
+            Ok((_, backup::Msg::Work { .. })) => (0, true),
+            _ => (self.rng.u32() as u16, false),
+        };
+        if self.rng.chance(10) {
+            return Ok(None);
+        }
+        let mut f = if work && self.rng.chance(80) {
+            let mut b = [0u8; backup::MAX_FRAME];
+            let n = backup::encode(to, &backup::Msg::Ack, &mut b).expect("an ack fits");
+            b[..n].to_vec()
+        } else {
+            backup_node_reply(self.rng, to, ack)
+        };
+        if self.rng.chance(40) {
+            backup_mutate(self.rng, &mut f);
+        }
+        self.input.extend_from_slice(&f);
+        let n = f.len().min(backup::MAX_FRAME);
+        buf[..n].copy_from_slice(&f[..n]);
+        Ok(Some(n))
+    }
+}
+
+/// A node's answer: mostly a pixel chunk of job 7 at sequence `ack` whose runs add up to
+/// its length (sometimes not), else another message.
+fn backup_node_reply(rng: &mut Rng, addr: u8, ack: u16) -> Vec<u8> {
+    let mut rle = Vec::new();
+    let mut len = 0u32;
+    // Mostly short runs (a chunk inside the 64-pixel row), sometimes up to 56 of 256.
+    let (runs, longest) = if rng.chance(70) { (12, 8) } else { (56, 256) };
+    for _ in 0..rng.range(0, runs) {
+        let count = rng.below(longest) as u8;
+        len += count as u32 + 1;
+        rle.push(count);
+        rle.extend_from_slice(&rng.bytes(3));
+    }
+    let msg = match rng.below(6) {
+        0 => backup::Msg::Idle,
+        1 => backup::Msg::Ack,
+        _ => backup::Msg::Pixels {
+            seq: if rng.chance(85) {
+                ack
+            } else {
+                rng.u32() as u16
+            },
+            job: if rng.chance(90) { 7 } else { rng.u32() },
+            frame: 0,
+            y: small_or_edge(rng, 20) as u16,
+            x: small_or_edge(rng, 80) as u16,
+            len: if rng.chance(85) {
+                len as u16
+            } else {
+                rng.u32() as u16
+            },
+            done: rng.chance(20),
+            rle: &rle,
+        },
+    };
+    let mut buf = [0u8; backup::MAX_FRAME];
+    let n = backup::encode(addr, &msg, &mut buf).expect("a valid message fits");
+    buf[..n].to_vec()
+}
+
+/// The work: job 7 for node 3, a 64 x 16 frame; refuses runs outside it.
+#[derive(Default)]
+struct FuzzWork {
+    taken_px: u64,
+    parts: Vec<(u16, u16, usize)>,
+    lost: bool,
+}
+
+impl backup::BackupWork for FuzzWork {
+    fn assign(&mut self, addr: u8) -> Option<links_core::wire::Job> {
+        assert_eq!(addr, 3);
+        Some(links_core::wire::Job {
+            id: 7,
+            frame: 0,
+            region: links_core::wire::Region::Span {
+                start: 0,
+                len: 1024,
+            },
+        })
+    }
+    fn missing_scene(&self, _: u8) -> Option<u16> {
+        None
+    }
+    fn scene(&self, _: u16) -> Option<&[u8]> {
+        None
+    }
+    fn scene_ready(&mut self, _: u8, _: u16) {}
+    fn pixels(&mut self, addr: u8, job: u32, y: u16, x: u16, rgb: &[u8], _: bool) -> bool {
+        assert_eq!((addr, job), (3, 7));
+        assert!(!rgb.is_empty() && rgb.len().is_multiple_of(3));
+        self.parts.push((y, x, rgb.len() / 3));
+        let ok = y < 16 && x as usize + rgb.len() / 3 <= 64;
+        if ok {
+            self.taken_px += (rgb.len() / 3) as u64;
+        }
+        ok
+    }
+    fn lost(&mut self, _: u8) {
+        self.lost = true;
+    }
+}
+
 #[test]
 fn relay() {
     let mut rng0 = Rng(11);
@@ -2974,4 +3104,41 @@ fn relay() {
             relay_session(rng, corpus, input, tally)
         }
     });
+}
+
+#[test]
+fn backup_rc() {
+    let t = fuzz("backup_rc", &mut (), |_, rng, input, tally| {
+        let mut rc = backup::BackupRc::<2>::new();
+        assert_eq!(rc.serve(3), Some(0));
+        let mut work = FuzzWork::default();
+        let mut rgb = vec![0u8; 3 * rng.range(1, 40) as usize];
+        let mut line = FuzzLine { rng, input };
+        let mut chunks = 0;
+        for _ in 0..12 {
+            let turn = embassy_futures::block_on(rc.turn(0, &mut line, &mut work, &mut rgb))
+                .expect("the fuzz line never fails");
+            if let backup::Turn::Pixels { len, .. } = turn {
+                chunks += 1;
+                tally.note("backup chunks taken", 1);
+                assert!(len > 0);
+            }
+            if turn == backup::Turn::Lost {
+                assert!(work.lost);
+                break;
+            }
+        }
+        // The RC counts a chunk's pixels only when the work took every part of it; no part
+        // is longer than the RC's buffer.
+        assert!(rc.counters.pixels <= work.taken_px);
+        assert!(work.parts.iter().all(|p| p.2 <= rgb.len() / 3));
+        if chunks > 0 {
+            Verdict::Accepted
+        } else {
+            Verdict::Rejected("no chunk taken".into())
+        }
+    });
+    if t.tried >= 100 {
+        assert!(t.notes.get("backup chunks taken").is_some_and(|&n| n > 0));
+    }
 }

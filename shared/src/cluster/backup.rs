@@ -275,9 +275,16 @@ pub fn rle_chunk(rgb: &[u8], out: &mut [u8]) -> (usize, usize) {
 
 pub mod line;
 mod node;
+pub mod rc;
+mod render;
 mod rollcall;
-pub use line::{call_roll, serve, LineError, LinePort};
+pub use line::{call_roll, serve, serve_with, LineError, LinePort};
 pub use node::{BackupNode, NodeScene};
+pub use rc::{
+    serve_root, BackupRc, BackupWork, NoLine, PortLine, RcCounters, RcLine, RootWork, ServeConfig,
+    Turn,
+};
+pub use render::{BackupRender, BackupRenderError, Piece};
 pub use rollcall::{RollCall, RollCallStep};
 
 /// Most pixels a node holds for the line at once (one scanline piece).

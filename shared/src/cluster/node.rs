@@ -51,6 +51,10 @@ pub trait RunRenderer {
         x: u32,
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError>;
+
+    /// The bytes of a scene it rendered may have changed under the same bank and frame (the
+    /// backup line reuses a bank): drop anything kept from run to run. Default: nothing kept.
+    fn forget(&mut self) {}
 }
 
 /// The real renderer: a [`Tracer`] in number type `T`, working in one [`TracerState`] it
@@ -86,6 +90,10 @@ impl<T: Real> RunRenderer for Tracing<T> {
         let mut t = Tracer::with_state(scene, Techniques::ALL, &mut self.state, key);
         render_run(&mut t, y, x, out)?;
         Ok(t.stats)
+    }
+
+    fn forget(&mut self) {
+        self.state.forget();
     }
 }
 

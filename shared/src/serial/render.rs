@@ -5,15 +5,19 @@
 
 use super::readback::{ByteQueue, Readback, RUN_RESERVE};
 use super::throttle::{Room, Throttle};
+use crate::backup::{serve_root, BackupRc, NoLine, RcLine, RootWork, ServeConfig};
 use crate::image::SceneView;
 use crate::link::RootBus;
 use crate::render::{render_run, Rgb8, Tracer};
+use crate::root::BACKUP_NODES;
 use crate::root::{run_bus, RootClock, RootConfig, RootError, RootReport, RootState};
 use crate::sched::Policy;
 use crate::serial::{Encoder, FrameStreamer, RcError, SerialError, ToPc, MAX_RUN, MAX_TO_PC};
 use core::cell::RefCell;
 use core::future::poll_fn;
+use core::pin::pin;
 use core::task::Poll;
+use embassy_futures::select::{select, Either};
 
 /// Why a render request did not produce its frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -85,11 +89,46 @@ pub async fn render_frames<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
     enc: &mut Encoder,
     last: &mut Option<FrameStreamer>,
 ) -> Result<RootReport, RenderFail> {
+    let none: Option<(&mut NoLine, ServeConfig)> = None;
+    render_frames_with_line(
+        bus, clock, room, queue, image, frames, nodes, enc, last, none,
+    )
+    .await
+}
+
+/// Pixels the RC expands from one backup-line chunk at a time (a chunk goes in parts).
+const LINE_RGB: usize = 3 * 32;
+
+/// [`render_frames`] with the serial backup line beside the bus: each frame, nodes the root
+/// declares dead on SPI that answer on the line are served there
+/// ([`crate::backup::serve_root`], at most [`BACKUP_NODES`]). A line error ends the line's
+/// service for that frame (the bus goes on); the line stops when the bus does.
+#[allow(clippy::too_many_arguments)]
+pub async fn render_frames_with_line<B, C, R, Q, L>(
+    bus: &mut B,
+    clock: &C,
+    room: &R,
+    queue: &mut Q,
+    image: &[u8],
+    frames: u16,
+    nodes: u16,
+    enc: &mut Encoder,
+    last: &mut Option<FrameStreamer>,
+    mut line: Option<(&mut L, ServeConfig)>,
+) -> Result<RootReport, RenderFail>
+where
+    B: RootBus,
+    C: RootClock,
+    R: Room,
+    Q: ByteQueue,
+    L: RcLine,
+{
     let dims = frame_dims(image, enc, room, queue).await?;
     let mut report = RootReport::default();
     for frame in 0..frames.max(1) {
         let mut out = Out { room, queue, enc };
-        report = render_one(bus, clock, &mut out, image, dims, frame, nodes, last).await?;
+        let line = line.as_mut().map(|(l, cfg)| (&mut **l, *cfg));
+        report = render_one(bus, clock, &mut out, image, dims, frame, nodes, last, line).await?;
     }
     Ok(report)
 }
@@ -110,7 +149,8 @@ pub async fn render_film_frame<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
 ) -> Result<RootReport, RenderFail> {
     let dims = frame_dims(image, enc, room, queue).await?;
     let mut out = Out { room, queue, enc };
-    render_one(bus, clock, &mut out, image, dims, frame, nodes, last).await
+    let none: Option<(&mut NoLine, ServeConfig)> = None;
+    render_one(bus, clock, &mut out, image, dims, frame, nodes, last, none).await
 }
 
 /// Where a frame's messages go: the queue, the room it waits for, the numbering.
@@ -123,7 +163,7 @@ struct Out<'a, R, Q> {
 /// One frame: a full `run_bus` of `image` as bus frame 0 (the nodes' even bank), its runs
 /// streamed as serial frame `frame`.
 #[allow(clippy::too_many_arguments)]
-async fn render_one<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
+async fn render_one<B: RootBus, C: RootClock, R: Room, Q: ByteQueue, L: RcLine>(
     bus: &mut B,
     clock: &C,
     out: &mut Out<'_, R, Q>,
@@ -132,6 +172,7 @@ async fn render_one<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
     frame: u16,
     nodes: u16,
     last: &mut Option<FrameStreamer>,
+    line: Option<(&mut L, ServeConfig)>,
 ) -> Result<RootReport, RenderFail> {
     let cfg = RootConfig {
         policy: Policy::DECREASING,
@@ -153,13 +194,51 @@ async fn render_one<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
         room: out.room,
         need: RUN_RESERVE,
     };
-    let r = run_bus(0, &mut throttled, clock, &root, &scenes[..], &sink).await;
+    let r = {
+        // Pinned where it is made: moving the bus's future (its RX buffer) into another
+        // slot (a parameter, a local) would double it in this future.
+        let bus_run = pin!(run_bus(0, &mut throttled, clock, &root, &scenes[..], &sink));
+        let mut work = RootWork {
+            root: &root,
+            scenes: &scenes[..],
+            sink: &sink,
+        };
+        bus_and_line(bus_run, line, clock, &mut work).await
+    };
     let ended = sink.into_inner().end();
     *out.enc = ended.enc;
     *last = Some(ended.streamer);
     let report = r.map_err(RenderFail::Root)?;
     ended.result.map_err(RenderFail::Incomplete)?;
     Ok(report)
+}
+
+/// Run the bus's future and, if there is a line, serve it beside the bus until the bus is
+/// done (the frame complete, or the bus failed): the bus's result.
+async fn bus_and_line<F, L, C, S, P>(
+    mut bus_run: core::pin::Pin<&mut F>,
+    line: Option<(&mut L, ServeConfig)>,
+    clock: &C,
+    work: &mut RootWork<'_, S, P>,
+) -> F::Output
+where
+    F: core::future::Future,
+    L: RcLine,
+    C: RootClock,
+    S: crate::root::SceneSource + ?Sized,
+    P: crate::root::PixelSink,
+{
+    let Some((line, cfg)) = line else {
+        return bus_run.await;
+    };
+    let mut rc = BackupRc::<BACKUP_NODES>::new();
+    let mut rgb = [0u8; LINE_RGB];
+    let served = serve_root(&mut rc, line, clock, work, cfg, &mut rgb);
+    let out = match select(bus_run.as_mut(), pin!(served)).await {
+        Either::First(r) => r,
+        Either::Second(_) => bus_run.await,
+    };
+    out
 }
 
 /// Queue space an upload reply may take while a frame renders: the reply only goes out

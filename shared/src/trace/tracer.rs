@@ -120,6 +120,12 @@ impl<T: Real> TracerState<T> {
         }
     }
 
+    /// Forget which scene the caches hold: the next run refills them (the bytes behind a
+    /// key changed: a bank reused for another path's scene).
+    pub fn forget(&mut self) {
+        self.key = None;
+    }
+
     /// Forget every cache unless they were filled from the scene `key` names.
     fn prepare(&mut self, camera: &Camera<T>, key: Option<SceneKey>) {
         if key.is_some() && self.key == key {

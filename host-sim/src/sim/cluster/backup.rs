@@ -1,7 +1,8 @@
 //! The serial backup line simulated: the RC and nodes whose SPI link is dead (alive
 //! otherwise) on the board profile's RS-485 line ([`LineProfile`]), in virtual time, running
 //! the links-core protocol ([`links_core::backup`]): the node's state machine
-//! ([`BackupNode`]) and the RC's roll call ([`RollCall`]) as the firmware runs them.
+//! ([`BackupNode`]) and the RC's side ([`BackupRc`]: roll call, scene, jobs, pixel polls)
+//! as the firmware runs them, the RC's over this module's virtual line ([`SimLine`]).
 //!
 //! The line is one half-duplex medium: every frame (the RC's, then the addressed node's
 //! answer) occupies it for [`LineProfile::frame_ns`]; an absent node costs the reply
@@ -14,12 +15,13 @@
 use super::exec::Ps;
 use crate::cost::CycleModel;
 use links_core::backup::{
-    self, BackupNode, Health, Msg, RollCall, RollCallStep, BROADCAST, MAX_FRAME, SCENE_DATA,
+    self, rc, BackupNode, BackupRc, BackupWork, Health, RcLine, Turn, BROADCAST, MAX_ADDR,
+    MAX_FRAME, OUTBOX_PIXELS,
 };
 use links_core::board::{BoardProfile, LineProfile};
 use links_core::image::SceneView;
 use links_core::render::{render_run, Rgb8, Stats, Techniques, Tracer};
-use links_core::wire::{rle_decode, Job, Region, CRC32};
+use links_core::wire::{Job, Region};
 use std::fmt;
 
 /// One backup-line simulation's set-up.
@@ -182,15 +184,13 @@ impl Line {
     }
 }
 
-/// The scenes (by frame), the renderer's settings, the frame being assembled (standalone
-/// runs only).
+/// The scenes (by frame) and the renderer's settings.
 pub(super) struct Work<'s> {
     pub(super) views: Vec<SceneView<'s>>,
     pub(super) width: u32,
     pub(super) model: CycleModel,
     pub(super) clock_hz: f64,
     pub(super) techniques: Techniques,
-    pub(super) frame: Vec<u8>,
 }
 
 impl Work<'_> {
@@ -271,62 +271,113 @@ pub(super) fn exchange(
     Ok(answer)
 }
 
-pub(super) fn send(
-    line: &mut Line,
-    nodes: &mut [SimNode<'_>],
-    work: &Work<'_>,
-    to: u8,
-    msg: &Msg<'_>,
-) -> Result<Option<Vec<u8>>, BackupSimError> {
-    let mut buf = [0u8; MAX_FRAME];
-    let n = backup::encode(to, msg, &mut buf)?;
-    exchange(line, nodes, work, to, &buf[..n])
+/// The RC's end of the simulated line ([`RcLine`]): every exchange charged in virtual time.
+pub(super) struct SimLine<'l, 'n, 'b, 'w, 's> {
+    pub(super) line: &'l mut Line,
+    pub(super) nodes: &'n mut [SimNode<'b>],
+    pub(super) work: &'w Work<'s>,
 }
 
-/// The scene's chunks for `to` from byte `from` on.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn send_scene(
-    line: &mut Line,
-    nodes: &mut [SimNode<'_>],
-    work: &Work<'_>,
-    to: u8,
-    frame: u16,
-    scene: &[u8],
-    from: usize,
-) -> Result<(), BackupSimError> {
-    let crc = CRC32.checksum(scene);
-    let mut at = from;
-    while at < scene.len() {
-        let end = (at + SCENE_DATA).min(scene.len());
-        let msg = Msg::Scene {
-            frame,
-            offset: at as u32,
-            total: scene.len() as u32,
-            crc,
-            data: &scene[at..end],
+impl RcLine for SimLine<'_, '_, '_, '_, '_> {
+    type Error = BackupSimError;
+    async fn exchange(
+        &mut self,
+        to: u8,
+        buf: &mut [u8; MAX_FRAME],
+        len: usize,
+    ) -> Result<Option<usize>, BackupSimError> {
+        let answer = exchange(self.line, self.nodes, self.work, to, &buf[..len])?;
+        Ok(answer.map(|a| {
+            let n = a.len().min(MAX_FRAME);
+            buf[..n].copy_from_slice(&a[..n]);
+            n
+        }))
+    }
+}
+
+/// The pixel buffer of the RC's turns: a whole outbox chunk at once.
+pub(super) const RC_RGB: usize = 3 * OUTBOX_PIXELS;
+
+/// The standalone run's work: one scanline per job, rows in order, into the frame.
+struct Dealer<'f> {
+    frame: &'f mut [u8],
+    width: u32,
+    height: u32,
+    next_row: u32,
+    /// Per address: the job it holds; jobs of nodes given up, to hand out again.
+    holding: Vec<Option<Job>>,
+    again: Vec<Job>,
+}
+
+impl Dealer<'_> {
+    fn finished(&self) -> bool {
+        self.next_row >= self.height
+            && self.again.is_empty()
+            && self.holding.iter().all(Option::is_none)
+    }
+}
+
+impl BackupWork for Dealer<'_> {
+    fn assign(&mut self, addr: u8) -> Option<Job> {
+        let held = self.holding.get_mut(addr as usize - 1)?;
+        if held.is_none() {
+            *held = match self.again.pop() {
+                Some(j) => Some(j),
+                None if self.next_row < self.height => {
+                    let row = self.next_row;
+                    self.next_row += 1;
+                    Some(Job {
+                        id: row,
+                        frame: 0,
+                        region: Region::Span {
+                            start: row * self.width,
+                            len: self.width,
+                        },
+                    })
+                }
+                None => None,
+            };
+        }
+        *held
+    }
+
+    fn missing_scene(&self, _: u8) -> Option<u16> {
+        None
+    }
+
+    fn scene(&self, _: u16) -> Option<&[u8]> {
+        None
+    }
+
+    fn scene_ready(&mut self, _: u8, _: u16) {}
+
+    fn pixels(&mut self, addr: u8, job: u32, y: u16, x: u16, rgb: &[u8], done: bool) -> bool {
+        let Some(held) = self.holding.get_mut(addr as usize - 1) else {
+            return false;
         };
-        send(line, nodes, work, to, &msg)?;
-        at = end;
+        if held.is_none_or(|j| j.id != job) || x as u32 + (rgb.len() / 3) as u32 > self.width {
+            return false;
+        }
+        let at = 3 * (y as usize * self.width as usize + x as usize);
+        let Some(dst) = self.frame.get_mut(at..at + rgb.len()) else {
+            return false;
+        };
+        dst.copy_from_slice(rgb);
+        if done {
+            *held = None;
+        }
+        true
     }
-    Ok(())
-}
 
-/// Roll call over every address; returns each one's health.
-pub(super) fn roll_call(
-    line: &mut Line,
-    nodes: &mut [SimNode<'_>],
-    work: &Work<'_>,
-    count: u8,
-) -> Result<Vec<(u8, Option<Health>)>, BackupSimError> {
-    let mut rc = RollCall::new(count);
-    let mut req = [0u8; MAX_FRAME];
-    while let RollCallStep::Ask(a) = rc.step() {
-        let n = rc.request(&mut req)?;
-        let answer = exchange(line, nodes, work, a, &req[..n])?;
-        // A garbled answer counts the node absent (the error is the roll call's to report).
-        let _ = rc.answered(answer.as_deref());
+    fn lost(&mut self, addr: u8) {
+        if let Some(j) = self
+            .holding
+            .get_mut(addr as usize - 1)
+            .and_then(Option::take)
+        {
+            self.again.push(j);
+        }
     }
-    Ok((1..=count).map(|a| (a, rc.health(a))).collect())
 }
 
 /// Simulate rendering one frame over the backup line only.
@@ -346,13 +397,12 @@ pub fn simulate_backup(image: &[u8], cfg: &BackupConfig) -> Result<BackupReport,
     let view = SceneView::new(image).map_err(|e| BackupSimError::Scene(e.to_string()))?;
     let cam = view.camera::<f32>();
     let (width, height) = (cam.width, cam.height);
-    let mut work = Work {
+    let work = Work {
         views: vec![view],
         width,
         model: cfg.model,
         clock_hz: cfg.clock_hz,
         techniques: cfg.techniques,
-        frame: vec![0u8; 3 * width as usize * height as usize],
     };
     let mut banks: Vec<Vec<u8>> = (0..cfg.nodes).map(|_| vec![0u8; image.len()]).collect();
     let mut nodes: Vec<SimNode<'_>> = banks
@@ -361,8 +411,14 @@ pub fn simulate_backup(image: &[u8], cfg: &BackupConfig) -> Result<BackupReport,
         .map(|(i, b)| SimNode::new(i as u8 + 1, b, !cfg.dead.contains(&(i as u8 + 1))))
         .collect();
     let mut line = Line::new(cfg.line);
-    let calls = roll_call(&mut line, &mut nodes, &work, cfg.nodes)?;
-    let roll_call_ps = line.now;
+    let mut sim = SimLine {
+        line: &mut line,
+        nodes: &mut nodes,
+        work: &work,
+    };
+    let roll = embassy_futures::block_on(rc::roll_call(&mut sim, cfg.nodes))?;
+    let calls: Vec<(u8, Option<Health>)> = (1..=cfg.nodes).map(|a| (a, roll.health(a))).collect();
+    let roll_call_ps = sim.line.now;
     let present: Vec<u8> = calls
         .iter()
         .filter(|c| c.1.is_some())
@@ -371,13 +427,17 @@ pub fn simulate_backup(image: &[u8], cfg: &BackupConfig) -> Result<BackupReport,
     if present.is_empty() {
         return Err(BackupSimError::NoNodes);
     }
-    deliver_scene(&mut line, &mut nodes, &work, &present, image)?;
-    let scene_ps = line.now;
-    let (pixel_frames, pixel_bytes) = hand_out(&mut line, &mut nodes, &mut work, &present)?;
+    // Broadcast, then each node's health and what it lacks (at most 4 rounds).
+    if !embassy_futures::block_on(rc::deliver_scene(&mut sim, &present, 0, image, 4))? {
+        return Err(BackupSimError::Stalled);
+    }
+    let scene_ps = sim.line.now;
+    let mut frame = vec![0u8; 3 * width as usize * height as usize];
+    let (pixel_frames, pixel_bytes) = hand_out(&mut line, &mut nodes, &work, &present, &mut frame)?;
     Ok(BackupReport {
         width,
         height,
-        frame: std::mem::take(&mut work.frame),
+        frame,
         time_s: line.now as f64 * 1e-12,
         roll_call_s: roll_call_ps as f64 * 1e-12,
         scene_s: scene_ps as f64 * 1e-12,
@@ -396,109 +456,47 @@ pub fn simulate_backup(image: &[u8], cfg: &BackupConfig) -> Result<BackupReport,
     })
 }
 
-/// Broadcast the scene, then ask each present node for its health and send what it lacks
-/// (at most 4 rounds).
-fn deliver_scene(
+/// Hand out one scanline at a time to each present node and poll for pixels until the
+/// frame is complete ([`BackupRc`] over the simulated line). Returns the pixel frames
+/// accepted and their run-length bytes.
+fn hand_out(
     line: &mut Line,
     nodes: &mut [SimNode<'_>],
     work: &Work<'_>,
     present: &[u8],
-    scene: &[u8],
-) -> Result<(), BackupSimError> {
-    send_scene(line, nodes, work, BROADCAST, 0, scene, 0)?;
-    for _ in 0..4 {
-        let mut all = true;
-        for &a in present {
-            let h = match send(line, nodes, work, a, &Msg::RollCall)? {
-                Some(r) => match backup::decode(&r)? {
-                    (_, Msg::Health(h)) => h,
-                    _ => continue,
-                },
-                None => continue,
-            };
-            if !h.scene_ok {
-                all = false;
-                send_scene(line, nodes, work, a, 0, scene, h.scene_bytes as usize)?;
-            }
-        }
-        if all {
-            return Ok(());
-        }
-    }
-    Err(BackupSimError::Stalled)
-}
-
-/// Hand out one scanline at a time to each present node and poll for pixels until the
-/// frame is complete. Returns the pixel frames accepted and their run-length bytes.
-fn hand_out(
-    line: &mut Line,
-    nodes: &mut [SimNode<'_>],
-    work: &mut Work<'_>,
-    present: &[u8],
+    frame: &mut [u8],
 ) -> Result<(u64, u64), BackupSimError> {
-    let height = (work.frame.len() / 3) as u32 / work.width.max(1);
-    let mut next_row = 0u32;
-    // Per present node: the job it holds and the RC's ack.
-    let mut holding: Vec<Option<Job>> = vec![None; present.len()];
-    let mut ack: Vec<u16> = vec![0; present.len()];
-    let (mut frames, mut bytes) = (0u64, 0u64);
+    let mut dealer = Dealer {
+        height: (frame.len() / 3) as u32 / work.width.max(1),
+        frame,
+        width: work.width,
+        next_row: 0,
+        holding: vec![None; MAX_ADDR as usize],
+        again: Vec::new(),
+    };
+    let mut rc = BackupRc::<{ MAX_ADDR as usize }>::new();
+    for &a in present {
+        rc.serve(a);
+    }
+    let mut rgb = [0u8; RC_RGB];
     let mut steps = 0u64;
-    while next_row < height || holding.iter().any(Option::is_some) {
+    while !dealer.finished() {
         steps += 1;
-        if steps > 50_000_000 {
+        if steps > 50_000_000 || rc.addrs().next().is_none() {
             return Err(BackupSimError::Stalled);
         }
-        for (k, &a) in present.iter().enumerate() {
-            if holding[k].is_none() && next_row < height {
-                let job = Job {
-                    id: next_row,
-                    frame: 0,
-                    region: Region::Span {
-                        start: next_row * work.width,
-                        len: work.width,
-                    },
-                };
-                next_row += 1;
-                send(line, nodes, work, a, &Msg::Work { job })?;
-                holding[k] = Some(job);
-                nodes[a as usize - 1].jobs += 1;
-                continue;
-            }
-            let Some(job) = holding[k] else { continue };
-            let Some(r) = send(line, nodes, work, a, &Msg::Poll { ack: ack[k] })? else {
-                continue;
+        for k in 0..present.len() {
+            let mut sim = SimLine {
+                line: &mut *line,
+                nodes: &mut *nodes,
+                work,
             };
-            if let (
-                _,
-                Msg::Pixels {
-                    seq,
-                    job: j,
-                    y,
-                    x,
-                    len,
-                    done,
-                    rle,
-                    ..
-                },
-            ) = backup::decode(&r)?
-            {
-                if seq != ack[k] || j != job.id {
-                    continue;
-                }
-                let at = 3 * (y as usize * work.width as usize + x as usize);
-                let dst = work
-                    .frame
-                    .get_mut(at..at + 3 * len as usize)
-                    .ok_or(backup::BackupError::Malformed)?;
-                rle_decode(rle, dst).map_err(|_| backup::BackupError::Malformed)?;
-                ack[k] = ack[k].wrapping_add(1);
-                frames += 1;
-                bytes += rle.len() as u64;
-                if done {
-                    holding[k] = None;
-                }
+            let addr = rc.addr_at(k);
+            let turn = embassy_futures::block_on(rc.turn(k, &mut sim, &mut dealer, &mut rgb))?;
+            if let (Turn::Work { .. }, Some(a)) = (turn, addr) {
+                nodes[a as usize - 1].jobs += 1;
             }
         }
     }
-    Ok((frames, bytes))
+    Ok((rc.counters.pixel_frames, rc.counters.pixel_bytes))
 }

@@ -6,16 +6,16 @@
 //! and a node that answers (fault injection: "SPI link dead, node alive",
 //! [`super::SimConfig::spi_dead`]) is served over the line from then on: the scene of the
 //! frame being handed out, one job at a time ([`RootState::backup_assign`]), its pixels
-//! polled back into the frame memory ([`RootState::backup_pixels`]). Every frame on the line
-//! takes its time on the board profile's line in virtual time.
+//! polled back into the frame memory ([`RootState::backup_pixels`]): links-core's RC side
+//! ([`BackupRc`] over [`RootWork`]) as the RC firmware runs it, over the simulated line. Every
+//! frame on the line takes its time on the board profile's line in virtual time.
 
-use super::backup::{roll_call, send, send_scene, BackupSimError, Line, SimNode, Work};
+use super::backup::{BackupSimError, Line, SimLine, SimNode, Work, RC_RGB};
 use super::exec::{Delay, Ps, SharedClock};
 use super::framemem::{FrameMemory, ViaRoot};
 use super::SimConfig;
-use links_core::backup::{self, Msg};
+use links_core::backup::{self, rc, BackupRc, RootWork, Turn, MAX_ADDR};
 use links_core::root::RootState;
-use links_core::wire::rle_decode;
 use std::cell::RefCell;
 
 /// What the backup line did in a cluster simulation.
@@ -52,14 +52,6 @@ pub(super) struct LineSetup<'a> {
     pub counters: &'a RefCell<LineCounters>,
 }
 
-/// Per served node: the job sent to it and the RC's acknowledgement number.
-#[derive(Clone, Copy, Default)]
-struct Served {
-    node: u16,
-    sent: Option<u32>,
-    ack: u16,
-}
-
 /// Run the line until the cluster finishes (or a protocol error, reported as the line's).
 pub(super) async fn run_line(s: LineSetup<'_>) -> Result<(), BackupSimError> {
     let on_line = s.cfg.nodes.min(backup::MAX_ADDR as u16);
@@ -74,37 +66,58 @@ pub(super) async fn run_line(s: LineSetup<'_>) -> Result<(), BackupSimError> {
         .collect();
     let mut line = Line::new(s.cfg.profile.backup);
     let mut called = vec![false; on_line as usize];
-    let mut served: Vec<Served> = Vec::new();
-    let calls = roll_call(&mut line, &mut nodes, &s.work, on_line as u8)?;
-    s.counters.borrow_mut().absent = calls
-        .iter()
-        .filter(|c| c.1.is_none())
-        .map(|c| c.0 as u16 - 1)
-        .collect();
+    let mut rc = BackupRc::<{ MAX_ADDR as usize }>::new();
+    let sink = RefCell::new(ViaRoot(s.fm));
+    let mut work = RootWork {
+        root: s.root,
+        scenes: &s.scenes[..],
+        sink: &sink,
+    };
+    let mut rgb = [0u8; RC_RGB];
+    let calls = {
+        let mut sim = SimLine {
+            line: &mut line,
+            nodes: &mut nodes,
+            work: &s.work,
+        };
+        embassy_futures::block_on(rc::roll_call(&mut sim, on_line as u8))?
+    };
+    s.counters.borrow_mut().absent = calls.absent().map(|a| a as u16 - 1).collect();
     wait(&s.clock, &line).await;
     while !s.root.borrow().finished() {
         let now = s.clock.borrow().now;
         set_alive(s.cfg, &mut nodes, now);
         line.now = now;
+        let mut sim = SimLine {
+            line: &mut line,
+            nodes: &mut nodes,
+            work: &s.work,
+        };
         for n in 0..on_line {
-            let now_us = line.now / 1_000_000;
+            let now_us = sim.line.now / 1_000_000;
             if called[n as usize] || !s.root.borrow().backup_candidate(n, now_us) {
                 continue;
             }
             called[n as usize] = true;
-            let answer = send(&mut line, &mut nodes, &s.work, n as u8 + 1, &Msg::RollCall)?;
-            let now_us = line.now / 1_000_000;
+            let answer = rc::ask_health(&mut sim, n as u8 + 1).await?;
+            let now_us = sim.line.now / 1_000_000;
             if answer.is_some() && s.root.borrow_mut().serve_by_backup(n, now_us) {
-                served.push(Served {
-                    node: n,
-                    ..Served::default()
-                });
+                rc.serve(n as u8 + 1);
                 s.counters.borrow_mut().served.push(n);
             }
         }
         let mut busy = false;
-        for sv in served.iter_mut() {
-            busy |= serve_one(&s, &mut line, &mut nodes, sv)?;
+        for k in 0..MAX_ADDR as usize {
+            let before = rc.counters;
+            let addr = rc.addr_at(k);
+            let turn = rc.turn(k, &mut sim, &mut work, &mut rgb).await?;
+            if let (Turn::Work { .. }, Some(a)) = (turn, addr) {
+                sim.nodes[a as usize - 1].jobs += 1;
+            }
+            let mut c = s.counters.borrow_mut();
+            c.pixels += rc.counters.pixels - before.pixels;
+            c.jobs += rc.counters.jobs - before.jobs;
+            busy |= turn != Turn::Nothing;
         }
         if !busy {
             line.now = line.now.max(now + IDLE_PS);
@@ -145,73 +158,4 @@ fn update(s: &LineSetup<'_>, line: &Line, nodes: &[SimNode<'_>]) {
     c.timeouts = line.timeouts;
     c.busy_s = line.busy as f64 * 1e-12;
     c.compute_s = nodes.iter().map(|n| n.compute as f64 * 1e-12).sum();
-}
-
-/// One turn of a served node: its scene if it lacks the frame being handed out's, else its
-/// job, else a poll for pixels. Returns whether it had something to do.
-fn serve_one(
-    s: &LineSetup<'_>,
-    line: &mut Line,
-    nodes: &mut [SimNode<'_>],
-    sv: &mut Served,
-) -> Result<bool, BackupSimError> {
-    let (n, addr) = (sv.node, sv.node as u8 + 1);
-    let frame = s.root.borrow().handing_out();
-    let job = s.root.borrow_mut().backup_assign(n);
-    if job.is_none() && !s.root.borrow().has_scene(n, frame) {
-        let Some(scene) = s.scenes.get(frame as usize) else {
-            return Ok(false);
-        };
-        send_scene(line, nodes, &s.work, addr, frame, scene, 0)?;
-        if let Some(r) = send(line, nodes, &s.work, addr, &Msg::RollCall)? {
-            if let (_, Msg::Health(h)) = backup::decode(&r)? {
-                if h.scene_ok && h.frame == frame {
-                    s.root.borrow_mut().backup_scene_ready(n, frame);
-                }
-            }
-        }
-        return Ok(true);
-    }
-    let Some(job) = job else {
-        return Ok(false);
-    };
-    if sv.sent != Some(job.id) {
-        send(line, nodes, &s.work, addr, &Msg::Work { job })?;
-        sv.sent = Some(job.id);
-        nodes[n as usize].jobs += 1;
-        return Ok(true);
-    }
-    let Some(r) = send(line, nodes, &s.work, addr, &Msg::Poll { ack: sv.ack })? else {
-        return Ok(true);
-    };
-    if let (
-        _,
-        Msg::Pixels {
-            seq,
-            job: j,
-            y,
-            x,
-            len,
-            done,
-            rle,
-            ..
-        },
-    ) = backup::decode(&r)?
-    {
-        if seq == sv.ack && j == job.id {
-            let mut rgb = vec![0u8; 3 * len as usize];
-            rle_decode(rle, &mut rgb).map_err(|_| backup::BackupError::Malformed)?;
-            let mut sink = ViaRoot(s.fm);
-            if s.root
-                .borrow_mut()
-                .backup_pixels(n, j, y, x, &rgb, done, &mut sink)
-            {
-                sv.ack = sv.ack.wrapping_add(1);
-                let mut c = s.counters.borrow_mut();
-                c.pixels += len as u64;
-                c.jobs += u32::from(done);
-            }
-        }
-    }
-    Ok(true)
 }

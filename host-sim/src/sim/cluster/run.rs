@@ -328,7 +328,6 @@ fn line_setup<'a, S: AsRef<[u8]>>(
             model: cfg.model,
             clock_hz: cfg.clock_hz,
             techniques: cfg.techniques,
-            frame: Vec::new(),
         },
         counters,
     })

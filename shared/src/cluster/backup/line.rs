@@ -54,6 +54,19 @@ pub async fn serve<P: LinePort>(
     node: &mut BackupNode<'_>,
     reader: &mut FrameReader,
 ) -> Result<usize, LineError> {
+    serve_with(port, reader, |frame, reply| node.handle(frame, reply)).await
+}
+
+/// [`serve`] with the node reached through `handle` (firmware that shares the node with its
+/// renderer locks it there, for one frame at a time).
+pub async fn serve_with<P: LinePort, H>(
+    port: &mut P,
+    reader: &mut FrameReader,
+    mut handle: H,
+) -> Result<usize, LineError>
+where
+    H: FnMut(&[u8], &mut [u8]) -> Result<Option<usize>, BackupError>,
+{
     let mut rx = [0u8; MAX_FRAME];
     let n = port.receive(&mut rx, None).await?;
     let mut handled = 0;
@@ -61,7 +74,7 @@ pub async fn serve<P: LinePort>(
     for &b in &rx[..n.min(MAX_FRAME)] {
         let Some(len) = reader.push(b) else { continue };
         handled += 1;
-        if let Ok(Some(r)) = node.handle(reader.frame(len), &mut reply) {
+        if let Ok(Some(r)) = handle(reader.frame(len), &mut reply) {
             port.send(&reply[..r]).await?;
         }
     }

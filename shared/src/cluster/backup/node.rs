@@ -33,7 +33,8 @@ impl<'b> NodeScene<'b> {
 
     /// Take a chunk: a chunk of another scene (frame, length or CRC) starts over; the chunk
     /// at the first missing byte is appended; any other is ignored (the RC resumes from the
-    /// byte count the node reports). A scene larger than the bank is refused.
+    /// byte count the node reports). A scene larger than the bank is refused (also while
+    /// the bank is lent out: [`BackupNode::take_bank`]).
     fn take(
         &mut self,
         frame: u16,
@@ -73,10 +74,16 @@ impl<'b> NodeScene<'b> {
         Ok(())
     }
 
-    /// The complete, CRC-checked scene and its frame.
+    /// The complete, CRC-checked scene and its frame (`None` while the bank is lent out).
     pub fn ready(&self) -> Option<(u16, &[u8])> {
-        self.ok
-            .then(|| (self.frame, &self.bank[..self.total as usize]))
+        let bytes = self.bank.get(..self.total as usize)?;
+        self.ok.then_some((self.frame, bytes))
+    }
+
+    /// The complete scene's frame and CRC-32: what identifies it (also while the bank is lent
+    /// out).
+    pub fn key(&self) -> Option<(u16, u32)> {
+        self.ok.then_some((self.frame, self.crc))
     }
 }
 
@@ -106,6 +113,8 @@ pub struct BackupNode<'b> {
     seq: u16,
     jobs_done: u32,
     errors: u32,
+    /// Work or a scene arrived while the node had no bank for the line.
+    wants_bank: bool,
 }
 
 impl<'b> BackupNode<'b> {
@@ -129,7 +138,28 @@ impl<'b> BackupNode<'b> {
             seq: 0,
             jobs_done: 0,
             errors: 0,
+            wants_bank: false,
         }
+    }
+
+    /// Give the line a scene bank (the firmware shares the SPI path's bank once the RC serves
+    /// the node over the line). A scene received before keeps its state: a bank taken back
+    /// with [`BackupNode::take_bank`] and lent again still holds it.
+    pub fn lend_bank(&mut self, bank: &'b mut [u8]) {
+        self.scene.bank = bank;
+        self.wants_bank = false;
+    }
+
+    /// Take the bank back (empty from now on: scene chunks are refused, the scene's state
+    /// and key stay). The renderer reads the scene from it while the line has none.
+    pub fn take_bank(&mut self) -> &'b mut [u8] {
+        core::mem::take(&mut self.scene.bank)
+    }
+
+    /// Whether the RC sent work or a scene chunk while the node had no bank (since the last
+    /// call): the firmware should lend it one ([`BackupNode::lend_bank`]).
+    pub fn take_bank_request(&mut self) -> bool {
+        core::mem::take(&mut self.wants_bank)
     }
 
     pub fn addr(&self) -> u8 {
@@ -205,12 +235,14 @@ impl<'b> BackupNode<'b> {
             } => {
                 if let Err(e) = self.scene.take(frame, offset, total, crc, data) {
                     self.errors = self.errors.saturating_add(1);
+                    self.wants_bank |= self.scene.bank.is_empty() && addr == self.addr;
                     return Err(e);
                 }
                 Msg::Ack
             }
             Msg::Work { job } => {
                 self.job = Some(job);
+                self.wants_bank |= self.scene.bank.is_empty();
                 Msg::Ack
             }
             Msg::Poll { ack } => return self.poll(ack, reply).map(Some),

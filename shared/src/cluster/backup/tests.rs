@@ -392,3 +392,195 @@ fn the_node_serves_a_burst_of_frames() {
     assert!(matches!(got[0], (3, Msg::Health(_))));
     assert_eq!(got[1], (3, Msg::Idle));
 }
+
+/// An RC line that answers every exchange with the next of `answers` (`None`: silence) and
+/// keeps the RC's requests.
+struct Scripted {
+    answers: Vec<Option<Vec<u8>>>,
+    requests: Vec<(u8, Vec<u8>)>,
+}
+
+impl RcLine for Scripted {
+    type Error = BackupError;
+    async fn exchange(
+        &mut self,
+        to: u8,
+        buf: &mut [u8; MAX_FRAME],
+        len: usize,
+    ) -> Result<Option<usize>, BackupError> {
+        self.requests.push((to, buf[..len].to_vec()));
+        let Some(a) = self.answers.remove(0) else {
+            return Ok(None);
+        };
+        buf[..a.len()].copy_from_slice(&a);
+        Ok(Some(a.len()))
+    }
+}
+
+/// Job 9 for node 2; records every run handed in.
+#[derive(Default)]
+struct Recorder {
+    runs: Vec<(u16, u16, Vec<u8>, bool)>,
+    lost: Vec<u8>,
+}
+
+impl BackupWork for Recorder {
+    fn assign(&mut self, _: u8) -> Option<Job> {
+        Some(job(9))
+    }
+    fn missing_scene(&self, _: u8) -> Option<u16> {
+        None
+    }
+    fn scene(&self, _: u16) -> Option<&[u8]> {
+        None
+    }
+    fn scene_ready(&mut self, _: u8, _: u16) {}
+    fn pixels(&mut self, _: u8, _: u32, y: u16, x: u16, rgb: &[u8], done: bool) -> bool {
+        self.runs.push((y, x, rgb.to_vec(), done));
+        true
+    }
+    fn lost(&mut self, addr: u8) {
+        self.lost.push(addr);
+    }
+}
+
+fn reply(addr: u8, msg: Msg<'_>) -> Option<Vec<u8>> {
+    let mut buf = [0u8; MAX_FRAME];
+    let n = encode(addr, &msg, &mut buf).unwrap();
+    Some(buf[..n].to_vec())
+}
+
+fn pixels(seq: u16, len: u16, rle: &[u8]) -> Option<Vec<u8>> {
+    let msg = Msg::Pixels {
+        seq,
+        job: 9,
+        frame: 3,
+        y: 4,
+        x: 5,
+        len,
+        done: true,
+        rle,
+    };
+    reply(2, msg)
+}
+
+/// The RC's turns by hand: the job until acknowledged, then polls; a chunk of 4 pixels
+/// (runs of 3 and 1) expanded through a 2-pixel buffer arrives as two runs at x = 5 and 7,
+/// `done` on the second only; a chunk whose runs do not add up to its length is refused and
+/// the next poll asks for the same sequence number; eight silent turns give the node up.
+#[test]
+fn the_rc_hands_out_work_and_expands_pixel_chunks_in_parts() {
+    let rle = [2, 1, 2, 3, 0, 9, 9, 9];
+    let mut line = Scripted {
+        answers: vec![
+            None,                // Work: no answer
+            reply(2, Msg::Ack),  // Work again: taken
+            reply(2, Msg::Idle), // Poll ack 0
+            pixels(0, 5, &rle),  // runs add up to 4, not 5: refused
+            pixels(0, 4, &rle),  // taken
+        ],
+        requests: Vec::new(),
+    };
+    let mut rc = BackupRc::<2>::new();
+    assert_eq!(rc.serve(2), Some(0));
+    let mut work = Recorder::default();
+    let mut rgb = [0u8; 6];
+    let mut turn =
+        || embassy_futures::block_on(rc.turn(0, &mut line, &mut work, &mut rgb)).unwrap();
+    assert_eq!(
+        turn(),
+        Turn::Work {
+            job: job(9),
+            taken: false
+        }
+    );
+    assert_eq!(
+        turn(),
+        Turn::Work {
+            job: job(9),
+            taken: true
+        }
+    );
+    assert_eq!(turn(), Turn::Idle);
+    assert_eq!(turn(), Turn::Refused);
+    assert_eq!(
+        turn(),
+        Turn::Pixels {
+            len: 4,
+            rle: 8,
+            done: true
+        }
+    );
+    let polls: Vec<Msg<'_>> = line.requests[2..]
+        .iter()
+        .map(|r| decode(&r.1).unwrap().1)
+        .collect();
+    assert_eq!(
+        polls,
+        [
+            Msg::Poll { ack: 0 },
+            Msg::Poll { ack: 0 },
+            Msg::Poll { ack: 0 }
+        ]
+    );
+    assert_eq!(
+        work.runs,
+        vec![
+            (4, 5, vec![1, 2, 3, 1, 2, 3], false),
+            (4, 7, vec![1, 2, 3, 9, 9, 9], true)
+        ]
+    );
+    assert_eq!((rc.counters.pixels, rc.counters.jobs), (4, 1));
+    // Silence from now on: the next poll asks for chunk 1; the eighth silent turn gives up.
+    line.answers = vec![None; 8];
+    let turns: Vec<Turn> = (0..8)
+        .map(|_| embassy_futures::block_on(rc.turn(0, &mut line, &mut work, &mut rgb)).unwrap())
+        .collect();
+    assert_eq!(turns[..7], [Turn::Silent; 7]);
+    assert_eq!(turns[7], Turn::Lost);
+    assert_eq!(work.lost, vec![2]);
+    assert_eq!(rc.addrs().count(), 0);
+    let (_, last) = decode(&line.requests.last().unwrap().1).unwrap();
+    assert_eq!(last, Msg::Poll { ack: 1 });
+}
+
+/// A node without a bank (the firmware's SPI path holds it) asks for one when the RC sends
+/// work or a scene; a lent bank takes the scene; taken back, the scene's key stays (its
+/// bytes are out: `ready` is `None`, chunks are refused) until it is lent again.
+#[test]
+fn a_node_borrows_a_bank_for_the_line_and_keeps_the_scene_across_loans() {
+    let scene: Vec<u8> = (0..500u32).map(|i| (i * 7) as u8).collect();
+    let mut node = BackupNode::new(2, &mut []);
+    assert!(!node.take_bank_request());
+    assert_eq!(
+        ask(&mut node, 2, Msg::Work { job: job(1) }),
+        Some((2, {
+            let mut b = [0u8; MAX_FRAME];
+            let n = encode(2, &Msg::Ack, &mut b).unwrap();
+            b[..n].to_vec()
+        }))
+    );
+    assert!(node.take_bank_request());
+    assert!(!node.take_bank_request(), "asked once");
+    let mut reply = [0u8; MAX_FRAME];
+    let frames = scene_frames(&scene, 4, 2);
+    assert_eq!(
+        node.handle(&frames[0], &mut reply),
+        Err(BackupError::TooLong)
+    );
+    assert!(node.take_bank_request());
+    let mut bank = vec![0u8; 600];
+    node.lend_bank(&mut bank);
+    for f in &frames {
+        assert!(node.handle(f, &mut reply).unwrap().is_some());
+    }
+    assert_eq!(node.scene.ready(), Some((4, &scene[..])));
+    let key = (4, CRC32.checksum(&scene));
+    assert_eq!(node.scene.key(), Some(key));
+    let out = node.take_bank();
+    assert_eq!(&out[..500], &scene[..]);
+    assert_eq!((node.scene.ready(), node.scene.key()), (None, Some(key)));
+    assert_eq!(node.health().scene_bytes, 500);
+    node.lend_bank(out);
+    assert_eq!(node.scene.ready(), Some((4, &scene[..])));
+}

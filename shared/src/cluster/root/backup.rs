@@ -102,6 +102,30 @@ impl RootState {
         Some(job)
     }
 
+    /// Backup node `node` stopped answering on the line: it is no longer served there, and
+    /// the job it held becomes an orphan for the other nodes (SPI or backup) to adopt, as a
+    /// dead SPI node's jobs do. Returns false when its SPI job list has no free slot for the
+    /// job (it then stays with the node, served again if it answers a later roll call).
+    pub fn backup_lost(&mut self, node: NodeId) -> bool {
+        let Some(k) = self.backup_entry(node) else {
+            return false;
+        };
+        self.backup_jobs[k].1 = false;
+        if let Some(job) = self.backup_jobs[k].2 {
+            let Some(free) = self.nodes[node as usize]
+                .jobs
+                .iter_mut()
+                .find(|j| j.is_none())
+            else {
+                return false;
+            };
+            *free = Some(job);
+        }
+        // The entry is free for another node.
+        self.backup_jobs[k] = (NodeId::MAX, false, None);
+        true
+    }
+
     /// The index of `node`'s entry in the backup table.
     fn backup_entry(&self, node: NodeId) -> Option<usize> {
         self.backup_jobs.iter().position(|e| e.0 == node)
