@@ -86,6 +86,81 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
     }
 }
 
+/// Fixed-point nodes: the cluster's frame of the DM's Q16.16 image is bit-identical to the
+/// single-node fixed-point render for 1, 3, 8 and 16 nodes under the dynamic and the static
+/// policy, on the F207 (its nodes carry the Q16.16 kernel only) and on the F407 (both
+/// kernels; the image picks). Nodes that lack the image's kernel are refused before the run.
+#[test]
+fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render() {
+    use links_core::node::Kernels;
+    use links_core::num::Storage;
+    use links_host::frame::{fixed_image, render_frame, Precision};
+    let img = fixed_image(&image("photo1.ron", 64, 60)).expect("photo1 fits Q16.16");
+    let want = render_frame(&img, Precision::Fixed, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    assert!(
+        want != reference(&image("photo1.ron", 64, 60)),
+        "f32 differs"
+    );
+    let policies = [Policy::DECREASING, Policy::Static { shape: Split::Rect }];
+    let mut times = Vec::new();
+    for board in [BoardProfile::F207, BoardProfile::F407] {
+        for (nodes, policy) in [1u16, 3, 8, 16]
+            .into_iter()
+            .flat_map(|n| policies.map(|p| (n, p)))
+        {
+            let r = run(
+                &img,
+                SimConfig {
+                    nodes,
+                    policy,
+                    ..SimConfig::buildable(board, nodes)
+                },
+            );
+            let what = format!("{} board, {nodes} nodes, {policy:?}", board.name);
+            assert!(r.frames[0] == want, "{what}");
+            assert_eq!(r.root.pixels, 64 * 60, "{what}");
+            if nodes == 1 && policy == Policy::DECREASING {
+                times.push(r.time_s);
+            }
+        }
+    }
+    // One F207 node (Cortex-M3, 120 MHz) takes longer than one F407 node (M4F, 168 MHz).
+    assert!(times[0] > times[1], "{times:?}");
+    let f32_nodes = SimConfig {
+        kernels: Kernels::F32,
+        ..SimConfig::for_board(BoardProfile::F407)
+    };
+    match simulate_frame(&img, &f32_nodes) {
+        Err(SimError::NoKernel {
+            frame: 0,
+            image: Storage::Q16_16,
+            kernels: Kernels::F32,
+            mixed: false,
+        }) => {}
+        other => panic!("f32-only nodes sent a Q16.16 image: {other:?}"),
+    }
+    let f32_img = image("photo1.ron", 64, 60);
+    let f207 = SimConfig::for_board(BoardProfile::F207);
+    assert!(matches!(
+        simulate_frame(&f32_img, &f207),
+        Err(SimError::NoKernel {
+            image: Storage::F32,
+            kernels: Kernels::Fixed,
+            ..
+        })
+    ));
+    assert!(matches!(
+        simulate(&[&img[..], &f32_img[..]], &SimConfig::default()),
+        Err(SimError::NoKernel {
+            frame: 1,
+            mixed: true,
+            ..
+        })
+    ));
+}
+
 /// The relay tree (the F407's buildable topology): frames bit-identical to the single-node
 /// render at every node count (one and two levels of relays), policy, with and without
 /// batching, under bit errors and a node death; every node frame crosses every link up to

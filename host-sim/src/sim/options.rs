@@ -39,9 +39,9 @@ impl FromStr for PolicyArg {
 
 /// The known board profiles, borrowed by the command line's arguments (a reference keeps
 /// them small).
-static BOARDS: [BoardProfile; 2] = BoardProfile::ALL;
+static BOARDS: [BoardProfile; BoardProfile::ALL.len()] = BoardProfile::ALL;
 
-/// `--board NAME`: a known board profile (`f407`, `ideal`; ASCII case ignored).
+/// `--board NAME`: a known board profile (`f407`, `f207`, `ideal`; ASCII case ignored).
 pub fn parse_board(s: &str) -> Result<BoardProfile, OptionError> {
     parse_board_arg(s).copied()
 }

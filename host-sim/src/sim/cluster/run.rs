@@ -13,7 +13,8 @@ use super::timeline::{SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
 use crate::cost::{CycleModel, SceneCheckCost};
 use links_core::image::SceneView;
-use links_core::node::{run_node, NodeReport, RunRenderer, WorkClock};
+use links_core::node::{run_node, Kernels, NodeReport, RunRenderer, WorkClock};
+use links_core::num::{Fx, Real, Storage};
 use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Tracer};
 use links_core::root::{
     run_bus, PixelSink, RootConfig, RootError, RootReport, RootState, MAX_BUSES,
@@ -23,9 +24,11 @@ use std::cell::{Cell, RefCell};
 use std::rc::Rc;
 use std::sync::Arc;
 
-/// The tracer in `f32` (the nodes' format) with the configured techniques, optionally
-/// through a [`RunCache`].
+/// The tracer of the scene's storage (`f32` or Q16.16, as a node's
+/// [`links_core::node::TracingByImage`]) with the configured techniques, optionally through a
+/// [`RunCache`]. It carries `kernels` (the run checked them against every scene first).
 struct SimRenderer {
+    kernels: Kernels,
     cache: Option<Arc<RunCache>>,
     crcs: Rc<Vec<u32>>,
     techniques: Techniques,
@@ -43,10 +46,23 @@ impl SimRenderer {
         x: u32,
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError> {
-        let mut t = Tracer::<f32>::with_techniques(scene, self.techniques);
-        render_run(&mut t, y, x, out)?;
-        Ok(t.stats)
+        match scene.storage() {
+            Storage::F32 => trace_run::<f32>(scene, self.techniques, (y, x), out),
+            Storage::Q16_16 => trace_run::<Fx>(scene, self.techniques, (y, x), out),
+        }
     }
+}
+
+/// One run of `scene` in number type `T` with `techniques`.
+pub(super) fn trace_run<T: Real>(
+    scene: SceneView<'_>,
+    techniques: Techniques,
+    (y, x): (u32, u32),
+    out: &mut [Rgb8],
+) -> Result<Stats, RenderError> {
+    let mut t = Tracer::<T>::with_techniques(scene, techniques);
+    render_run(&mut t, y, x, out)?;
+    Ok(t.stats)
 }
 
 impl RunRenderer for SimRenderer {
@@ -84,6 +100,10 @@ impl RunRenderer for SimRenderer {
             m.insert(key, (out.as_flattened().to_vec(), stats));
         }
         Ok(stats)
+    }
+
+    fn kernels(&self) -> Kernels {
+        self.kernels
     }
 }
 
@@ -149,7 +169,7 @@ pub fn simulate_frame(image: &[u8], cfg: &SimConfig) -> Result<SimReport, SimErr
 /// `f + 1`'s scene is broadcast into the nodes' second bank while frame `f` renders. Nodes in
 /// `cfg.deaths` stop answering at their time; the RC re-issues their work.
 pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimReport, SimError> {
-    let frames = check_config(scenes, cfg)?;
+    let (frames, storage) = check_config(scenes, cfg)?;
     let rc = RootConfig {
         policy: cfg.policy,
         nodes: cfg.nodes,
@@ -225,6 +245,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     }
     tasks.extend(node_tasks(
         cfg,
+        storage,
         (&clock, &star, &log),
         &busy,
         &crcs,
@@ -302,6 +323,7 @@ fn line_setup<'a, S: AsRef<[u8]>>(
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| SimError::Config(format!("backup line: {e}")))?;
     let width = root.borrow().size().0;
+    let model = cfg.model_for(views.first().map_or(Storage::F32, |v| v.storage()));
     Ok(LineSetup {
         cfg,
         clock: clock.clone(),
@@ -311,7 +333,7 @@ fn line_setup<'a, S: AsRef<[u8]>>(
         work: Work {
             views,
             width,
-            model: cfg.model,
+            model,
             clock_hz: cfg.clock_hz,
             techniques: cfg.techniques,
             frame: Vec::new(),
@@ -320,8 +342,9 @@ fn line_setup<'a, S: AsRef<[u8]>>(
     })
 }
 
-/// Refuse a configuration the simulator cannot run; the number of frames otherwise.
-fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, SimError> {
+/// Refuse a configuration the simulator cannot run; the number of frames and the storage
+/// of their scenes otherwise.
+fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<(u16, Storage), SimError> {
     if cfg.nodes == 0 || cfg.nodes as usize > links_core::root::MAX_NODES {
         return Err(SimError::Config(format!("{} nodes (1 to 256)", cfg.nodes)));
     }
@@ -393,7 +416,28 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
             bank: cfg.board.largest_bank(),
         });
     }
-    Ok(frames)
+    Ok((frames, check_kernels(scenes, cfg.kernels)?))
+}
+
+/// The storage every scene shares, if the nodes' `kernels` read it.
+fn check_kernels<S: AsRef<[u8]>>(scenes: &[S], kernels: Kernels) -> Result<Storage, SimError> {
+    let mut first = None;
+    for (frame, s) in scenes.iter().enumerate() {
+        let image = SceneView::new(s.as_ref())
+            .map_err(|e| SimError::Config(format!("frame {frame}'s scene: {e}")))?
+            .storage();
+        let mixed = first.is_some_and(|f| f != image);
+        if mixed || !kernels.run(image) {
+            return Err(SimError::NoKernel {
+                frame: frame as u16,
+                image,
+                kernels,
+                mixed,
+            });
+        }
+        first = Some(image);
+    }
+    Ok(first.unwrap_or(Storage::F32))
 }
 
 /// The SPI star with the configuration's faults: deaths, dropped broadcasts, bit errors.
@@ -463,6 +507,7 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
 /// The nodes: one task each, rendering into its two scene banks and reporting into its slot.
 fn node_tasks<'a>(
     cfg: &SimConfig,
+    storage: Storage,
     (clock, star, log): (&SharedClock, &SharedStar, &Option<SharedTimeline>),
     busy: &Rc<RefCell<Vec<Ps>>>,
     crcs: &Rc<Vec<u32>>,
@@ -474,7 +519,7 @@ fn node_tasks<'a>(
         let mut link = SimNodeLink::new(star, i as u16);
         let mut work = SimWork {
             clock: clock.clone(),
-            model: cfg.model,
+            model: cfg.model_for(storage),
             hz: cfg.clock_hz,
             busy: 0,
             report: busy.clone(),
@@ -482,6 +527,7 @@ fn node_tasks<'a>(
             log: log.clone(),
         };
         let mut renderer = SimRenderer {
+            kernels: cfg.kernels,
             cache: cfg.cache.clone(),
             crcs: crcs.clone(),
             techniques: cfg.techniques,
