@@ -1,5 +1,6 @@
 //! NC bring-up: clocks, pins, the link task (interrupt executor, preempts rendering) and the
-//! node task (thread mode: `links_core::node::run_node`, rendering f32 on the FPU).
+//! node task (thread mode: `links_core::node::run_node` with the build's kernels,
+//! `nc_fw::Renderer`: f32 on the F407's FPU, Q16.16 on the F207).
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -7,7 +8,8 @@
 fn main() {
     eprintln!(
         "nc-fw is firmware for the STM32F407VG: \
-         cargo run --release --target thumbv7em-none-eabihf -p nc-fw"
+         cargo run --release --target thumbv7em-none-eabihf -p nc-fw \
+         (NUCLEO-F207ZG: --target thumbv7m-none-eabi --no-default-features --features board-f207)"
     );
     std::process::exit(2);
 }
@@ -27,7 +29,7 @@ mod fw {
     use links_board::rs485::Rs485;
     use links_core::backup::{self, BackupNode, FrameReader};
     use links_core::board::Memory;
-    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
+    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime};
     use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
     use nc_fw::plan::{BOARD, SCENE_EVEN, SCENE_ODD_CCM, SCENE_ODD_SRAM};
     use nc_fw::port::{Irqs, NcPort};
@@ -93,7 +95,7 @@ mod fw {
         even: &'static mut [u8],
         odd: &'static mut [u8],
     ) {
-        let mut renderer = Tracing::<f32>::new();
+        let mut renderer = nc_fw::Renderer::default();
         let mut link = shared.handle();
         loop {
             let mut report = NodeReport::default();
@@ -134,8 +136,13 @@ mod fw {
         let shared: &'static SlaveShared<'static> = SHARED.init(shared);
 
         // The Discovery's accelerometer shares SPI1's pins: keep it deselected.
-        let accel_cs = Output::new(p.PE3, Level::High, Speed::Low);
-        core::mem::forget(accel_cs);
+        #[cfg(not(feature = "board-f207"))]
+        core::mem::forget(Output::new(p.PE3, Level::High, Speed::Low));
+        // The board's pins that differ (nc_fw::pins): chip-select sense, backup line.
+        #[cfg(not(feature = "board-f207"))]
+        let (cs_sense, (line_tx, line_rx, line_de)) = (p.PB0, (p.PA2, p.PA3, p.PA1));
+        #[cfg(feature = "board-f207")]
+        let (cs_sense, (line_tx, line_rx, line_de)) = (p.PE0, (p.PD5, p.PD6, p.PD4));
         let port = NcPort {
             spi: p.SPI1,
             sck: p.PA5,
@@ -144,12 +151,12 @@ mod fw {
             nss: p.PA4,
             tx_dma: p.DMA2_CH3,
             rx_dma: p.DMA2_CH0,
-            cs: ExtiInput::new(p.PB0, p.EXTI0, Pull::Up, Irqs),
+            cs: ExtiInput::new(cs_sense, p.EXTI0, Pull::Up, Irqs),
             ready: Output::new(p.PB1, Level::Low, Speed::VeryHigh),
             want_ready: false,
         };
 
-        // The backup line (USART2 on PA2/PA3, driver enable PA1) and the address straps.
+        // The backup line (USART2, driver enable; nc_fw::pins::BACKUP) and the address straps.
         let straps = [
             Input::new(p.PE7, Pull::Up),
             Input::new(p.PE8, Pull::Up),
@@ -162,8 +169,8 @@ mod fw {
         info!("backup line address {}", addr);
         let uart = unwrap!(Uart::new(
             p.USART2,
-            p.PA3,
-            p.PA2,
+            line_rx,
+            line_tx,
             p.DMA1_CH6,
             p.DMA1_CH5,
             BackupIrqs,
@@ -171,7 +178,7 @@ mod fw {
         ));
         let line = Rs485 {
             uart,
-            de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
+            de: Output::new(line_de, Level::Low, Speed::VeryHigh),
         };
         let backup_node = BACKUP_NODE.init(BackupNode::new(addr, &mut []));
 

@@ -1410,3 +1410,40 @@ fn the_timeline_accounts_for_every_node_transfer_and_pixel() {
         }
     }
 }
+
+/// `links render --nodes N --precision fixed` writes the host's fixed-point PNG byte for
+/// byte, on the F407 (asked) and the F207 (its default); f32 on f32-less F207 nodes and an
+/// f64 cluster are refused with one line each.
+#[test]
+fn the_cli_renders_fixed_point_on_the_cluster_as_the_host_does() {
+    let dir = std::env::temp_dir().join(format!("links-fixed-nodes-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let at = |name: &str| format!("{}/{name}", dir.display());
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
+    let scene = scene.to_str().unwrap();
+    let render = |args: &[&str], out: &str| {
+        let mut argv = vec!["links", "render", scene, "--width", "40", "--height", "30"];
+        argv.extend_from_slice(args);
+        argv.extend_from_slice(&["-o", out, "--quiet"]);
+        links_host::cli::run_from(argv).map_err(|e| e.to_string())
+    };
+    let read = |p: &str| std::fs::read(p).unwrap_or_else(|e| panic!("{p}: {e}"));
+    render(&["--precision", "fixed"], &at("host.png")).unwrap();
+    render(&["--precision", "f32"], &at("host-f32.png")).unwrap();
+    render(&["--nodes", "3", "--precision", "fixed"], &at("f407.png")).unwrap();
+    render(&["--nodes", "8", "--board", "f207"], &at("f207.png")).unwrap();
+    let host = read(&at("host.png"));
+    assert!(read(&at("f407.png")) == host, "f407 nodes in Q16.16");
+    assert!(read(&at("f207.png")) == host, "f207 nodes");
+    assert!(read(&at("host-f32.png")) != host);
+    let e = render(
+        &["--nodes", "2", "--board", "f207", "--precision", "f32"],
+        &at("x.png"),
+    )
+    .unwrap_err();
+    assert!(e.contains("f32") && e.contains("Q16.16 kernel only"), "{e}");
+    let e = render(&["--nodes", "2", "--precision", "f64"], &at("x.png")).unwrap_err();
+    assert!(e.contains("f32 or Q16.16"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

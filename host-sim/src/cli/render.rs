@@ -191,8 +191,13 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
 fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
     let c = &a.cluster;
     let cfg = cluster_config(a, nodes)?;
-    let precision = c.precision(a.precision)?;
-    let (image, _) = image_to_render(&a.scene, a.image.as_deref(), Some(precision))?;
+    let (image, _) = image_to_render(&a.scene, a.image.as_deref(), a.precision.map(Into::into))?;
+    // `--precision`, else the image's own storage if it is Q16.16, else the board's.
+    let stored = SceneView::new(&image).map_err(CliError::failed)?.storage();
+    let precision = match (a.precision, stored) {
+        (None, Storage::Q16_16) => Precision::Fixed,
+        (asked, _) => c.precision(asked)?,
+    };
     // What the DM sends nodes computing in fixed point: the Q16.16 rewrite.
     let image = match precision {
         Precision::Fixed => crate::frame::fixed_image(&image).map_err(CliError::failed)?,
