@@ -1,7 +1,7 @@
 //! Which tracing kernel a node runs: the one the SceneImage it receives is stored for.
 //!
 //! An f32 image is traced by `Tracer<f32>`, a Q16.16 image (the DM's fixed-point rewrite) by
-//! `Tracer<Fx>` (LINKS-1 4.2: the nodes compute on what the DM sends them). A node carries
+//! `Tracer<Fx>`: the DM decides the number format, the node follows it. A node carries
 //! one kernel ([`Tracing<f32>`] or [`Tracing<Fx>`], the smaller firmware) or both
 //! ([`TracingByImage`]); [`RunRenderer::kernels`] says which, and `run_node` stops with
 //! [`super::NodeError::NoKernel`] when a scene arrives that none of them reads.
