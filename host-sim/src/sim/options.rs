@@ -475,9 +475,10 @@ mod tests {
     #[test]
     fn boards_parse_and_set_the_link() {
         assert_eq!(parse_board("F407"), Ok(BoardProfile::F407));
+        assert_eq!(parse_board("f207"), Ok(BoardProfile::F207));
         let e = parse_board("f429").unwrap_err().to_string();
         assert!(
-            e.contains("unknown board 'f429'") && e.contains("f407, ideal"),
+            e.contains("unknown board 'f429'") && e.contains("f407, f207, ideal"),
             "{e}"
         );
         let star = TopologyArg::Star;
