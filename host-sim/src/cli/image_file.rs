@@ -62,7 +62,7 @@ impl fmt::Display for ImageFileError {
                 path.display(),
                 storage.name(),
                 match storage {
-                    Storage::Q16_16 => " (render it with --precision fixed, on the host)",
+                    Storage::Q16_16 => " (render it with --precision fixed)",
                     Storage::F32 => "",
                 }
             ),
