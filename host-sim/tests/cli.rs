@@ -222,22 +222,27 @@ fn fixed_point_render_is_close_to_f64_and_compare_reports_it() {
         line.contains("fixed vs f64: PSNR") && line.contains("0 NaN/inf pixels"),
         "{line}"
     );
-    // The cluster's nodes compute in f32: a clear refusal, not a silent f32 render.
+    // The cluster's nodes run the Q16.16 kernel on the DM's fixed-point image: the host's
+    // fixed-point frame, bit for bit.
+    let out = tmp("cluster-fixed.png");
     let o = links()
+        .args(["render", scene("ellipsoids.ron").to_str().unwrap()])
         .args([
-            "render",
-            scene("ellipsoids.ron").to_str().unwrap(),
+            "--width",
+            "48",
+            "--height",
+            "45",
             "--nodes",
             "2",
             "--precision",
             "fixed",
-            "-o",
         ])
-        .arg(tmp("x.png"))
+        .arg("-o")
+        .arg(&out)
         .output()
         .unwrap();
-    assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("nodes compute in f32"));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(decode_png_rgb(&std::fs::read(&out).unwrap()).unwrap().2 == fixed);
 }
 
 /// Runs `links` with `args` in `dir`: (exit code, stderr). `None` is death by a signal (an
@@ -546,9 +551,14 @@ fn a_compiled_image_checks_and_renders_like_its_scene() {
             &[&[e.to_str().unwrap(), "--precision", "fixed"][..], &dims].concat()
         )
     );
+    // On the cluster the nodes take the image's kernel (Q16.16): the host's frame.
+    assert_eq!(
+        render_png("image-fixed-nodes.png", &["--image", f, "--nodes", "2"]),
+        render_png("image-fixed-host.png", &["--image", f])
+    );
     for (extra, who) in [
         (&["--precision", "f32"][..], "an f32 render"),
-        (&["--nodes", "2"][..], "the cluster's f32 nodes"),
+        (&["--nodes", "2", "--precision", "f32"][..], "an f32 render"),
     ] {
         let mut args = vec!["render", "--image", f, "-o", "never.png"];
         args.extend_from_slice(extra);
@@ -558,7 +568,7 @@ fn a_compiled_image_checks_and_renders_like_its_scene() {
             err.trim_end(),
             format!(
                 "error: {f}: the image stores q16.16 scalars, which {who} can't read (render \
-                 it with --precision fixed, on the host)"
+                 it with --precision fixed)"
             )
         );
     }

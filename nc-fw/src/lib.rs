@@ -1,4 +1,6 @@
-//! LINKS-1 node computer (NC) firmware for the STM32F407VG.
+//! LINKS-1 node computer (NC) firmware for the STM32F407VG (feature `board-f407`, default)
+//! or the FPU-less STM32F207ZG (`board-f207`), with the tracing kernels of its
+//! `kernel-f32` / `kernel-fixed` features ([`KERNELS`]).
 //!
 //! The behaviour is `links_core::node::run_node`; the link protocol is
 //! `links_core::spi` (tested on the host against an emulated bus). This crate adds only the
@@ -12,15 +14,37 @@
 #[cfg(target_os = "none")]
 pub mod port;
 
-/// Where every large buffer lives (bytes): the board's data,
-/// [`links_core::board::NodeBoard::F407`], which the host checks SceneImages against. See
-/// `docs/hardware.md`.
+/// The tracing kernels this build carries (its `kernel-*` features; `links_core::node`'s
+/// renderer of that set is [`Renderer`]).
+pub const KERNELS: links_core::node::Kernels = {
+    use links_core::node::Kernels;
+    match (cfg!(feature = "kernel-f32"), cfg!(feature = "kernel-fixed")) {
+        (true, true) => Kernels::Both,
+        (true, false) => Kernels::F32,
+        (false, true) => Kernels::Fixed,
+        (false, false) => panic!("nc-fw needs a kernel: feature kernel-f32 or kernel-fixed"),
+    }
+};
+
+/// The node's renderer: both kernels (the image picks) or the one built.
+#[cfg(all(feature = "kernel-f32", feature = "kernel-fixed"))]
+pub type Renderer = links_core::node::TracingByImage;
+/// The node's renderer: both kernels (the image picks) or the one built.
+#[cfg(all(feature = "kernel-f32", not(feature = "kernel-fixed")))]
+pub type Renderer = links_core::node::Tracing<f32>;
+/// The node's renderer: both kernels (the image picks) or the one built.
+#[cfg(not(feature = "kernel-f32"))]
+pub type Renderer = links_core::node::Tracing<links_core::num::Fx>;
+
+/// Where every large buffer lives (bytes): the board's data (the profile's node,
+/// [`links_core::board::NodeBoard::F407`] or [`links_core::board::NodeBoard::F207`]), which
+/// the host checks SceneImages against. See `docs/hardware.md`.
 pub mod plan {
     use links_core::board::{BoardProfile, Memory, NodeBoard};
     use links_core::spi::BANK;
 
-    /// The board profile this firmware is built for.
-    pub const PROFILE: BoardProfile = BoardProfile::F407;
+    /// The board profile this firmware is built for (`links_board`'s board feature).
+    pub const PROFILE: BoardProfile = links_board::PROFILE;
     /// The board this firmware runs on: its RAM and the scene banks of this plan (the
     /// profile's node).
     pub const BOARD: NodeBoard = PROFILE.node;
@@ -53,6 +77,7 @@ pub mod plan {
 }
 
 /// Pins of the NC board (STM32F4DISCOVERY). See `docs/hardware.md`.
+#[cfg(not(feature = "board-f207"))]
 pub mod pins {
     /// SPI1 (slave): SCK, MISO, MOSI, NSS (hardware chip-select input).
     pub const SPI1: [&str; 4] = ["PA5", "PA6", "PA7", "PA4"];
@@ -72,6 +97,28 @@ pub mod pins {
     pub const BACKUP: [&str; 3] = ["PA2", "PA3", "PA1"];
     /// The node's backup-line address straps (pull-ups; a jumper to ground is a 1 bit):
     /// address = 1 + the 6-bit value, bit 0 first.
+    pub const ADDRESS: [&str; 6] = ["PE7", "PE8", "PE9", "PE10", "PE11", "PE12"];
+}
+
+/// Pins of the NC board (NUCLEO-F207ZG, the Zio connectors CN7-CN10): SPI1 on the F407's
+/// pins (AF5; PA7 is also the Ethernet PHY's RMII_CRS_DV, disconnected by removing JP6), the
+/// chip-select sense on PE0 (PB0 drives LD1) and the backup line on USART2's other pins,
+/// PD5/PD6 (PA2 and PA1 are the PHY's MDIO and REF_CLK). See `docs/hardware.md`.
+#[cfg(feature = "board-f207")]
+pub mod pins {
+    /// SPI1 (slave): SCK, MISO, MOSI, NSS (hardware chip-select input).
+    pub const SPI1: [&str; 4] = ["PA5", "PA6", "PA7", "PA4"];
+    /// The RC's chip-select line also goes here (EXTI0).
+    pub const CS_SENSE: &str = "PE0";
+    /// Handshake output to the RC ("armed, frame posted").
+    pub const READY: &str = "PB1";
+    /// MISO pin number on GPIOA (driven by the slave-pin workaround in [`crate::port`]).
+    pub const MISO_PA: usize = 6;
+    /// MOSI pin number on GPIOA.
+    pub const MOSI_PA: usize = 7;
+    /// The serial backup line (RS-485): USART2 TX, RX, and the transceiver's driver enable.
+    pub const BACKUP: [&str; 3] = ["PD5", "PD6", "PD4"];
+    /// The node's backup-line address straps (as on the F407 board).
     pub const ADDRESS: [&str; 6] = ["PE7", "PE8", "PE9", "PE10", "PE11", "PE12"];
 }
 
@@ -118,11 +165,45 @@ mod tests {
         }
     }
 
+    /// The F207 build: the F207 profile's plan, the Q16.16 kernel (the core has no FPU),
+    /// its pins distinct (`cargo test -p nc-fw --no-default-features --features board-f207`).
+    #[cfg(feature = "board-f207")]
+    #[test]
+    fn the_firmware_constants_are_the_f207_profile() {
+        let p = BoardProfile::F207;
+        assert_eq!(super::plan::PROFILE, p);
+        assert_eq!(super::plan::BOARD, p.node);
+        assert_eq!(
+            (super::plan::SRAM, super::plan::CCM),
+            (64 * 1024, 64 * 1024)
+        );
+        assert_eq!(
+            [super::plan::SCENE_EVEN, super::plan::SCENE_ODD],
+            [40_960, 16_384]
+        );
+        assert_eq!(super::plan::LINK_BANKS, 5 * p.dma_bank_bytes());
+        assert_eq!(links_board::CORE_CLOCK_HZ, 120_000_000);
+        assert!(super::KERNELS.run(p.storage));
+        if !cfg!(feature = "kernel-f32") {
+            assert_eq!(super::KERNELS, p.kernels);
+        }
+        let mut all = super::pins::SPI1.to_vec();
+        all.extend([super::pins::CS_SENSE, super::pins::READY]);
+        all.extend(super::pins::BACKUP);
+        all.extend(super::pins::ADDRESS);
+        let n = all.len();
+        all.sort();
+        all.dedup();
+        assert_eq!(all.len(), n, "no pin used twice");
+    }
+
     /// The node's memory plan and link banks are the F407 board profile's.
+    #[cfg(not(feature = "board-f207"))]
     #[test]
     fn the_firmware_constants_are_the_f407_profile() {
         let p = BoardProfile::F407;
         assert_eq!(super::plan::PROFILE, p);
+        assert_eq!(super::KERNELS, p.kernels);
         assert_eq!(super::plan::BOARD, p.node);
         assert_eq!(super::plan::LINK_BANKS, 5 * p.dma_bank_bytes());
         assert_eq!(

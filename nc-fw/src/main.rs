@@ -1,5 +1,6 @@
 //! NC bring-up: clocks, pins, the link task (interrupt executor, preempts rendering) and the
-//! node task (thread mode: `links_core::node::run_node`, rendering f32 on the FPU).
+//! node task (thread mode: `links_core::node::run_node` with the build's kernels,
+//! `nc_fw::Renderer`: f32 on the F407's FPU, Q16.16 on the F207).
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -7,7 +8,8 @@
 fn main() {
     eprintln!(
         "nc-fw is firmware for the STM32F407VG: \
-         cargo run --release --target thumbv7em-none-eabihf -p nc-fw"
+         cargo run --release --target thumbv7em-none-eabihf -p nc-fw \
+         (NUCLEO-F207ZG: --target thumbv7m-none-eabi --no-default-features --features board-f207)"
     );
     std::process::exit(2);
 }
@@ -35,7 +37,7 @@ mod fw {
         self, BackupNode, BackupRender, BackupRenderError, FrameReader, Piece,
     };
     use links_core::board::Memory;
-    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
+    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer};
     use links_core::render::Rgb8;
     use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
     use nc_fw::backup_line::{IDLE_MS, PIECE};
@@ -119,7 +121,7 @@ mod fw {
     async fn serve_line(
         node: &'static Backup,
         even: &mut &'static mut [u8],
-        renderer: &mut Tracing<f32>,
+        renderer: &mut nc_fw::Renderer,
     ) {
         let bank = core::mem::take(even);
         node.lock(|n| n.borrow_mut().lend_bank(bank));
@@ -170,7 +172,7 @@ mod fw {
         odd: &'static mut [u8],
         backup: &'static Backup,
     ) {
-        let mut renderer = Tracing::<f32>::new();
+        let mut renderer = nc_fw::Renderer::default();
         let mut link = shared.handle();
         let mut clock = RealTime;
         loop {
@@ -218,8 +220,13 @@ mod fw {
         let shared: &'static SlaveShared<'static> = SHARED.init(shared);
 
         // The Discovery's accelerometer shares SPI1's pins: keep it deselected.
-        let accel_cs = Output::new(p.PE3, Level::High, Speed::Low);
-        core::mem::forget(accel_cs);
+        #[cfg(not(feature = "board-f207"))]
+        core::mem::forget(Output::new(p.PE3, Level::High, Speed::Low));
+        // The board's pins that differ (nc_fw::pins): chip-select sense, backup line.
+        #[cfg(not(feature = "board-f207"))]
+        let (cs_sense, (line_tx, line_rx, line_de)) = (p.PB0, (p.PA2, p.PA3, p.PA1));
+        #[cfg(feature = "board-f207")]
+        let (cs_sense, (line_tx, line_rx, line_de)) = (p.PE0, (p.PD5, p.PD6, p.PD4));
         let port = NcPort {
             spi: p.SPI1,
             sck: p.PA5,
@@ -228,12 +235,12 @@ mod fw {
             nss: p.PA4,
             tx_dma: p.DMA2_CH3,
             rx_dma: p.DMA2_CH0,
-            cs: ExtiInput::new(p.PB0, p.EXTI0, Pull::Up, Irqs),
+            cs: ExtiInput::new(cs_sense, p.EXTI0, Pull::Up, Irqs),
             ready: Output::new(p.PB1, Level::Low, Speed::VeryHigh),
             want_ready: false,
         };
 
-        // The backup line (USART2 on PA2/PA3, driver enable PA1) and the address straps.
+        // The backup line (USART2, driver enable; nc_fw::pins::BACKUP) and the address straps.
         let straps = [
             Input::new(p.PE7, Pull::Up),
             Input::new(p.PE8, Pull::Up),
@@ -246,8 +253,8 @@ mod fw {
         info!("backup line address {}", addr);
         let uart = unwrap!(Uart::new(
             p.USART2,
-            p.PA3,
-            p.PA2,
+            line_rx,
+            line_tx,
             p.DMA1_CH6,
             p.DMA1_CH5,
             BackupIrqs,
@@ -255,7 +262,7 @@ mod fw {
         ));
         let line = Rs485 {
             uart,
-            de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
+            de: Output::new(line_de, Level::Low, Speed::VeryHigh),
         };
         // No bank until the RC serves the node over the line (then the even one).
         let backup_node: &'static Backup =

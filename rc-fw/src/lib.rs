@@ -1,4 +1,5 @@
-//! LINKS-1 root computer (RC) firmware for the STM32F407VG.
+//! LINKS-1 root computer (RC) firmware for the STM32F407VG (feature `board-f407`, default)
+//! or the STM32F207ZG (`board-f207`, NUCLEO-F207ZG).
 //!
 //! The behaviour is `links_core::root::run_bus` over `links_core::spi::MasterLink` (the link
 //! protocol, tested on the host against an emulated bus); the PC side speaks
@@ -15,8 +16,9 @@ pub mod port;
 pub mod link {
     use links_core::board::{BoardProfile, LinkProfile};
 
-    /// The board this firmware is: every number below is its.
-    pub const PROFILE: BoardProfile = BoardProfile::F407;
+    /// The board this firmware is (`links_board`'s board feature): every number below is
+    /// its.
+    pub const PROFILE: BoardProfile = links_board::PROFILE;
     const LINK: LinkProfile = PROFILE.link;
     /// SPI1's clock (Hz): APB2's 84 MHz / 4.
     pub const SPI_HZ: u32 = LINK.bit_rate_hz;
@@ -45,11 +47,22 @@ pub mod plan {
     /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
     /// through the TX bank): what the DMA banks leave, in whole KB.
     pub const SCENE: usize = (SRAM - LINK_BANKS) / 1024 * 1024;
-    /// A film's two scene banks split [`SCENE`]: frame k is uploaded into one while frame
-    /// k - 1 renders from the other (`links_core::serial::film`). Each holds more than a
-    /// node's scene bank, so a film frame the nodes can take fits the RC too; a still scene
-    /// uses the first. No RAM is added: the 123 KB region is shared out.
-    pub const FILM_BANK: usize = SCENE / 2;
+    /// The first of a film's two scene banks, which split [`SCENE`]: frame k is uploaded
+    /// into one while frame k - 1 renders from the other (`links_core::serial::film`); a
+    /// still scene uses the first. Half of [`SCENE`], or a node's larger scene bank if that
+    /// is more, so every still a node can take fits the RC: on the F407 both halves (62,976
+    /// bytes) exceed a node's bank; on the F207 the first is the node's 40 KB bank and the
+    /// second what is left, which bounds a film's frames there (an upload names the bank
+    /// it does not fit). No RAM is added: the region is shared out.
+    pub const FILM_BANK: usize = {
+        let half = SCENE / 2;
+        let node = crate::link::PROFILE.node.bank(0);
+        if node > half {
+            node
+        } else {
+            half
+        }
+    };
     /// Bytes of serial frames queued for USB (in CCM).
     pub const USB_QUEUE: usize = 8 * 1024;
 
@@ -57,6 +70,7 @@ pub mod plan {
     const _: () = assert!(SCENE <= links_core::wire::MAX_SCENE);
     // Every SceneImage a node's bank holds fits one film bank of the RC.
     const _: () = assert!(FILM_BANK >= crate::link::PROFILE.node.bank(0));
+    const _: () = assert!(FILM_BANK <= SCENE);
     const _: () = assert!(USB_QUEUE >= 4 * links_core::serial::MAX_TO_PC);
     // The throttle holds two exchanges' runs back (one may be in flight, double buffering)
     // plus a frame header.
@@ -67,6 +81,7 @@ pub mod plan {
 /// The RC board's pin table (STM32F4DISCOVERY; see `docs/hardware.md`), written once: calls
 /// `$m!(args; table)` with every pin as an identifier. [`pins`] turns it into names for the
 /// host tests, the firmware's `main` into the peripherals it wires, so the two cannot drift.
+#[cfg(not(feature = "board-f207"))]
 #[macro_export]
 macro_rules! with_pins {
     ($m:ident $(, $arg:ident)*) => {
@@ -77,6 +92,27 @@ macro_rules! with_pins {
             cs: [PE8, PE9, PE10, PE11, PE12, PE13, PE14, PE15],
             ready: [PD0 / EXTI0, PD1 / EXTI1, PD2 / EXTI2, PD3 / EXTI3,
                     PD6 / EXTI6, PD7 / EXTI7, PD8 / EXTI8, PD9 / EXTI9],
+            miso_sel: [PE4, PE5, PE6]
+        }
+    };
+}
+
+/// The RC board's pin table on the NUCLEO-F207ZG (see `docs/hardware.md`): the F407's but
+/// for the handshake lines the ST-LINK's virtual COM port (PD8/PD9) and PD4-PD6 (the backup
+/// line) take: PD7 and PD10-PD12 instead. PE3 (the Discovery's accelerometer select) is a
+/// free pin here, held high all the same. PA7 (MOSI) is also the Ethernet PHY's
+/// RMII_CRS_DV: remove JP6.
+#[cfg(feature = "board-f207")]
+#[macro_export]
+macro_rules! with_pins {
+    ($m:ident $(, $arg:ident)*) => {
+        $m! {$($arg),*;
+            spi1: [PA5, PA6, PA7],
+            usb: [PA11, PA12],
+            accel_cs: PE3,
+            cs: [PE8, PE9, PE10, PE11, PE12, PE13, PE14, PE15],
+            ready: [PD0 / EXTI0, PD1 / EXTI1, PD2 / EXTI2, PD3 / EXTI3,
+                    PD7 / EXTI7, PD10 / EXTI10, PD11 / EXTI11, PD12 / EXTI12],
             miso_sel: [PE4, PE5, PE6]
         }
     };
@@ -115,7 +151,12 @@ pub mod pins {
     /// The serial backup line (RS-485, `links_core::backup`): USART2 TX, RX, and the
     /// transceiver's driver enable (also its /RE). Free of every pin above and of the
     /// Discovery's on-board parts.
+    #[cfg(not(feature = "board-f207"))]
     pub const BACKUP: [&str; 3] = ["PA2", "PA3", "PA1"];
+    /// The serial backup line: USART2 on PD5 (TX), PD6 (RX), driver enable PD4 (the
+    /// Nucleo's PA1/PA2 are the Ethernet PHY's).
+    #[cfg(feature = "board-f207")]
+    pub const BACKUP: [&str; 3] = ["PD5", "PD6", "PD4"];
 }
 
 /// The relay role's pin table (`--features relay`; `docs/hardware.md`, "Reaching 64 and
@@ -200,16 +241,29 @@ pub use links_core::serial::{readback, render, session, throttle};
 mod tests {
     use links_core::board::BoardProfile;
 
-    /// Every link number of this firmware is the F407 board profile's.
+    /// Every link number of this firmware is its board profile's (the F207's with
+    /// `--no-default-features --features board-f207`).
     #[test]
-    fn the_firmware_constants_are_the_f407_profile() {
-        let p = BoardProfile::F407;
+    fn the_firmware_constants_are_the_board_profile() {
+        let p = if cfg!(feature = "board-f207") {
+            BoardProfile::F207
+        } else {
+            BoardProfile::F407
+        };
         assert_eq!(super::link::PROFILE, p);
         assert_eq!(super::link::SPI_HZ, p.link.bit_rate_hz);
-        assert_eq!(super::link::SPI_HZ, 21_000_000);
+        let (hz, setup, hold) = if cfg!(feature = "board-f207") {
+            (15_000_000, 12, 21)
+        } else {
+            (21_000_000, 8, 15)
+        };
+        assert_eq!(super::link::SPI_HZ, hz);
         assert_eq!(super::link::CS_SETUP_US * 1000, p.link.cs_setup_ns as u64);
         assert_eq!(super::link::CS_HOLD_US * 1000, p.link.cs_hold_ns as u64);
-        assert_eq!((super::link::CS_SETUP_US, super::link::CS_HOLD_US), (8, 15));
+        assert_eq!(
+            (super::link::CS_SETUP_US, super::link::CS_HOLD_US),
+            (setup, hold)
+        );
         assert_eq!(super::pins::NODES, p.link.nodes_per_bus as usize);
         assert_eq!(super::backup_line::BIT_RATE, p.backup.bit_rate_hz);
         assert_eq!(
@@ -272,6 +326,7 @@ mod tests {
         all.extend(super::pins::USB);
         all.extend(super::pins::MISO_SEL);
         all.push(super::pins::ACCEL_CS);
+        all.extend(super::pins::BACKUP);
         let n = all.len();
         all.sort();
         all.dedup();

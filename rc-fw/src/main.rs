@@ -66,6 +66,8 @@ mod fw {
         EXTI2 => exti::InterruptHandler<interrupt::typelevel::EXTI2>;
         EXTI3 => exti::InterruptHandler<interrupt::typelevel::EXTI3>;
         EXTI9_5 => exti::InterruptHandler<interrupt::typelevel::EXTI9_5>;
+        #[cfg(feature = "board-f207")]
+        EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
         USART2 => uart::InterruptHandler<USART2>;
         DMA1_STREAM5 => dma::InterruptHandler<DMA1_CH5>;
         DMA1_STREAM6 => dma::InterruptHandler<DMA1_CH6>;
@@ -382,11 +384,15 @@ mod fw {
         let [btx0, btx1, brx] = &mut sram.link;
         let link = MasterFront::new(&BUS, 0, NODES as u16, [btx0, btx1], brx);
 
-        // The serial backup line: USART2 (PA2 TX, PA3 RX), driver enable PA1.
+        // The serial backup line: USART2 and its driver enable (rc_fw::pins::BACKUP).
+        #[cfg(not(feature = "board-f207"))]
+        let (line_tx, line_rx, line_de) = (p.PA2, p.PA3, p.PA1);
+        #[cfg(feature = "board-f207")]
+        let (line_tx, line_rx, line_de) = (p.PD5, p.PD6, p.PD4);
         let uart = unwrap!(Uart::new(
             p.USART2,
-            p.PA3,
-            p.PA2,
+            line_rx,
+            line_tx,
             p.DMA1_CH6,
             p.DMA1_CH5,
             Irqs,
@@ -394,7 +400,7 @@ mod fw {
         ));
         let line = Rs485 {
             uart,
-            de: Output::new(p.PA1, Level::Low, Speed::VeryHigh),
+            de: Output::new(line_de, Level::Low, Speed::VeryHigh),
         };
 
         interrupt::UART4.set_priority(Priority::P6);

@@ -87,6 +87,81 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
     }
 }
 
+/// Fixed-point nodes: the cluster's frame of the DM's Q16.16 image is bit-identical to the
+/// single-node fixed-point render for 1, 3, 8 and 16 nodes under the dynamic and the static
+/// policy, on the F207 (its nodes carry the Q16.16 kernel only) and on the F407 (both
+/// kernels; the image picks). Nodes that lack the image's kernel are refused before the run.
+#[test]
+fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render() {
+    use links_core::node::Kernels;
+    use links_core::num::Storage;
+    use links_host::frame::{fixed_image, render_frame, Precision};
+    let img = fixed_image(&image("photo1.ron", 64, 60)).expect("photo1 fits Q16.16");
+    let want = render_frame(&img, Precision::Fixed, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    assert!(
+        want != reference(&image("photo1.ron", 64, 60)),
+        "f32 differs"
+    );
+    let policies = [Policy::DECREASING, Policy::Static { shape: Split::Rect }];
+    let mut times = Vec::new();
+    for board in [BoardProfile::F207, BoardProfile::F407] {
+        for (nodes, policy) in [1u16, 3, 8, 16]
+            .into_iter()
+            .flat_map(|n| policies.map(|p| (n, p)))
+        {
+            let r = run(
+                &img,
+                SimConfig {
+                    nodes,
+                    policy,
+                    ..SimConfig::buildable(board, nodes)
+                },
+            );
+            let what = format!("{} board, {nodes} nodes, {policy:?}", board.name);
+            assert!(r.frames[0] == want, "{what}");
+            assert_eq!(r.root.pixels, 64 * 60, "{what}");
+            if nodes == 1 && policy == Policy::DECREASING {
+                times.push(r.time_s);
+            }
+        }
+    }
+    // One F207 node (Cortex-M3, 120 MHz) takes longer than one F407 node (M4F, 168 MHz).
+    assert!(times[0] > times[1], "{times:?}");
+    let f32_nodes = SimConfig {
+        kernels: Kernels::F32,
+        ..SimConfig::for_board(BoardProfile::F407)
+    };
+    match simulate_frame(&img, &f32_nodes) {
+        Err(SimError::NoKernel {
+            frame: 0,
+            image: Storage::Q16_16,
+            kernels: Kernels::F32,
+            mixed: false,
+        }) => {}
+        other => panic!("f32-only nodes sent a Q16.16 image: {other:?}"),
+    }
+    let f32_img = image("photo1.ron", 64, 60);
+    let f207 = SimConfig::for_board(BoardProfile::F207);
+    assert!(matches!(
+        simulate_frame(&f32_img, &f207),
+        Err(SimError::NoKernel {
+            image: Storage::F32,
+            kernels: Kernels::Fixed,
+            ..
+        })
+    ));
+    assert!(matches!(
+        simulate(&[&img[..], &f32_img[..]], &SimConfig::default()),
+        Err(SimError::NoKernel {
+            frame: 1,
+            mixed: true,
+            ..
+        })
+    ));
+}
+
 /// The relay tree (the F407's buildable topology): frames bit-identical to the single-node
 /// render at every node count (one and two levels of relays), policy, with and without
 /// batching, under bit errors and a node death; every node frame crosses every link up to
@@ -1346,4 +1421,41 @@ fn the_timeline_accounts_for_every_node_transfer_and_pixel() {
             assert_eq!(mine, rep.pixels, "node {n}");
         }
     }
+}
+
+/// `links render --nodes N --precision fixed` writes the host's fixed-point PNG byte for
+/// byte, on the F407 (asked) and the F207 (its default); f32 on f32-less F207 nodes and an
+/// f64 cluster are refused with one line each.
+#[test]
+fn the_cli_renders_fixed_point_on_the_cluster_as_the_host_does() {
+    let dir = std::env::temp_dir().join(format!("links-fixed-nodes-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let at = |name: &str| format!("{}/{name}", dir.display());
+    let scene = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
+    let scene = scene.to_str().unwrap();
+    let render = |args: &[&str], out: &str| {
+        let mut argv = vec!["links", "render", scene, "--width", "40", "--height", "30"];
+        argv.extend_from_slice(args);
+        argv.extend_from_slice(&["-o", out, "--quiet"]);
+        links_host::cli::run_from(argv).map_err(|e| e.to_string())
+    };
+    let read = |p: &str| std::fs::read(p).unwrap_or_else(|e| panic!("{p}: {e}"));
+    render(&["--precision", "fixed"], &at("host.png")).unwrap();
+    render(&["--precision", "f32"], &at("host-f32.png")).unwrap();
+    render(&["--nodes", "3", "--precision", "fixed"], &at("f407.png")).unwrap();
+    render(&["--nodes", "8", "--board", "f207"], &at("f207.png")).unwrap();
+    let host = read(&at("host.png"));
+    assert!(read(&at("f407.png")) == host, "f407 nodes in Q16.16");
+    assert!(read(&at("f207.png")) == host, "f207 nodes");
+    assert!(read(&at("host-f32.png")) != host);
+    let e = render(
+        &["--nodes", "2", "--board", "f207", "--precision", "f32"],
+        &at("x.png"),
+    )
+    .unwrap_err();
+    assert!(e.contains("f32") && e.contains("Q16.16 kernel only"), "{e}");
+    let e = render(&["--nodes", "2", "--precision", "f64"], &at("x.png")).unwrap_err();
+    assert!(e.contains("f32 or Q16.16"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
 }

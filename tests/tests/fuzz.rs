@@ -35,7 +35,10 @@ use links_core::dm::{compile, CompileOptions, MeshHierarchy};
 use links_core::fixed_image::to_fixed;
 use links_core::image::{SceneView, Section, Word, HEADER_SIZE, NONE, SECTION_COUNT};
 use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
-use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
+use links_core::node::{
+    run_node, Kernels, NodeConfig, NodeError, NodeReport, RealTime, RunRenderer, Tracing,
+    TracingByImage,
+};
 use links_core::num::{FastF32, Fx, Real, Storage};
 use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Tracer};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootError, RootState};
@@ -1129,6 +1132,10 @@ impl RunRenderer for Budgeted {
         self.left -= out.len();
         Tracing::<f32>::new().render(scene, frame, y, x, out)
     }
+
+    fn kernels(&self) -> Kernels {
+        Kernels::F32
+    }
 }
 
 /// One frame the scripted RC sends a node: exchanged (else broadcast), the message, and
@@ -1206,6 +1213,108 @@ impl NodeLink for ScriptLink<'_> {
         } else {
             Incoming::Broadcast { len }
         })
+    }
+}
+
+/// A node with one kernel, broadcast a scene of the other storage: once the scene is
+/// complete and checked it stops with the typed error, having rendered nothing; with the
+/// image's own kernel (or both) the same conversation ends with `Stop` and the whole frame
+/// as the single-node render of that kernel has it.
+#[test]
+fn a_node_renders_with_the_images_kernel_and_stops_on_one_it_lacks() {
+    let f = links_tests::bundled_image("photo1.ron", 24, 18);
+    let q = links_host::frame::fixed_image(&f).expect("photo1 fits Q16.16");
+    let session =
+        |img: &[u8], renderer: &mut dyn FnMut(&mut ScriptLink<'_>) -> Result<(), NodeError>| {
+            let (crc, total) = (CRC32.checksum(img), img.len() as u32);
+            let mut items: Vec<NodeItem<'_>> = img
+                .chunks(SCENE_CHUNK)
+                .enumerate()
+                .map(|(c, data)| NodeItem {
+                    exchanged: false,
+                    msg: Down::Scene {
+                        frame: 0,
+                        offset: (c * SCENE_CHUNK) as u32,
+                        total,
+                        crc,
+                        data,
+                    },
+                    mutate: None,
+                })
+                .collect();
+            let job = Job {
+                id: 1,
+                frame: 0,
+                region: Region::Span {
+                    start: 0,
+                    len: 24 * 18,
+                },
+            };
+            let mut jobs = [None; wire::JOB_QUEUE];
+            jobs[0] = Some(job);
+            let work = (0..64).map(|_| (true, Down::Work { jobs }));
+            let tail = [(
+                false,
+                Down::SceneEnd {
+                    frame: 0,
+                    len: total,
+                    crc,
+                },
+            )]
+            .into_iter()
+            .chain(work)
+            .chain([(true, Down::Stop)]);
+            items.extend(tail.map(|(exchanged, msg)| NodeItem {
+                exchanged,
+                msg,
+                mutate: None,
+            }));
+            let mut link = ScriptLink {
+                items: items.into(),
+                seq: 0,
+                last_posted: None,
+                fix_crc: false,
+                pixels: BTreeMap::new(),
+                posts: 0,
+            };
+            let r = renderer(&mut link);
+            let px: Vec<u8> = link.pixels.values().flatten().copied().collect();
+            (r, px)
+        };
+    fn node<R: RunRenderer>(link: &mut ScriptLink<'_>, mut r: R) -> Result<(), NodeError> {
+        let (mut b0, mut b1) = (vec![0u8; MAX_SCENE], vec![0u8; MAX_SCENE]);
+        let mut report = NodeReport::default();
+        let banks = [b0.as_mut_slice(), b1.as_mut_slice()];
+        let cfg = NodeConfig::default();
+        block_on(run_node(
+            cfg,
+            link,
+            &mut RealTime,
+            &mut r,
+            banks,
+            &mut report,
+        ))
+    }
+    let want = |img: &[u8], p| {
+        links_host::frame::render_frame(img, p, 1, &|| {})
+            .expect("renders")
+            .rgb
+    };
+    use links_host::frame::Precision;
+    let (want_f, want_q) = (want(&f, Precision::F32), want(&q, Precision::Fixed));
+    assert_ne!(want_f, want_q);
+    let lacks = |image, kernels| Err(NodeError::NoKernel { image, kernels });
+    let (r, px) = session(&q, &mut |l| node(l, Tracing::<f32>::new()));
+    assert_eq!((r, px.len()), (lacks(Storage::Q16_16, Kernels::F32), 0));
+    let (r, px) = session(&f, &mut |l| node(l, Tracing::<Fx>::new()));
+    assert_eq!((r, px.len()), (lacks(Storage::F32, Kernels::Fixed), 0));
+    let (r, px) = session(&q, &mut |l| node(l, Tracing::<Fx>::new()));
+    assert_eq!(r, Ok(()));
+    assert!(px == want_q, "the Q16.16 node's frame");
+    for (img, want) in [(&q, &want_q), (&f, &want_f)] {
+        let (r, px) = session(img, &mut |l| node(l, TracingByImage::default()));
+        assert_eq!(r, Ok(()));
+        assert!(px == *want, "a node with both kernels");
     }
 }
 

@@ -162,12 +162,10 @@ pub fn load_film_any(path: &Path) -> Result<Film, CliError> {
 pub fn image_to_render(
     a: &SceneArgs,
     file: Option<&Path>,
-    precision: Option<PrecisionArg>,
-    cluster: bool,
+    asked: Option<Precision>,
 ) -> Result<(Vec<u8>, Precision), CliError> {
-    let asked = precision.map(Precision::from);
     match file {
-        Some(path) => Ok(cli_image::for_render(path, asked, cluster)?),
+        Some(path) => Ok(cli_image::for_render(path, asked)?),
         None => Ok((a.compile()?, asked.unwrap_or_default())),
     }
 }

@@ -62,6 +62,11 @@ pub fn run(a: &RenderArgs, range: FrameRange) -> Result<(), CliError> {
     let film = load_film_any(path)?;
     check_range(&film, range, path)?;
     let cluster = match a.nodes {
+        Some(_) if a.cluster.precision(a.precision)? == Precision::Fixed => {
+            return Err(CliError::Usage(
+                "a film on the cluster renders in f32 (--board f407 --precision f32); fixed-point films render without --nodes".into(),
+            ))
+        }
         Some(nodes) => Some(cluster_config(a, nodes)?),
         None => None,
     };
@@ -73,7 +78,7 @@ pub fn run(a: &RenderArgs, range: FrameRange) -> Result<(), CliError> {
         precision: a.precision.map(Precision::from).unwrap_or_default(),
         threads: a.threads,
         cluster,
-        node: a.cluster.node,
+        node: a.cluster.node_board(),
         quiet: a.quiet,
     };
     job.render(range, &dir)

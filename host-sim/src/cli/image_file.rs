@@ -62,7 +62,7 @@ impl fmt::Display for ImageFileError {
                 path.display(),
                 storage.name(),
                 match storage {
-                    Storage::Q16_16 => " (render it with --precision fixed, on the host)",
+                    Storage::Q16_16 => " (render it with --precision fixed)",
                     Storage::F32 => "",
                 }
             ),
@@ -106,13 +106,11 @@ pub fn check_frame(path: &Path, view: &SceneView<'_>) -> Result<(), ImageFileErr
 }
 
 /// The number type a render of the image at `path` uses: what was asked for (f32 when
-/// nothing was), or fixed point for an image that stores Q16.16. `cluster`: the simulated
-/// cluster's nodes, which compute in f32 only.
+/// nothing was), or fixed point for an image that stores Q16.16.
 pub fn precision_for(
     path: &Path,
     view: &SceneView<'_>,
     asked: Option<Precision>,
-    cluster: bool,
 ) -> Result<Precision, ImageFileError> {
     let refuse = |asked| ImageFileError::Precision {
         path: path.to_path_buf(),
@@ -120,7 +118,6 @@ pub fn precision_for(
         asked,
     };
     match (view.storage(), asked) {
-        (Storage::Q16_16, _) if cluster => Err(refuse("the cluster's f32 nodes")),
         (Storage::Q16_16, None | Some(Precision::Fixed)) => Ok(Precision::Fixed),
         (Storage::Q16_16, Some(p)) => Err(refuse(match p {
             Precision::F64 => "an f64 render",
@@ -195,7 +192,6 @@ pub fn describe(name: &str, view: &SceneView<'_>, shares: bool) -> Vec<String> {
 pub fn for_render(
     path: &Path,
     asked: Option<Precision>,
-    cluster: bool,
 ) -> Result<(Vec<u8>, Precision), ImageFileError> {
     let bytes = read_image(path)?;
     let view = SceneView::new(&bytes).map_err(|source| ImageFileError::Invalid {
@@ -203,7 +199,7 @@ pub fn for_render(
         source,
     })?;
     check_frame(path, &view)?;
-    let precision = precision_for(path, &view, asked, cluster)?;
+    let precision = precision_for(path, &view, asked)?;
     Ok((bytes, precision))
 }
 

@@ -110,6 +110,9 @@ pub enum Cmd {
         /// Which target's samples to fit
         #[arg(long, default_value = "thumbv7em-none-eabihf")]
         target: String,
+        /// Which number backend's samples to fit (f32, q16.16)
+        #[arg(long, default_value = "f32")]
+        backend: String,
     },
     /// Regenerate the procedural meshes and textures of the bundled scenes
     GenAssets {
@@ -145,7 +148,11 @@ pub fn run(cli: Cli) -> Result<(), CliError> {
         Cmd::Readback(a) => readback::run(&a),
         Cmd::Sweep(cmd) => sweep::run(cmd),
         Cmd::Chart(cmd) => chart::run(cmd),
-        Cmd::Calibrate { csv, target } => calibrate::run(&csv, &target),
+        Cmd::Calibrate {
+            csv,
+            target,
+            backend,
+        } => calibrate::run(&csv, &target, &backend),
         Cmd::GenAssets { dir } => gen_assets::run(&dir),
     }
 }

@@ -7,6 +7,8 @@ use std::path::PathBuf;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use links_core::board::{BoardProfile, NodeBoard};
 use links_core::image::SceneView;
+use links_core::node::Kernels;
+use links_core::num::Storage;
 use links_core::render::Stats;
 
 use super::args::{image_to_render, PrecisionArg, SceneArgs};
@@ -15,7 +17,7 @@ use super::film::{self, FrameRange};
 use super::{node, CliError};
 use crate::cli_cluster;
 use crate::cluster::SimConfig;
-use crate::frame::{encode_png, render_frame};
+use crate::frame::{encode_png, render_frame, Precision};
 use crate::limits;
 use crate::studies::timeline_chart::timeline_svg;
 
@@ -57,14 +59,20 @@ pub struct RenderArgs {
 pub struct ClusterArgs {
     /// The board profile the cluster is built of (cluster only): f407 (the firmware's:
     /// 21 MHz SPI, 8-byte header + 1-byte trailer, 8 + 15 us chip-select set-up and hold,
-    /// an RC that does not overlap) or ideal (42 MHz, 4-byte header, 0.5 us per transfer,
-    /// an RC that overlaps)
+    /// an RC that does not overlap), f207 (the FPU-less NUCLEO-F207ZG: Cortex-M3 at
+    /// 120 MHz, 15 MHz SPI, Q16.16 nodes) or ideal (42 MHz, 4-byte header, 0.5 us per
+    /// transfer, an RC that overlaps)
     #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
     pub board: &'static BoardProfile,
-    /// The node computers' board (cluster only; known: f407): a SceneImage larger than its
-    /// scene bank is refused before the run
-    #[arg(long, default_value = nc_fw::plan::BOARD.name, value_parser = node::parse_node)]
-    pub node: NodeBoard,
+    /// The node computers' board (cluster only; known: f407, f207; default: the --board's):
+    /// a SceneImage larger than its scene bank is refused before the run
+    #[arg(long, value_parser = node::parse_node)]
+    pub node: Option<NodeBoard>,
+    /// The kernels the nodes carry (cluster only): f32, fixed (Q16.16) or both; default: the
+    /// --board's firmware's (f407: both, f207: fixed). A scene in a storage no kernel reads
+    /// is refused before the run
+    #[arg(long, value_parser = parse_kernels)]
+    pub node_kernels: Option<Kernels>,
     /// How the nodes are wired (cluster only): buildable (what the board can be built as:
     /// one bus while it holds every node, otherwise a tree of relay RCs, one per bus of
     /// nodes; the ideal board's one bus holds 256), star (the RC drives --buses buses
@@ -116,6 +124,36 @@ pub fn run(a: RenderArgs) -> Result<(), CliError> {
     }
 }
 
+/// `--node-kernels`: f32, fixed or both.
+fn parse_kernels(s: &str) -> Result<Kernels, String> {
+    [Kernels::F32, Kernels::Fixed, Kernels::Both]
+        .into_iter()
+        .find(|k| k.name() == s)
+        .ok_or_else(|| format!("unknown kernels '{s}' (expected f32, fixed or both)"))
+}
+
+impl ClusterArgs {
+    /// The node board: `--node`, else the `--board`'s.
+    pub fn node_board(&self) -> NodeBoard {
+        self.node.unwrap_or(self.board.node)
+    }
+
+    /// The number type the cluster renders in: `--precision` (f32 or fixed), else the
+    /// `--board`'s (f32 on the f407, fixed on the f207). An f64 render has no node.
+    pub fn precision(&self, asked: Option<PrecisionArg>) -> Result<Precision, CliError> {
+        match asked {
+            Some(PrecisionArg::F64) => Err(CliError::Usage(
+                "the cluster's nodes compute in f32 or Q16.16: --precision f32 or fixed".into(),
+            )),
+            Some(p) => Ok(p.into()),
+            None => Ok(match self.board.storage {
+                Storage::F32 => Precision::F32,
+                Storage::Q16_16 => Precision::Fixed,
+            }),
+        }
+    }
+}
+
 /// The RC's time-out for a silent node holding work without `--timeout-ms`, at one ray per
 /// pixel (ms).
 const DEFAULT_TIMEOUT_MS: f64 = 500.0;
@@ -123,11 +161,7 @@ const DEFAULT_TIMEOUT_MS: f64 = 500.0;
 /// The simulated cluster of `--nodes N` and the cluster options, checked.
 pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, CliError> {
     let c = &a.cluster;
-    if !matches!(a.precision, None | Some(PrecisionArg::F32)) {
-        return Err(CliError::Usage(
-            "the cluster's nodes compute in f32: drop --precision or --nodes".into(),
-        ));
-    }
+    c.precision(a.precision)?;
     if !(1..=256).contains(&nodes) {
         return Err(CliError::Usage(format!(
             "--nodes {nodes}: a cluster has 1 to 256 node computers"
@@ -148,7 +182,8 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
             "--dm-ms must be >= 0 and --timeout-ms > 0".into(),
         ));
     }
-    cfg.board = c.node;
+    cfg.board = c.node_board();
+    cfg.kernels = c.node_kernels.unwrap_or(c.board.kernels);
     if let Some(link) = c.link {
         cfg.link = link;
     }
@@ -166,12 +201,23 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
 fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
     let c = &a.cluster;
     let cfg = cluster_config(a, nodes)?;
-    let (image, _) = image_to_render(&a.scene, a.image.as_deref(), a.precision, true)?;
+    let (image, _) = image_to_render(&a.scene, a.image.as_deref(), a.precision.map(Into::into))?;
+    // `--precision`, else the image's own storage if it is Q16.16, else the board's.
+    let stored = SceneView::new(&image).map_err(CliError::failed)?.storage();
+    let precision = match (a.precision, stored) {
+        (None, Storage::Q16_16) => Precision::Fixed,
+        (asked, _) => c.precision(asked)?,
+    };
+    // What the DM sends nodes computing in fixed point: the Q16.16 rewrite.
+    let image = match precision {
+        Precision::Fixed => crate::frame::fixed_image(&image).map_err(CliError::failed)?,
+        _ => image,
+    };
     let what = match &a.image {
         Some(path) => path.display().to_string(),
         None => a.scene.path()?.display().to_string(),
     };
-    node::check_fits(&what, image.len(), &c.node)?;
+    node::check_fits(&what, image.len(), &c.node_board())?;
     let start = std::time::Instant::now();
     let r = cli_cluster::render(&image, &cfg)?;
     let rep = &r.report;
@@ -225,7 +271,8 @@ pub(super) fn progress_bar(quiet: bool, rows: u32) -> Result<ProgressBar, CliErr
 
 /// `links render` on the host's threads.
 fn host(a: &RenderArgs) -> Result<(), CliError> {
-    let (image, precision) = image_to_render(&a.scene, a.image.as_deref(), a.precision, false)?;
+    let asked = a.precision.map(Precision::from);
+    let (image, precision) = image_to_render(&a.scene, a.image.as_deref(), asked)?;
     let view = SceneView::new(&image).map_err(CliError::failed)?;
     let bar = progress_bar(a.quiet, view.camera::<f32>().height)?;
     let frame =

@@ -13,6 +13,8 @@
 //! for single-cycle FPU/ALU work plus two-cycle loads and flash wait states behind the ART
 //! accelerator at 168 MHz.
 
+use links_core::board::Core;
+use links_core::num::Storage;
 use links_core::render::Stats;
 use std::fmt;
 
@@ -113,6 +115,63 @@ impl CycleModel {
         cycles_per_instruction: 1.3,
     };
 
+    /// Cortex-M4F computing in Q16.16 (the kernel the F407 nodes run on a Q16.16 image):
+    /// weights fitted by `links calibrate --backend q16.16` to the M4F q16.16 frames of
+    /// `docs/cortex-m-bench.csv`.
+    pub const CORTEX_M4F_Q16: CycleModel = CycleModel {
+        name: "cortex-m4f q16.16 (QEMU-calibrated)",
+        per_primary_ray: 0.0,
+        per_secondary_ray: 3878.4,
+        per_shadow_ray: 0.0,
+        per_box_test: 643.6,
+        per_triangle_test: 1176.2,
+        per_ellipsoid_test: 7889.1,
+        per_box_shape_test: 1303.1,
+        per_blob_test: 0.0,
+        per_blob_field_eval: 8819.8,
+        per_shading: 6043.7,
+        per_clip_compare: 217.2,
+        cycles_per_instruction: 1.3,
+    };
+
+    /// Cortex-M3 (STM32F207 at 120 MHz) computing in soft-float `f32`: weights fitted by
+    /// `links calibrate --target thumbv7m-none-eabi` to the M3 f32 frames of
+    /// `docs/cortex-m-bench.csv`. Cycles per instruction as the M4F's (the F2's ART
+    /// accelerator hides its 3 flash wait states at 120 MHz as the F4's hides 5 at 168).
+    pub const CORTEX_M3_F32: CycleModel = CycleModel {
+        name: "cortex-m3 soft-float f32 (QEMU-calibrated)",
+        per_primary_ray: 0.0,
+        per_secondary_ray: 30105.8,
+        per_shadow_ray: 16199.5,
+        per_box_test: 894.8,
+        per_triangle_test: 3318.2,
+        per_ellipsoid_test: 4715.9,
+        per_box_shape_test: 1250.2,
+        per_blob_test: 6015.3,
+        per_blob_field_eval: 16726.6,
+        per_shading: 8409.9,
+        per_clip_compare: 0.0,
+        cycles_per_instruction: 1.3,
+    };
+
+    /// Cortex-M3 computing in Q16.16 (what the F207 nodes run by default): weights fitted by
+    /// `links calibrate --target thumbv7m-none-eabi --backend q16.16`.
+    pub const CORTEX_M3_Q16: CycleModel = CycleModel {
+        name: "cortex-m3 q16.16 (QEMU-calibrated)",
+        per_primary_ray: 0.0,
+        per_secondary_ray: 3761.1,
+        per_shadow_ray: 0.0,
+        per_box_test: 621.4,
+        per_triangle_test: 1152.5,
+        per_ellipsoid_test: 7600.3,
+        per_box_shape_test: 1570.3,
+        per_blob_test: 0.0,
+        per_blob_field_eval: 8740.7,
+        per_shading: 6545.2,
+        per_clip_compare: 213.6,
+        cycles_per_instruction: 1.3,
+    };
+
     /// Instructions the counted work takes.
     pub fn instructions(&self, s: &Stats) -> f64 {
         features(s)
@@ -140,10 +199,19 @@ impl Default for CycleModel {
 }
 
 impl CycleModel {
-    /// The weights of a board's core (`links_core::board::BoardProfile::core`).
-    pub const fn for_core(core: links_core::board::Core) -> CycleModel {
-        match core {
-            links_core::board::Core::CortexM4F => Self::CORTEX_M4F_F32,
+    /// The weights of a board's core (`links_core::board::BoardProfile::core`) computing in
+    /// `f32` (hard-float on the M4F, soft-float on the M3).
+    pub const fn for_core(core: Core) -> CycleModel {
+        Self::for_kernel(core, Storage::F32)
+    }
+
+    /// The weights of a board's core running the kernel of images stored as `storage`.
+    pub const fn for_kernel(core: Core, storage: Storage) -> CycleModel {
+        match (core, storage) {
+            (Core::CortexM4F, Storage::F32) => Self::CORTEX_M4F_F32,
+            (Core::CortexM4F, Storage::Q16_16) => Self::CORTEX_M4F_Q16,
+            (Core::CortexM3, Storage::F32) => Self::CORTEX_M3_F32,
+            (Core::CortexM3, Storage::Q16_16) => Self::CORTEX_M3_Q16,
         }
     }
 }
@@ -282,6 +350,22 @@ impl fmt::Display for CalibrationError {
 }
 
 impl std::error::Error for CalibrationError {}
+
+/// The committed model of the frames of `target` (`thumbv7em-none-eabihf`: the M4F,
+/// `thumbv7m-none-eabi`: the M3) rendered by `backend` (`f32`, `q16.16`).
+pub fn committed_model(target: &str, backend: &str) -> Option<CycleModel> {
+    let core = match target {
+        "thumbv7em-none-eabihf" => Core::CortexM4F,
+        "thumbv7m-none-eabi" => Core::CortexM3,
+        _ => return None,
+    };
+    let storage = match backend {
+        "f32" => Storage::F32,
+        "q16.16" => Storage::Q16_16,
+        _ => return None,
+    };
+    Some(CycleModel::for_kernel(core, storage))
+}
 
 /// Read the `f32` samples of `scripts/qemu-bench`'s CSV (`docs/cortex-m-bench.csv`): the
 /// model is of f32 code, so rows of other number backends (column `backend`: `f32-fast`,
@@ -643,6 +727,42 @@ mod tests {
             again.push('\n');
         }
         assert_eq!(again, csv);
+    }
+
+    /// The Q16.16 and soft-float models predict the frames of their core and backend (the
+    /// committed CSV; the q16.16 rows are 11 frames, one technique set each).
+    #[test]
+    fn committed_fixed_point_and_m3_models_predict_their_frames() {
+        let rows = parse_rows(&committed_csv()).unwrap();
+        // (target, backend, frames at least, worst error below): the q16.16 fits are within
+        // 6.2 %; the M3's f32 frames span every technique set, as the M4F's (whose test
+        // allows 40 %), and its worst frame is off by 36 %.
+        for (target, backend, min, worst_below) in [
+            ("thumbv7em-none-eabihf", "q16.16", 11, 0.10),
+            ("thumbv7m-none-eabi", "q16.16", 11, 0.10),
+            ("thumbv7m-none-eabi", "f32", 50, 0.40),
+        ] {
+            let model = committed_model(target, backend).unwrap();
+            let of: Vec<Sample> = rows
+                .iter()
+                .filter(|r| r.backend == backend)
+                .cloned()
+                .collect();
+            let ratios = prediction_ratios(&model, &of, target);
+            assert!(ratios.len() >= min, "{target} {backend}: {}", ratios.len());
+            let off: Vec<f64> = ratios.iter().map(|(_, r)| (r - 1.0).abs()).collect();
+            let worst = off.iter().copied().fold(0.0, f64::max);
+            let mean = off.iter().sum::<f64>() / off.len() as f64;
+            assert!(
+                worst < worst_below && mean < 0.10,
+                "{target} {backend} off by up to {:.0}% (mean {:.0}%): re-run `links calibrate --target {target} --backend {backend}`",
+                worst * 100.0,
+                mean * 100.0
+            );
+        }
+        assert_eq!(committed_model("thumbv6m-none-eabi", "f32"), None);
+        let m3 = CycleModel::for_kernel(Core::CortexM3, Storage::Q16_16);
+        assert_eq!(m3, CycleModel::CORTEX_M3_Q16);
     }
 
     /// The committed model must predict every frame QEMU measured (the committed CSV).

@@ -40,9 +40,9 @@ impl FromStr for PolicyArg {
 
 /// The known board profiles, borrowed by the command line's arguments (a reference keeps
 /// them small).
-static BOARDS: [BoardProfile; 2] = BoardProfile::ALL;
+static BOARDS: [BoardProfile; BoardProfile::ALL.len()] = BoardProfile::ALL;
 
-/// `--board NAME`: a known board profile (`f407`, `ideal`; ASCII case ignored).
+/// `--board NAME`: a known board profile (`f407`, `f207`, `ideal`; ASCII case ignored).
 pub fn parse_board(s: &str) -> Result<BoardProfile, OptionError> {
     parse_board_arg(s).copied()
 }
@@ -528,9 +528,10 @@ mod tests {
     #[test]
     fn boards_parse_and_set_the_link() {
         assert_eq!(parse_board("F407"), Ok(BoardProfile::F407));
+        assert_eq!(parse_board("f207"), Ok(BoardProfile::F207));
         let e = parse_board("f429").unwrap_err().to_string();
         assert!(
-            e.contains("unknown board 'f429'") && e.contains("f407, ideal"),
+            e.contains("unknown board 'f429'") && e.contains("f407, f207, ideal"),
             "{e}"
         );
         let star = TopologyArg::Star;

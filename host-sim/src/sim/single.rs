@@ -75,6 +75,16 @@ impl fmt::Display for FrameError {
 
 impl std::error::Error for FrameError {}
 
+/// `image` as the fixed-point kernel reads it: the DM's Q16.16 rewrite of an f32 image, an
+/// image that already stores Q16.16 as it is (what the cluster sends nodes computing in
+/// fixed point, the same bytes [`render_single`] renders with [`Precision::Fixed`]).
+pub fn fixed_image(image: &[u8]) -> Result<Vec<u8>, FrameError> {
+    match SceneView::new(image).map_err(FrameError::Image)?.storage() {
+        Storage::F32 => Ok(to_fixed(image).map_err(FrameError::Fixed)?.bytes),
+        Storage::Q16_16 => Ok(image.to_vec()),
+    }
+}
+
 /// [`render_single`]'s former name, kept for its callers.
 pub use render_single as render_frame;
 

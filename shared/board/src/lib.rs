@@ -1,28 +1,77 @@
-//! The board both LINKS-1 firmwares run on (STM32F407VG on an STM32F4DISCOVERY): the RAM
-//! sizes their memory plans divide up, and for the MCU the one bring-up they share: the
-//! clock tree ([`config`], [`init`]) and the zeroed DMA-reachable `.sram` region
-//! ([`take_sram!`]), and the serial backup line's RS-485 port (`rs485`). Pins and memory plans stay with each firmware (`nc-fw`, `rc-fw`).
+//! The board both LINKS-1 firmwares run on, chosen by cargo feature: `board-f407`
+//! (default; STM32F407VG on an STM32F4DISCOVERY) or `board-f207` (STM32F207ZG on a
+//! NUCLEO-F207ZG, no FPU). It gives the board profile ([`PROFILE`]), the RAM sizes their
+//! memory plans divide up, and for the MCU the one bring-up they share: the clock tree
+//! ([`config`], [`init`]) and the zeroed DMA-reachable `.sram` region ([`take_sram!`]), and
+//! the serial backup line's RS-485 port (`rs485`). Pins and memory plans stay with each
+//! firmware (`nc-fw`, `rc-fw`). Features, not targets, pick the board: a target names a core,
+//! not a chip (the M4F firmware runs on the F407 and F429 alike), and the chip feature of
+//! `embassy-stm32` must be named exactly once.
 #![no_std]
+
+#[cfg(all(feature = "board-f407", feature = "board-f207"))]
+compile_error!("choose one board: board-f407 (default) or board-f207 (--no-default-features)");
+#[cfg(not(any(feature = "board-f407", feature = "board-f207")))]
+compile_error!("choose a board: feature board-f407 or board-f207");
 
 #[cfg(target_os = "none")]
 pub mod rs485;
 
-/// SRAM1 + SRAM2 (DMA-reachable): the board's data, `links_core::board::NodeBoard::F407`.
-pub const SRAM: usize = links_core::board::NodeBoard::F407.sram;
-/// CCM data RAM (CPU only): the board's data, `links_core::board::NodeBoard::F407`.
-pub const CCM: usize = links_core::board::NodeBoard::F407.ccm;
+/// The board profile both firmwares are built for.
+#[cfg(not(feature = "board-f207"))]
+pub const PROFILE: links_core::board::BoardProfile = links_core::board::BoardProfile::F407;
+/// The board profile both firmwares are built for.
+#[cfg(feature = "board-f207")]
+pub const PROFILE: links_core::board::BoardProfile = links_core::board::BoardProfile::F207;
 
-/// The core clock the clock tree below gives: the board profile's
-/// (`links_core::board::BoardProfile::F407`).
-pub const CORE_CLOCK_HZ: u32 = links_core::board::BoardProfile::F407.core_clock_hz;
-/// The crystal.
+/// DMA-reachable SRAM of the banks (memory.x's `SRAM`): the profile node's.
+pub const SRAM: usize = PROFILE.node.sram;
+/// RAM of `.data`, `.bss` and the stack (memory.x's `RAM`: the F407's CCM, the F207's low
+/// SRAM): the profile node's.
+pub const CCM: usize = PROFILE.node.ccm;
+
+/// The core clock the clock tree below gives: the board profile's.
+pub const CORE_CLOCK_HZ: u32 = PROFILE.core_clock_hz;
+/// The HSE input: the Discovery's 8 MHz crystal, the Nucleo's 8 MHz MCO from its ST-LINK.
 pub const HSE_HZ: u32 = 8_000_000;
 // The PLL of [`config`]: HSE / 4 (prediv) x 168 (mul) / 2 (P) must give the profile's clock.
+#[cfg(not(feature = "board-f207"))]
 const _: () = assert!(HSE_HZ / 4 * 168 / 2 == CORE_CLOCK_HZ);
+// The PLL of [`config`]: HSE / 8 (prediv, 1 MHz in) x 240 (VCO 240 MHz) / 2 (P), / 5 (Q:
+// 48 MHz for USB) must give the profile's clock.
+#[cfg(feature = "board-f207")]
+const _: () = assert!(HSE_HZ / 8 * 240 / 2 == CORE_CLOCK_HZ && HSE_HZ / 8 * 240 / 5 == 48_000_000);
+
+/// The clock tree: 120 MHz core from the ST-LINK's 8 MHz MCO (HSE bypass), APB2 60 MHz
+/// (SPI1 up to 30 MHz), APB1 30 MHz, 48 MHz for USB; flash wait states for 2.7-3.6 V.
+#[cfg(all(target_os = "none", feature = "board-f207"))]
+pub fn config() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::*;
+    use embassy_stm32::time::Hertz;
+    let mut c = embassy_stm32::Config::default();
+    c.rcc.hse = Some(Hse {
+        freq: Hertz(HSE_HZ),
+        mode: HseMode::Bypass,
+    });
+    c.rcc.pll_src = PllSource::HSE;
+    c.rcc.pll = Some(Pll {
+        prediv: PllPreDiv::DIV8,
+        mul: PllMul::MUL240,
+        divp: Some(PllPDiv::DIV2),
+        divq: Some(PllQDiv::DIV5),
+        divr: None,
+    });
+    c.rcc.ahb_pre = AHBPrescaler::DIV1;
+    c.rcc.apb1_pre = APBPrescaler::DIV4;
+    c.rcc.apb2_pre = APBPrescaler::DIV2;
+    c.rcc.sys = Sysclk::PLL1_P;
+    c.rcc.voltage = VoltageScale::Range0;
+    c
+}
 
 /// The clock tree: 8 MHz crystal -> 168 MHz core, APB2 84 MHz (SPI1 up to 42 MHz), 48 MHz
 /// for USB.
-#[cfg(target_os = "none")]
+#[cfg(all(target_os = "none", not(feature = "board-f207")))]
 pub fn config() -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     use embassy_stm32::time::Hertz;

@@ -7,12 +7,11 @@ use embassy_stm32::mode::Async;
 use embassy_stm32::usart::{self, Uart};
 use embassy_time::{with_timeout, Duration};
 use links_core::backup::{LineError, LinePort};
-use links_core::board::BoardProfile;
 
 /// The line's UART settings: the board profile's bit rate, 8N1.
 pub fn config() -> usart::Config {
     let mut c = usart::Config::default();
-    c.baudrate = BoardProfile::F407.backup.bit_rate_hz;
+    c.baudrate = crate::PROFILE.backup.bit_rate_hz;
     c
 }
 

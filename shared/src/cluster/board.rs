@@ -17,9 +17,11 @@ pub use crate::cluster::profile::{BoardProfile, Core, LineProfile, LinkProfile};
 pub struct NodeBoard {
     /// The name the command line knows it by (`--node f407`).
     pub name: &'static str,
-    /// DMA-reachable SRAM.
+    /// DMA-reachable SRAM the plan gives the banks (memory.x's `SRAM` region, `.sram`).
     pub sram: usize,
-    /// RAM the CPU alone reaches (CCM on the F407): `.data`, `.bss`, the stack.
+    /// The RAM of `.data`, `.bss` and the stack (memory.x's `RAM` region): the CCM on the
+    /// F407, which only the CPU reaches; on the F207, which has no CCM, the low part of its
+    /// SRAM.
     pub ccm: usize,
     /// The link's DMA banks in SRAM: two TX, two RX, one scratch.
     pub link_banks: usize,
@@ -67,6 +69,14 @@ const F407_SRAM: usize = 128 * 1024;
 const F407_CCM: usize = 64 * 1024;
 const F407_LINK_BANKS: usize = 5 * BANK;
 
+/// The STM32F207ZG's 128 KB of SRAM (SRAM1 112 KB + SRAM2 16 KB, contiguous, all
+/// DMA-reachable, no CCM), split in two regions: the low 64 KB for `.data`, `.bss` and the
+/// stack (the F407 firmware's statics take ~46 KB of its CCM, and the stack needs >= 16 KB),
+/// the high 64 KB for the link's DMA banks and the scene banks.
+const F207_RAM: usize = 64 * 1024;
+const F207_SRAM: usize = 128 * 1024 - F207_RAM;
+const F207_EVEN_BANK: usize = 40 * 1024;
+
 impl NodeBoard {
     /// The STM32F407VG node (STM32F4DISCOVERY), `nc-fw`'s board: two equal scene banks in
     /// SRAM, each half of what the link's DMA banks leave (in whole KB), so the next frame
@@ -81,8 +91,26 @@ impl NodeBoard {
         odd_bank_in: Memory::Sram,
     };
 
+    /// The STM32F207ZG node (NUCLEO-F207ZG), `nc-fw --features board-f207`: in the SRAM
+    /// region the statics leave, an even frames' bank of 40 KB (photo2, the paper's Table 5.2
+    /// scene, is 38,948 bytes at 512x480: it renders as single frames) and an odd frames'
+    /// bank of what the link's DMA banks leave beside it, in whole KB (16 KB: small scenes
+    /// double-bank; photo1, 18,292 bytes, renders as single frames too). An equal split (2 x
+    /// 28 KB) would double-bank photo1 but refuse photo2; see docs/hardware.md.
+    pub const F207: NodeBoard = NodeBoard {
+        name: "f207",
+        sram: F207_SRAM,
+        ccm: F207_RAM,
+        link_banks: F407_LINK_BANKS,
+        scene_banks: [
+            F207_EVEN_BANK,
+            (F207_SRAM - F407_LINK_BANKS - F207_EVEN_BANK) / 1024 * 1024,
+        ],
+        odd_bank_in: Memory::Sram,
+    };
+
     /// Every board the host knows, by name.
-    pub const ALL: [NodeBoard; 1] = [Self::F407];
+    pub const ALL: [NodeBoard; 2] = [Self::F407, Self::F207];
 
     /// The board called `name` (ASCII case ignored), if known.
     pub fn named(name: &str) -> Option<NodeBoard> {
@@ -143,6 +171,26 @@ mod tests {
         assert_eq!(b.odd_bank_bytes_in(Memory::Sram), 61_440);
         assert_eq!(b.odd_bank_bytes_in(Memory::Ccm), 0);
         assert_eq!(b.fit(40_000), Fit::TwoBanks);
+    }
+
+    /// Worked by hand: 65,536 - 5 x 1,588 - 40,960 = 16,636 -> 16 KB for the odd bank.
+    #[test]
+    fn the_f207_plan_leaves_64_kb_for_statics_and_stack_and_banks_the_rest() {
+        let b = NodeBoard::F207;
+        assert_eq!(b.sram + b.ccm, 128 * 1024);
+        assert_eq!(b.scene_banks, [40_960, 16_384]);
+        assert!(b.link_banks + b.scene_banks[0] + b.scene_banks[1] <= b.sram);
+        assert_eq!(
+            b.sram - b.link_banks - b.scene_banks[0] - b.scene_banks[1],
+            252
+        );
+        // photo1 and photo2 at 512x480 (docs/hardware.md).
+        assert_eq!(
+            (b.fit(16_384), b.fit(18_292)),
+            (Fit::TwoBanks, Fit::OneBank)
+        );
+        assert_eq!((b.fit(38_948), b.fit(40_961)), (Fit::OneBank, Fit::TooBig));
+        assert_eq!(NodeBoard::named("F207"), Some(b));
     }
 
     #[test]

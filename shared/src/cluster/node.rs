@@ -19,14 +19,14 @@ use super::wire::{
     PIECES_PER_CHUNK, SCENE_CHUNK, SCENE_PIECE,
 };
 use crate::image::SceneView;
-use crate::num::Real;
-use crate::render::{
-    render_run, RenderError, Rgb8, SceneKey, Stats, Techniques, Tracer, TracerState,
-};
+use crate::num::Storage;
+use crate::render::{RenderError, Rgb8, Stats};
 use core::fmt;
 
 mod bank;
+mod kernel;
 use bank::Bank;
+pub use kernel::{Kernels, Tracing, TracingByImage};
 
 /// Where compute time goes.
 #[allow(async_fn_in_trait)]
@@ -52,49 +52,13 @@ pub trait RunRenderer {
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError>;
 
+    /// The kernels this renderer carries: `run_node` renders a scene only if one of them
+    /// reads its storage ([`SceneView::storage`]).
+    fn kernels(&self) -> Kernels;
+
     /// The bytes of a scene it rendered may have changed under the same bank and frame (the
     /// backup line reuses a bank): drop anything kept from run to run. Default: nothing kept.
     fn forget(&mut self) {}
-}
-
-/// The real renderer: a [`Tracer`] in number type `T`, working in one [`TracerState`] it
-/// keeps from run to run (its caches stay warm while the scene stays the same).
-pub struct Tracing<T: Real> {
-    state: TracerState<T>,
-}
-
-impl<T: Real> Default for Tracing<T> {
-    fn default() -> Self {
-        Self::new()
-    }
-}
-
-impl<T: Real> Tracing<T> {
-    pub fn new() -> Self {
-        Self {
-            state: TracerState::new(),
-        }
-    }
-}
-
-impl<T: Real> RunRenderer for Tracing<T> {
-    fn render(
-        &mut self,
-        scene: SceneView<'_>,
-        frame: u16,
-        y: u32,
-        x: u32,
-        out: &mut [Rgb8],
-    ) -> Result<Stats, RenderError> {
-        let key = SceneKey::of(&scene, frame);
-        let mut t = Tracer::with_state(scene, Techniques::ALL, &mut self.state, key);
-        render_run(&mut t, y, x, out)?;
-        Ok(t.stats)
-    }
-
-    fn forget(&mut self) {
-        self.state.forget();
-    }
 }
 
 /// A clock for hardware: time passes by itself.
@@ -128,6 +92,12 @@ pub enum NodeError {
     BankTooSmall {
         len: u32,
     },
+    /// A scene arrived stored as `image`, which none of the node's kernels reads (a node
+    /// built with one kernel, sent an image of the other storage).
+    NoKernel {
+        image: Storage,
+        kernels: Kernels,
+    },
 }
 
 impl fmt::Display for NodeError {
@@ -135,6 +105,11 @@ impl fmt::Display for NodeError {
         match self {
             NodeError::Link(e) => write!(f, "link: {e}"),
             NodeError::BankTooSmall { len } => write!(f, "scene bank of {len} bytes is too small"),
+            NodeError::NoKernel { image, kernels } => write!(
+                f,
+                "a {} scene arrived but this node carries {kernels} only",
+                image.name()
+            ),
         }
     }
 }
@@ -606,6 +581,12 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                 let bank = &nc.banks[b];
                 if let Some(view) = bank.frame.and_then(|f| bank.view(banks[b], f)) {
                     clock.checked_scene(&view).await;
+                    let kernels = renderer.kernels();
+                    if !kernels.run(view.storage()) {
+                        *report = nc.report;
+                        let image = view.storage();
+                        return Err(NodeError::NoKernel { image, kernels });
+                    }
                 }
             }
             *report = nc.report;
@@ -826,6 +807,10 @@ mod tests {
         ) -> Result<Stats, RenderError> {
             self.0 += 1;
             Ok(Stats::default())
+        }
+
+        fn kernels(&self) -> Kernels {
+            Kernels::F32
         }
     }
 

@@ -3,7 +3,10 @@
 //! nodes per bus, whether the RC overlaps the wire with its own work), the node's memory
 //! ([`NodeBoard`]: DMA banks, scene banks), the core and its clock ([`Core`]).
 //!
-//! [`BoardProfile::F407`] is what the firmware builds: `links_core::spi` takes its header
+//! [`BoardProfile::F207`] is the FPU-less board (NUCLEO-F207ZG, Cortex-M3 at 120 MHz) whose
+//! nodes run the Q16.16 kernel: the host sends its nodes Q16.16 images ([`BoardProfile::storage`]).
+//!
+//! [`BoardProfile::F407`] is what the firmware builds by default: `links_core::spi` takes its header
 //! and trailer sizes (and with them the DMA bank size) from it, `rc-fw` its SPI clock,
 //! chip-select timing and nodes per bus, `nc-fw` its memory plan. [`BoardProfile::IDEAL`] is
 //! the idealised link the simulator used before it knew the board (42 MHz, a 4-byte header,
@@ -15,6 +18,8 @@ use crate::cluster::board::NodeBoard;
 use crate::cluster::root::MAX_NODES;
 use crate::cluster::spi;
 use crate::cluster::wire::MAX_MESSAGE;
+use crate::node::Kernels;
+use crate::num::Storage;
 
 /// The CPU core of a board: it selects the cost-model weights the simulator charges the
 /// node's and the RC's work with.
@@ -23,6 +28,8 @@ use crate::cluster::wire::MAX_MESSAGE;
 pub enum Core {
     /// Cortex-M4 with the single-precision FPU (STM32F407), rendering in hard-float `f32`.
     CortexM4F,
+    /// Cortex-M3 without an FPU (STM32F207), rendering in Q16.16 (or soft-float `f32`).
+    CortexM3,
 }
 
 impl Core {
@@ -30,6 +37,7 @@ impl Core {
     pub const fn name(self) -> &'static str {
         match self {
             Core::CortexM4F => "Cortex-M4F",
+            Core::CortexM3 => "Cortex-M3",
         }
     }
 }
@@ -71,6 +79,20 @@ impl LinkProfile {
         trailer_bytes: 1,
         nodes_per_bus: 8,
         rc_overlaps: spi::RC_OVERLAPS,
+    };
+
+    /// The F207 boards' link: the F407's protocol (header, trailer, 8 nodes per bus, an RC
+    /// that clocks the wire only inside `finish`) at the F207's speeds. SPI1 at 15 MHz
+    /// (APB2 60 MHz / 4, the same divider that holds on the F407 for a full-duplex slave
+    /// behind the MISO multiplexer; the F207's SPI slave limit is 30 MHz); chip-select
+    /// set-up and hold are the F407's 8 + 15 µs of software (EXTI wake-up, DMA re-arm) scaled
+    /// by the clocks, 168 / 120 = 1.4: 11.2 + 21 µs, the set-up rounded up to the RC timer's
+    /// whole µs: 12 + 21 µs (an estimate until measured on a board).
+    pub const F207: LinkProfile = LinkProfile {
+        bit_rate_hz: 15_000_000,
+        cs_setup_ns: 12_000,
+        cs_hold_ns: 21_000,
+        ..Self::F407
     };
 
     /// The simulator's idealised link before the board profile: 42 MHz (SPI1's maximum),
@@ -125,6 +147,13 @@ impl LineProfile {
         reply_timeout_us: 1_000,
     };
 
+    /// The F207 boards' line: USART2 at 1 Mbit/s (APB1 30 MHz, oversampling by 16), the
+    /// F407's 20 µs of software turnaround scaled by the clocks (x 1.4).
+    pub const F207: LineProfile = LineProfile {
+        turnaround_ns: 28_000,
+        ..Self::F407
+    };
+
     /// Time on the line of a frame of `bytes` bytes, turnaround included (ns).
     pub const fn frame_ns(&self, bytes: usize) -> u64 {
         self.turnaround_ns as u64
@@ -148,10 +177,17 @@ pub struct BoardProfile {
     pub core: Core,
     /// Core clock of the nodes and the RC (Hz).
     pub core_clock_hz: u32,
+    /// The kernels the node firmware carries by default (`nc-fw`'s `kernel-*` features).
+    pub kernels: Kernels,
+    /// The storage the host compiles the nodes' SceneImages in unless told otherwise (the
+    /// kernel the core runs best: f32 with an FPU, Q16.16 without).
+    pub storage: Storage,
 }
 
 /// The STM32F407's core clock: 8 MHz crystal, PLL to 168 MHz (`links-board`'s clock tree).
 const F407_CORE_CLOCK_HZ: u32 = 168_000_000;
+/// The STM32F207's core clock: the ST-LINK's 8 MHz MCO (HSE bypass), PLL to 120 MHz.
+const F207_CORE_CLOCK_HZ: u32 = 120_000_000;
 
 impl BoardProfile {
     /// What the firmware builds today: STM32F4DISCOVERY boards (STM32F407VG at 168 MHz)
@@ -163,6 +199,22 @@ impl BoardProfile {
         node: NodeBoard::F407,
         core: Core::CortexM4F,
         core_clock_hz: F407_CORE_CLOCK_HZ,
+        kernels: Kernels::Both,
+        storage: Storage::F32,
+    };
+
+    /// NUCLEO-F207ZG boards (STM32F207ZG, Cortex-M3 at 120 MHz, no FPU) on the
+    /// [`LinkProfile::F207`] link, the node's memory plan [`NodeBoard::F207`]; the nodes carry
+    /// the Q16.16 kernel only by default (`nc-fw --features kernel-f32` adds soft-float f32).
+    pub const F207: BoardProfile = BoardProfile {
+        name: "f207",
+        link: LinkProfile::F207,
+        backup: LineProfile::F207,
+        node: NodeBoard::F207,
+        core: Core::CortexM3,
+        core_clock_hz: F207_CORE_CLOCK_HZ,
+        kernels: Kernels::Fixed,
+        storage: Storage::Q16_16,
     };
 
     /// The simulator's idealised link ([`LinkProfile::IDEAL`]) on the F407's nodes (same
@@ -174,10 +226,12 @@ impl BoardProfile {
         node: NodeBoard::F407,
         core: Core::CortexM4F,
         core_clock_hz: F407_CORE_CLOCK_HZ,
+        kernels: Kernels::Both,
+        storage: Storage::F32,
     };
 
     /// Every profile the host knows, by name.
-    pub const ALL: [BoardProfile; 2] = [Self::F407, Self::IDEAL];
+    pub const ALL: [BoardProfile; 3] = [Self::F407, Self::F207, Self::IDEAL];
 
     /// The profile called `name` (ASCII case ignored), if known.
     pub fn named(name: &str) -> Option<BoardProfile> {
@@ -250,6 +304,29 @@ mod tests {
         assert_eq!((f.node, f.core), (i.node, i.core));
     }
 
+    /// The F207: the F407's protocol (so the same DMA bank) at its own speeds, a
+    /// Cortex-M3 at 120 MHz sent Q16.16 images.
+    #[test]
+    fn the_f207_profile_holds_the_documented_numbers() {
+        let (f, g) = (BoardProfile::F407, BoardProfile::F207);
+        assert_eq!(g.dma_bank_bytes(), f.dma_bank_bytes());
+        assert_eq!(
+            (
+                g.link.bit_rate_hz,
+                g.link.handshake_ns(),
+                g.link.nodes_per_bus
+            ),
+            (15_000_000, 33_000, 8)
+        );
+        assert_eq!(g.link.rc_overlaps, f.link.rc_overlaps);
+        assert_eq!((g.core, g.core_clock_hz), (Core::CortexM3, 120_000_000));
+        assert_eq!((g.kernels, g.storage), (Kernels::Fixed, Storage::Q16_16));
+        assert_eq!((f.kernels, f.storage), (Kernels::Both, Storage::F32));
+        // 262 bytes at 1 Mbit/s: 2,620 µs + 28 µs.
+        assert_eq!(g.backup.frame_ns(crate::backup::MAX_FRAME), 2_648_000);
+        assert_eq!(g.node, NodeBoard::F207);
+    }
+
     /// The backup line's timing, worked by hand: a 262-byte frame is 2,620 bits at 1 Mbit/s
     /// = 2,620 µs, plus 20 µs of turnaround.
     #[test]
@@ -264,6 +341,7 @@ mod tests {
     fn profiles_are_found_by_name_and_count_their_buses() {
         assert_eq!(BoardProfile::named("F407"), Some(BoardProfile::F407));
         assert_eq!(BoardProfile::named("ideal"), Some(BoardProfile::IDEAL));
+        assert_eq!(BoardProfile::named("F207"), Some(BoardProfile::F207));
         assert_eq!(BoardProfile::named("f429"), None);
         let f = BoardProfile::F407;
         assert_eq!(

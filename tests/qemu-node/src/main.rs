@@ -208,6 +208,10 @@ impl RunRenderer for Counted {
         self.runs += 1;
         r
     }
+
+    fn kernels(&self) -> links_core::node::Kernels {
+        self.inner.kernels()
+    }
 }
 
 /// The node's two scene banks (frame `f`'s scene lands in bank `f % 2`), 128 KB each as

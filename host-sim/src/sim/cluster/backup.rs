@@ -13,6 +13,7 @@
 //! A node renders a scanline piece while the previous one waits in its outbox.
 
 use super::exec::Ps;
+use super::run::trace_run;
 use crate::cost::CycleModel;
 use links_core::backup::{
     self, rc, BackupNode, BackupRc, BackupWork, Health, RcLine, Turn, BROADCAST, MAX_ADDR,
@@ -20,7 +21,8 @@ use links_core::backup::{
 };
 use links_core::board::{BoardProfile, LineProfile};
 use links_core::image::SceneView;
-use links_core::render::{render_run, Rgb8, Stats, Techniques, Tracer};
+use links_core::num::{Fx, Storage};
+use links_core::render::{Rgb8, Stats, Techniques};
 use links_core::wire::{Job, Region};
 use std::fmt;
 
@@ -237,10 +239,14 @@ impl Work<'_> {
             .views
             .get(frame as usize)
             .ok_or_else(|| BackupSimError::Scene(format!("no frame {frame}")))?;
-        let mut t = Tracer::<f32>::with_techniques(view, self.techniques);
         let mut out = vec![Rgb8::default(); len as usize];
-        render_run(&mut t, y, x, &mut out).map_err(|e| BackupSimError::Scene(format!("{e:?}")))?;
-        Ok((out.as_flattened().to_vec(), t.stats))
+        // The kernel of the scene's storage, as the node's.
+        let stats = match view.storage() {
+            Storage::F32 => trace_run::<f32>(view, self.techniques, (y, x), &mut out),
+            Storage::Q16_16 => trace_run::<Fx>(view, self.techniques, (y, x), &mut out),
+        }
+        .map_err(|e| BackupSimError::Scene(format!("{e:?}")))?;
+        Ok((out.as_flattened().to_vec(), stats))
     }
 }
 

@@ -48,7 +48,8 @@ pub use sweep::{
 use crate::cost::CycleModel;
 use exec::ExecError;
 use links_core::board::{BoardProfile, NodeBoard};
-use links_core::node::{NodeConfig, NodeReport};
+use links_core::node::{Kernels, NodeConfig, NodeReport};
+use links_core::num::Storage;
 use links_core::render::{Stats, Techniques};
 use links_core::root::{RootConfig, RootError, RootReport};
 use links_core::sched::Policy;
@@ -98,7 +99,13 @@ pub struct SimConfig {
     pub stuck: Vec<StuckReady>,
     /// Node core clock (Hz).
     pub clock_hz: f64,
+    /// The weights a node's work on an f32 image is charged with.
     pub model: CycleModel,
+    /// The weights a node's work on a Q16.16 image is charged with.
+    pub fixed_model: CycleModel,
+    /// The kernels every node carries: a scene of a storage none of them reads is refused
+    /// before the run ([`SimError::NoKernel`]). Default: the profile's firmware's.
+    pub kernels: Kernels,
     /// The speed techniques the nodes' tracers use (default: all). None changes a pixel;
     /// they change the operation counts and with them the nodes' compute time.
     pub techniques: Techniques,
@@ -155,6 +162,14 @@ impl Default for SimConfig {
 }
 
 impl SimConfig {
+    /// The weights a node's work on an image stored as `storage` is charged with.
+    pub fn model_for(&self, storage: Storage) -> CycleModel {
+        match storage {
+            Storage::F32 => self.model,
+            Storage::Q16_16 => self.fixed_model,
+        }
+    }
+
     /// The default set-up on `profile`: its link's timing, its core's clock and cost-model
     /// weights, its node's scene banks, and an RC that overlaps the wire with its work only
     /// if the profile's does. 64 nodes, 1 bus, decreasing sizes, no faults.
@@ -169,7 +184,9 @@ impl SimConfig {
             link: LinkModel::for_link(&profile.link),
             stuck: Vec::new(),
             clock_hz: profile.core_clock_hz as f64,
-            model: CycleModel::for_core(profile.core),
+            model: CycleModel::for_kernel(profile.core, Storage::F32),
+            fixed_model: CycleModel::for_kernel(profile.core, Storage::Q16_16),
+            kernels: profile.kernels,
             techniques: Techniques::ALL,
             faults: Faults::default(),
             noise: Noise::default(),
@@ -327,6 +344,14 @@ pub enum SimError {
     NotIdentical {
         what: String,
     },
+    /// Frame `frame`'s scene is stored as `image`, which none of the nodes' kernels reads
+    /// ([`SimConfig::kernels`]), or its storage differs from frame 0's (`mixed`).
+    NoKernel {
+        frame: u16,
+        image: Storage,
+        kernels: Kernels,
+        mixed: bool,
+    },
     /// An error of one point of a sweep.
     Context {
         what: String,
@@ -470,6 +495,26 @@ impl fmt::Display for SimError {
             } => write!(
                 f,
                 "frame {frame}'s scene image is {bytes} bytes; the {node} node's scene bank holds {bank} bytes: make the scene smaller (fewer triangles, a smaller texture)"
+            ),
+            SimError::NoKernel {
+                frame,
+                image,
+                mixed: true,
+                ..
+            } => write!(
+                f,
+                "frame {frame}'s scene is {}, frame 0's is not: a run renders one storage",
+                image.name()
+            ),
+            SimError::NoKernel {
+                frame,
+                image,
+                kernels,
+                mixed: false,
+            } => write!(
+                f,
+                "frame {frame}'s scene is {} but the nodes carry {kernels} only (--node-kernels)",
+                image.name()
             ),
             SimError::Root(e) => write!(f, "root: {e}"),
             SimError::Unfinished(u) => write!(f, "{u}"),

@@ -116,7 +116,10 @@ impl RcCost {
     /// The RC of `profile`: its core's instruction counts at its clock.
     pub fn for_board(profile: &BoardProfile) -> RcCost {
         let cost = match profile.core {
-            Core::CortexM4F => Self::CORTEX_M4F,
+            // The RC's work is integer code (framing, CRCs, copies): the M3 runs the M4F's
+            // Thumb-2 instructions, so the M4F's counts (an estimate until measured), at
+            // the board's clock.
+            Core::CortexM4F | Core::CortexM3 => Self::CORTEX_M4F,
         };
         RcCost {
             clock_hz: profile.core_clock_hz as f64,

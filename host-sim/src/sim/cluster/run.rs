@@ -17,7 +17,8 @@ use super::timeline::{SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
 use crate::cost::{CycleModel, SceneCheckCost};
 use links_core::image::SceneView;
-use links_core::node::{run_node, NodeReport, RunRenderer, WorkClock};
+use links_core::node::{run_node, Kernels, NodeReport, RunRenderer, WorkClock};
+use links_core::num::{Fx, Real, Storage};
 use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Tracer};
 use links_core::root::{
     run_bus, PixelSink, RootConfig, RootError, RootReport, RootState, MAX_BUSES,
@@ -28,9 +29,11 @@ use std::cell::{Cell, RefCell};
 use std::rc::Rc;
 use std::sync::Arc;
 
-/// The tracer in `f32` (the nodes' format) with the configured techniques, optionally
-/// through a [`RunCache`].
+/// The tracer of the scene's storage (`f32` or Q16.16, as a node's
+/// [`links_core::node::TracingByImage`]) with the configured techniques, optionally through a
+/// [`RunCache`]. It carries `kernels` (the run checked them against every scene first).
 struct SimRenderer {
+    kernels: Kernels,
     cache: Option<Arc<RunCache>>,
     crcs: Rc<Vec<u32>>,
     techniques: Techniques,
@@ -48,10 +51,23 @@ impl SimRenderer {
         x: u32,
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError> {
-        let mut t = Tracer::<f32>::with_techniques(scene, self.techniques);
-        render_run(&mut t, y, x, out)?;
-        Ok(t.stats)
+        match scene.storage() {
+            Storage::F32 => trace_run::<f32>(scene, self.techniques, (y, x), out),
+            Storage::Q16_16 => trace_run::<Fx>(scene, self.techniques, (y, x), out),
+        }
     }
+}
+
+/// One run of `scene` in number type `T` with `techniques`.
+pub(super) fn trace_run<T: Real>(
+    scene: SceneView<'_>,
+    techniques: Techniques,
+    (y, x): (u32, u32),
+    out: &mut [Rgb8],
+) -> Result<Stats, RenderError> {
+    let mut t = Tracer::<T>::with_techniques(scene, techniques);
+    render_run(&mut t, y, x, out)?;
+    Ok(t.stats)
 }
 
 impl RunRenderer for SimRenderer {
@@ -89,6 +105,10 @@ impl RunRenderer for SimRenderer {
             m.insert(key, (out.as_flattened().to_vec(), stats));
         }
         Ok(stats)
+    }
+
+    fn kernels(&self) -> Kernels {
+        self.kernels
     }
 }
 
@@ -154,7 +174,7 @@ pub fn simulate_frame(image: &[u8], cfg: &SimConfig) -> Result<SimReport, SimErr
 /// `f + 1`'s scene is broadcast into the nodes' second bank while frame `f` renders. Nodes in
 /// `cfg.deaths` stop answering at their time; the RC re-issues their work.
 pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimReport, SimError> {
-    let frames = check_config(scenes, cfg)?;
+    let (frames, storage) = check_config(scenes, cfg)?;
     let rc = RootConfig {
         policy: cfg.policy,
         nodes: cfg.nodes,
@@ -235,6 +255,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     }
     tasks.extend(node_tasks(
         cfg,
+        storage,
         (&clock, &star, &log),
         (&wire, &counters),
         &busy,
@@ -316,6 +337,7 @@ fn line_setup<'a, S: AsRef<[u8]>>(
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| SimError::Config(format!("backup line: {e}")))?;
     let width = root.borrow().size().0;
+    let model = cfg.model_for(views.first().map_or(Storage::F32, |v| v.storage()));
     Ok(LineSetup {
         cfg,
         clock: clock.clone(),
@@ -325,7 +347,7 @@ fn line_setup<'a, S: AsRef<[u8]>>(
         work: Work {
             views,
             width,
-            model: cfg.model,
+            model,
             clock_hz: cfg.clock_hz,
             techniques: cfg.techniques,
         },
@@ -333,8 +355,9 @@ fn line_setup<'a, S: AsRef<[u8]>>(
     })
 }
 
-/// Refuse a configuration the simulator cannot run; the number of frames otherwise.
-fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, SimError> {
+/// Refuse a configuration the simulator cannot run; the number of frames and the storage
+/// of their scenes otherwise.
+fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<(u16, Storage), SimError> {
     if cfg.nodes == 0 || cfg.nodes as usize > links_core::root::MAX_NODES {
         return Err(SimError::Config(format!("{} nodes (1 to 256)", cfg.nodes)));
     }
@@ -407,7 +430,28 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<u16, Si
             bank: cfg.board.largest_bank(),
         });
     }
-    Ok(frames)
+    Ok((frames, check_kernels(scenes, cfg.kernels)?))
+}
+
+/// The storage every scene shares, if the nodes' `kernels` read it.
+fn check_kernels<S: AsRef<[u8]>>(scenes: &[S], kernels: Kernels) -> Result<Storage, SimError> {
+    let mut first = None;
+    for (frame, s) in scenes.iter().enumerate() {
+        let image = SceneView::new(s.as_ref())
+            .map_err(|e| SimError::Config(format!("frame {frame}'s scene: {e}")))?
+            .storage();
+        let mixed = first.is_some_and(|f| f != image);
+        if mixed || !kernels.run(image) {
+            return Err(SimError::NoKernel {
+                frame: frame as u16,
+                image,
+                kernels,
+                mixed,
+            });
+        }
+        first = Some(image);
+    }
+    Ok(first.unwrap_or(Storage::F32))
 }
 
 /// Refuse a link the board cannot run: the firmware's code needs the firmware's framing,
@@ -557,6 +601,7 @@ impl Drop for SlaveCountersOut<'_, '_> {
 /// on the firmware link each node's task also runs its link task ([`NodeOnLink`]).
 fn node_tasks<'a>(
     cfg: &SimConfig,
+    storage: Storage,
     (clock, star, log): (&SharedClock, &SharedStar, &Option<SharedTimeline>),
     (wire, counters): (&Option<SharedWire>, &LinkReport),
     busy: &Rc<RefCell<Vec<Ps>>>,
@@ -568,7 +613,7 @@ fn node_tasks<'a>(
     for (i, ([a, b], report)) in banks.iter_mut().zip(node_reports.iter_mut()).enumerate() {
         let mut work = SimWork {
             clock: clock.clone(),
-            model: cfg.model,
+            model: cfg.model_for(storage),
             hz: cfg.clock_hz,
             busy: 0,
             report: busy.clone(),
@@ -576,6 +621,7 @@ fn node_tasks<'a>(
             log: log.clone(),
         };
         let mut renderer = SimRenderer {
+            kernels: cfg.kernels,
             cache: cfg.cache.clone(),
             crcs: crcs.clone(),
             techniques: cfg.techniques,
