@@ -1,6 +1,7 @@
 //! The firmware's own link in the simulator: an emulated SPI peripheral in virtual time under
-//! `links_core::spi` (the RC's [`MasterLink`], each node's `SlaveTask` and `SlaveHandle`),
-//! so the cluster runs the code the boards run.
+//! `links_core::spi` (the RC's split master, [`MasterFront`] + [`MasterTask`], where the
+//! board overlaps, else the inline [`MasterLink`]; each node's `SlaveTask` and
+//! `SlaveHandle`), so the cluster runs the code the boards run.
 //!
 //! - **RC side** ([`SpiMaster`], a [`MasterPort`] per bus): chip-selects asserted with the
 //!   profile's set-up time, released with its hold time; full-duplex transfers of whole bytes
