@@ -261,7 +261,7 @@ fn timed_master(
     Box::pin(async move {
         let mut banks = Box::new([[0u8; BANK]; 3]);
         let report = Rc::new(RefCell::new(vec![Default::default()]));
-        let mut bus = FirmwareBus::new(&wire, 0, &mut banks, report);
+        let mut bus = FirmwareBus::new(&wire, 0, &mut banks, None, report);
         let node = bus.wait_ready().await;
         let mut rx = vec![0u8; 2000];
         bus.tx_bank()[..rc_len].fill(0x11);

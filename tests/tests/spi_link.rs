@@ -162,6 +162,39 @@ fn a_ready_line_stuck_high_is_ignored_until_seen_low() {
     assert_eq!(master.ready(), Some(0), "seen low: counted again");
 }
 
+/// The same rule on the split link (`MasterFront` + `MasterTask`): the task clocks node 0's
+/// stuck-high line once, sees no acknowledgement, and the front stops offering it until the
+/// task's snapshot shows it low; node 1 is served meanwhile.
+#[test]
+fn split_link_ignores_a_ready_line_stuck_high_until_seen_low() {
+    let bus = bus(2);
+    let (shared, mut front, mut task, mut mport) = master_split(&bus, 0);
+    // The task publishes the lines, then waits for a job or an edge: `polls` lets it run.
+    let mut step = |n: u32| run(select(task.step(&mut mport, shared), polls(n)));
+    bus.borrow_mut().nodes[0].ready = true;
+    step(5);
+    assert_eq!(front.ready(), Some(0));
+    front.start(Transfer::Exchange(0), 1).unwrap();
+    step(200);
+    let mut rx = [0u8; MAX_MESSAGE];
+    assert_eq!(run(front.finish(&mut rx)), Ok(0));
+    assert_eq!(shared.counters().no_ack, 1);
+    assert_eq!(bus.borrow().transfers, 0, "nothing clocked");
+    step(5);
+    assert_eq!(front.ready(), None, "still high, ignored");
+    bus.borrow_mut().nodes[1].ready = true;
+    step(5);
+    assert_eq!(front.ready(), Some(1), "the others are served");
+    assert!(front.line(0), "the line itself still reads high");
+    bus.borrow_mut().nodes[1].ready = false;
+    bus.borrow_mut().nodes[0].ready = false;
+    step(5);
+    assert_eq!(front.ready(), None);
+    bus.borrow_mut().nodes[0].ready = true;
+    step(5);
+    assert_eq!(front.ready(), Some(0), "seen low: counted again");
+}
+
 #[test]
 fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
     let bus = bus(2);

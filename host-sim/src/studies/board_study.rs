@@ -121,8 +121,9 @@ fn lifts_table(
         ..base
     };
     let wired = BoardProfile::F407.buses_for(nodes).min(MAX_BUSES as u16);
-    // An overlapping RC and a link without chip-select time are not what the firmware's
-    // code does: those variants run on the idealised link (the same wire otherwise).
+    // The idealised link (the same wire and the same overlapping RC, but a node inbox
+    // without bound) shows what the node's two RX banks cost; a link without chip-select
+    // time is not what the firmware's code does: those variants run on the idealised link.
     let mut no_cs = SimConfig {
         link: LinkModel::Ideal,
         ..f407.clone()
@@ -131,9 +132,8 @@ fn lifts_table(
     let variants = [
         ("F407, one bus (a star)", f407.clone()),
         (
-            "RC overlaps the wire (idealised link)",
+            "idealised link (node inbox unbounded)",
             SimConfig {
-                rc_double_buffer: true,
                 link: LinkModel::Ideal,
                 ..f407.clone()
             },

@@ -9,8 +9,8 @@ use super::framemem::{self, FrameMemory, ViaRoot};
 use super::rccost::RcClock;
 use super::relay::{Relays, Topology};
 use super::spi_bus::{
-    FirmwareBus, FirmwareLinkCounters, LinkModel, NodeOnLink, SharedWire, SpiSlave, Wire,
-    WireTiming,
+    master_task, FirmwareBus, FirmwareLinkCounters, LinkModel, NodeOnLink, Overlapped, SharedWire,
+    SpiSlave, Wire, WireTiming,
 };
 use super::star::{SharedStar, SimBus, SimNodeLink, Star};
 use super::timeline::{SharedTimeline, Timeline};
@@ -23,7 +23,9 @@ use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Trace
 use links_core::root::{
     run_bus, PixelSink, RootConfig, RootError, RootReport, RootState, MAX_BUSES,
 };
-use links_core::spi::{Bank, MasterCounters, SlaveBanks, SlaveCounters, SlaveShared, BANK};
+use links_core::spi::{
+    Bank, MasterCounters, MasterShared, SlaveBanks, SlaveCounters, SlaveShared, BANK,
+};
 use links_core::wire;
 use std::cell::{Cell, RefCell};
 use std::rc::Rc;
@@ -549,11 +551,29 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
             }),
             Some(wire) => {
                 let (wire, report) = (wire.clone(), counters.master.clone());
+                let overlaps = cfg.rc_double_buffer;
                 Box::pin(async move {
                     let mut banks = Box::new([[0u8; BANK]; 3]);
-                    let mut bus = FirmwareBus::new(&wire, b, &mut banks, report);
-                    let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
-                    bus_results.borrow_mut()[b] = Some(r);
+                    if !overlaps {
+                        let mut bus = FirmwareBus::new(&wire, b, &mut banks, None, report);
+                        let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
+                        bus_results.borrow_mut()[b] = Some(r);
+                        return;
+                    }
+                    // The board's split link: the bus logic and the clocking task.
+                    let shared = MasterShared::new();
+                    let task = Box::pin(master_task(wire.clone(), b, &shared));
+                    let mut bus = FirmwareBus::new(&wire, b, &mut banks, Some(&shared), report);
+                    let logic = Box::pin(async {
+                        let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
+                        bus_results.borrow_mut()[b] = Some(r);
+                    });
+                    Overlapped {
+                        shared: &shared,
+                        logic,
+                        task,
+                    }
+                    .await
                 })
             }
         };

@@ -1,6 +1,7 @@
 //! The firmware's own link in the simulator: an emulated SPI peripheral in virtual time under
-//! `links_core::spi` (the RC's [`MasterLink`], each node's `SlaveTask` and `SlaveHandle`),
-//! so the cluster runs the code the boards run.
+//! `links_core::spi` (the RC's split master, [`MasterFront`] + [`MasterTask`], where the
+//! board overlaps, else the inline [`MasterLink`]; each node's `SlaveTask` and
+//! `SlaveHandle`), so the cluster runs the code the boards run.
 //!
 //! - **RC side** ([`SpiMaster`], a [`MasterPort`] per bus): chip-selects asserted with the
 //!   profile's set-up time, released with its hold time; full-duplex transfers of whole bytes
@@ -25,8 +26,8 @@ use links_core::board::LinkProfile;
 use links_core::link::{LinkError, NodeId, RootBus, Transfer};
 use links_core::spi::nc_header;
 use links_core::spi::{
-    Armed, Bank, MasterCounters, MasterLink, MasterPort, PortError, Select, SlaveCounters,
-    SlavePort, HEADER, TRAILER,
+    Armed, Bank, MasterCounters, MasterFront, MasterLink, MasterPort, MasterShared, MasterTask,
+    PortError, Select, SlaveCounters, SlavePort, HEADER, TRAILER,
 };
 use std::cell::RefCell;
 use std::future::Future;
@@ -526,11 +527,113 @@ impl SlavePort for SpiSlave {
     }
 }
 
-/// The RC's end of one bus on the firmware link: [`MasterLink`] over [`SpiMaster`], with
-/// what the star's bus did around it (a relay tree's scene pieces arriving, node frames
-/// forwarded up, the collector's snoop, the bus's counters).
-pub struct FirmwareBus<'b> {
-    link: MasterLink<'b, SpiMaster>,
+/// The RC's link code on one bus: the inline [`MasterLink`] (clocks inside `finish`), or
+/// the split [`MasterFront`] whose [`MasterTask`] clocks over the port while the RC
+/// composes (the board's, where the profile's `rc_overlaps` holds; run the pair with
+/// [`Overlapped`]).
+pub enum MasterEnd<'s, 'b> {
+    Inline(MasterLink<'b, SpiMaster>),
+    Split(MasterFront<'s, 'b>),
+}
+
+impl MasterEnd<'_, '_> {
+    fn counters(&self) -> MasterCounters {
+        match self {
+            MasterEnd::Inline(l) => l.counters,
+            MasterEnd::Split(f) => f.counters(),
+        }
+    }
+}
+
+impl RootBus for MasterEnd<'_, '_> {
+    fn nodes(&self) -> (NodeId, u16) {
+        match self {
+            MasterEnd::Inline(l) => l.nodes(),
+            MasterEnd::Split(f) => f.nodes(),
+        }
+    }
+
+    fn ready(&self) -> Option<NodeId> {
+        match self {
+            MasterEnd::Inline(l) => l.ready(),
+            MasterEnd::Split(f) => f.ready(),
+        }
+    }
+
+    fn line(&self, node: NodeId) -> bool {
+        match self {
+            MasterEnd::Inline(l) => l.line(node),
+            MasterEnd::Split(f) => f.line(node),
+        }
+    }
+
+    async fn wait_ready(&mut self) -> NodeId {
+        match self {
+            MasterEnd::Inline(l) => l.wait_ready().await,
+            MasterEnd::Split(f) => f.wait_ready().await,
+        }
+    }
+
+    fn tx_bank(&mut self) -> &mut [u8] {
+        match self {
+            MasterEnd::Inline(l) => l.tx_bank(),
+            MasterEnd::Split(f) => f.tx_bank(),
+        }
+    }
+
+    fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
+        match self {
+            MasterEnd::Inline(l) => l.start(transfer, len),
+            MasterEnd::Split(f) => f.start(transfer, len),
+        }
+    }
+
+    async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+        match self {
+            MasterEnd::Inline(l) => l.finish(rx).await,
+            MasterEnd::Split(f) => f.finish(rx).await,
+        }
+    }
+}
+
+/// The RC's bus logic (over a [`MasterEnd::Split`]) and its [`MasterTask`] polled as one
+/// simulated task: the task, then the logic, again while a pass moved the state they share
+/// (the executor detects quiescence by the world's change counter, which a hand-over alone
+/// does not touch). On the board they are two executors at two interrupt priorities.
+pub struct Overlapped<'s, 'b, F, T> {
+    pub shared: &'s MasterShared<'b>,
+    pub logic: Pin<Box<F>>,
+    pub task: Pin<Box<T>>,
+}
+
+impl<F: Future, T: Future> Future for Overlapped<'_, '_, F, T> {
+    type Output = F::Output;
+    fn poll(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<F::Output> {
+        loop {
+            let before = self.shared.activity();
+            let _ = self.task.as_mut().poll(cx);
+            if let Poll::Ready(v) = self.logic.as_mut().poll(cx) {
+                return Poll::Ready(v);
+            }
+            if self.shared.activity() == before {
+                return Poll::Pending;
+            }
+        }
+    }
+}
+
+/// The clocking half of the split link over the emulated port, as a future for
+/// [`Overlapped`].
+pub async fn master_task(wire: SharedWire, bus: usize, shared: &MasterShared<'_>) {
+    let mut port = SpiMaster::new(&wire, bus);
+    MasterTask::new().run(&mut port, shared).await
+}
+
+/// The RC's end of one bus on the firmware link: its link code ([`MasterEnd`]) over
+/// [`SpiMaster`], with what the star's bus did around it (a relay tree's scene pieces
+/// arriving, node frames forwarded up, the collector's snoop, the bus's counters).
+pub struct FirmwareBus<'s, 'b> {
+    link: MasterEnd<'s, 'b>,
     star: SharedStar,
     clock: SharedClock,
     bus: usize,
@@ -540,21 +643,35 @@ pub struct FirmwareBus<'b> {
     report: Rc<RefCell<Vec<MasterCounters>>>,
 }
 
-impl<'b> FirmwareBus<'b> {
+impl<'s, 'b> FirmwareBus<'s, 'b> {
+    /// Bus `bus` over `banks` (two TX, one RX): the split link over `split` (whose task
+    /// the caller runs, see [`Overlapped`]), the inline one without.
     pub fn new(
         wire: &SharedWire,
         bus: usize,
         banks: &'b mut [Bank; 3],
+        split: Option<&'s MasterShared<'b>>,
         report: Rc<RefCell<Vec<MasterCounters>>>,
     ) -> Self {
-        let (star, first) = {
+        let (star, first, count) = {
             let w = wire.borrow();
-            (w.star.clone(), w.buses[bus].first)
+            (w.star.clone(), w.buses[bus].first, w.buses[bus].count)
         };
         let clock = star.borrow().clock().clone();
         let [tx0, tx1, rx] = banks;
+        let link = match split {
+            Some(shared) => {
+                MasterEnd::Split(MasterFront::new(shared, first, count, [tx0, tx1], rx))
+            }
+            None => MasterEnd::Inline(MasterLink::new(
+                SpiMaster::new(wire, bus),
+                first,
+                [tx0, tx1],
+                rx,
+            )),
+        };
         Self {
-            link: MasterLink::new(SpiMaster::new(wire, bus), first, [tx0, tx1], rx),
+            link,
             star,
             clock,
             bus,
@@ -564,7 +681,7 @@ impl<'b> FirmwareBus<'b> {
     }
 }
 
-impl RootBus for FirmwareBus<'_> {
+impl RootBus for FirmwareBus<'_, '_> {
     fn nodes(&self) -> (NodeId, u16) {
         self.link.nodes()
     }
@@ -630,7 +747,7 @@ impl RootBus for FirmwareBus<'_> {
             Transfer::Broadcast => s.broadcast_done(self.bus),
         }
         if let Some(slot) = self.report.borrow_mut().get_mut(self.bus) {
-            *slot = self.link.counters;
+            *slot = self.link.counters();
         }
         Ok(got)
     }

@@ -49,6 +49,14 @@ struct State<'b> {
     /// changed them (the front waits for it to move).
     lines: [u32; LINE_WORDS],
     lines_seq: u32,
+    /// Nodes (bit per index) whose handshake line stayed high through their selection: a
+    /// stuck line or a node not listening. The front does not offer them as ready until
+    /// the task sees their line low again, so one stuck line cannot starve the bus (the
+    /// root broadcasts only while no node is ready). [`super::MasterLink`]'s rule.
+    ignored: [u32; LINE_WORDS],
+    /// Bumped on every hand-over, hand-back and line change (see
+    /// [`MasterShared::activity`]).
+    activity: u32,
     counters: MasterCounters,
     task_waker: Option<Waker>,
     front_waker: Option<Waker>,
@@ -81,6 +89,8 @@ impl<'b> MasterShared<'b> {
                 done: None,
                 lines: [0; LINE_WORDS],
                 lines_seq: 0,
+                ignored: [0; LINE_WORDS],
+                activity: 0,
                 counters: MasterCounters {
                     exchanges: 0,
                     broadcasts: 0,
@@ -111,7 +121,15 @@ impl<'b> MasterShared<'b> {
         self.with(|s| s.job.is_some() || s.clocking)
     }
 
-    /// Read every handshake line of `port` into the snapshot; wake the front on a change.
+    /// A count of the state changes between the two halves (a transfer handed over, taken,
+    /// handed back, collected; the lines changing): a single-threaded host executor that
+    /// polls both halves in one task re-polls them until it stops moving.
+    pub fn activity(&self) -> u32 {
+        self.with(|s| s.activity)
+    }
+
+    /// Read every handshake line of `port` into the snapshot (forgetting the ignored nodes
+    /// whose line is low); wake the front on a change.
     fn publish_lines<P: MasterPort>(&self, port: &P) {
         let mut lines = [0u32; LINE_WORDS];
         for i in 0..port.count().min((LINE_WORDS * 32) as u16) {
@@ -120,12 +138,27 @@ impl<'b> MasterShared<'b> {
             }
         }
         self.with(|s| {
+            for (ig, l) in s.ignored.iter_mut().zip(lines) {
+                *ig &= l;
+            }
             if s.lines != lines {
                 s.lines = lines;
                 s.lines_seq = s.lines_seq.wrapping_add(1);
+                s.activity = s.activity.wrapping_add(1);
                 wake(&mut s.front_waker);
             }
         });
+    }
+
+    /// The lines up in the snapshot less the ignored nodes'.
+    fn offered(&self) -> [u32; LINE_WORDS] {
+        self.with(|s| {
+            let mut l = s.lines;
+            for (w, ig) in l.iter_mut().zip(s.ignored) {
+                *w &= !ig;
+            }
+            l
+        })
     }
 }
 
@@ -179,10 +212,12 @@ impl MasterTask {
         // waits for `done`); `clocking` keeps the transfer visible as in flight.
         let Some(Job { tx, rx, .. }) = shared.with(|s| {
             s.clocking = true;
+            s.activity = s.activity.wrapping_add(1);
             s.job.take()
         }) else {
             return;
         };
+        let no_ack = self.counters.no_ack;
         let mut wire = Wire {
             port: &mut *port,
             tx: &mut *tx,
@@ -192,8 +227,15 @@ impl MasterTask {
         let len = wire.clock(what, n).await;
         let counters = self.counters;
         shared.with(|s| {
+            if let (Clocked::Exchange(i), true) = (what, counters.no_ack != no_ack) {
+                // Its line stayed high through the selection: not offered until seen low.
+                if let Some(w) = s.ignored.get_mut(i as usize / 32) {
+                    *w |= 1 << (i % 32);
+                }
+            }
             s.done = Some(Done { tx, rx, len });
             s.clocking = false;
+            s.activity = s.activity.wrapping_add(1);
             s.counters = counters;
             wake(&mut s.front_waker);
         });
@@ -273,8 +315,8 @@ impl RootBus for MasterFront<'_, '_> {
 
     async fn wait_ready(&mut self) -> NodeId {
         loop {
-            let (seq, lines) = self.shared.with(|s| (s.lines_seq, s.lines));
-            if let Some(n) = self.ready_in(&lines) {
+            let seq = self.shared.with(|s| s.lines_seq);
+            if let Some(n) = self.ready_in(&self.shared.offered()) {
                 return n;
             }
             poll_fn(|cx| {
@@ -292,8 +334,7 @@ impl RootBus for MasterFront<'_, '_> {
     }
 
     fn ready(&self) -> Option<NodeId> {
-        let lines = self.shared.with(|s| s.lines);
-        self.ready_in(&lines)
+        self.ready_in(&self.shared.offered())
     }
 
     fn line(&self, node: NodeId) -> bool {
@@ -335,6 +376,7 @@ impl RootBus for MasterFront<'_, '_> {
         self.started = true;
         self.shared.with(|s| {
             s.job = Some(Job { what, len, tx, rx });
+            s.activity = s.activity.wrapping_add(1);
             wake(&mut s.task_waker);
         });
         Ok(())
@@ -346,7 +388,10 @@ impl RootBus for MasterFront<'_, '_> {
         }
         let done = poll_fn(|cx| {
             self.shared.with(|s| match s.done.take() {
-                Some(d) => Poll::Ready(d),
+                Some(d) => {
+                    s.activity = s.activity.wrapping_add(1);
+                    Poll::Ready(d)
+                }
                 None => {
                     s.front_waker = Some(cx.waker().clone());
                     Poll::Pending
