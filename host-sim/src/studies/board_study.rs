@@ -56,7 +56,20 @@ fn profiles_table(
         "exchanges",
         "bytes clocked",
     ]);
+    // A board whose nodes do not read the image's storage (the F207's carry Q16.16 only)
+    // renders the scene converted to Q16.16, as `links render --board f207` does.
+    let storage = links_core::image::SceneView::new(image)
+        .map(|v| v.storage())
+        .map_err(|e| SimError::Config(format!("scene image: {e}")))?;
+    let fixed = links_core::fixed_image::to_fixed(image)
+        .map(|f| f.bytes)
+        .map_err(|e| format!("the scene in Q16.16: {e}"));
     for board in BoardProfile::ALL {
+        let image: &[u8] = if board.kernels.run(storage) {
+            image
+        } else {
+            fixed.as_deref().map_err(|e| SimError::Config(e.clone()))?
+        };
         for &nodes in counts {
             progress(&format!("board {}, {nodes} nodes", board.name));
             let base = SimConfig::buildable(board, nodes);
