@@ -260,8 +260,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         storage,
         (&clock, &star, &log),
         (&wire, &counters),
-        &busy,
-        &crcs,
+        (&busy, &crcs),
         &mut banks,
         &mut node_reports,
     ));
@@ -624,8 +623,7 @@ fn node_tasks<'a>(
     storage: Storage,
     (clock, star, log): (&SharedClock, &SharedStar, &Option<SharedTimeline>),
     (wire, counters): (&Option<SharedWire>, &LinkReport),
-    busy: &Rc<RefCell<Vec<Ps>>>,
-    crcs: &Rc<Vec<u32>>,
+    (busy, crcs): (&Rc<RefCell<Vec<Ps>>>, &Rc<Vec<u32>>),
     banks: &'a mut [[Vec<u8>; 2]],
     node_reports: &'a mut [NodeReport],
 ) -> Vec<Option<Task<'a>>> {
