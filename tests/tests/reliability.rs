@@ -167,8 +167,26 @@ fn a_cluster_that_cannot_finish_names_the_nodes_and_what_they_lacked() {
     println!("{e}");
     assert!(e.contains("frame 0"), "{e}");
     assert!(e.contains("never returned"), "{e}");
-    assert!(e.contains("nodes 0, 1, 2, 3 declared dead"), "{e}");
-    assert!(e.contains("killed at 0.100 s"), "{e}");
+    // Every node holding a sub-screen never returned is named and declared dead (which
+    // nodes held one when they died depends on the node kernel's speed: a node that had
+    // finished its jobs owes nothing and is never declared dead); every death is named.
+    let holders: Vec<&str> = e
+        .split("held by node ")
+        .skip(1)
+        .filter_map(|t| t.split_whitespace().next())
+        .collect();
+    assert!(!holders.is_empty(), "{e}");
+    let dead = e
+        .split("; nodes ")
+        .nth(1)
+        .and_then(|t| t.split(" declared dead").next())
+        .unwrap_or_default();
+    for h in holders {
+        assert!(dead.split(", ").any(|d| d == h), "node {h} not declared dead: {e}");
+    }
+    for n in 0..4 {
+        assert!(e.contains(&format!("node {n} killed at 0.100 s")), "{e}");
+    }
     // Node 1 dies at once; node 0 lives but hears no broadcast at all, so it never gets the
     // scene, and no roll call reaches it.
     let cfg = SimConfig {
