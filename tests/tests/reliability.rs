@@ -182,7 +182,10 @@ fn a_cluster_that_cannot_finish_names_the_nodes_and_what_they_lacked() {
         .and_then(|t| t.split(" declared dead").next())
         .unwrap_or_default();
     for h in holders {
-        assert!(dead.split(", ").any(|d| d == h), "node {h} not declared dead: {e}");
+        assert!(
+            dead.split(", ").any(|d| d == h),
+            "node {h} not declared dead: {e}"
+        );
     }
     for n in 0..4 {
         assert!(e.contains(&format!("node {n} killed at 0.100 s")), "{e}");
