@@ -37,7 +37,9 @@ mod fw {
         self, BackupNode, BackupRender, BackupRenderError, FrameReader, Piece,
     };
     use links_core::board::Memory;
-    use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer};
+    use links_core::node::{
+        restore_lent, run_node_landing, NodeConfig, NodeReport, RealTime, RunRenderer,
+    };
     use links_core::render::Rgb8;
     use links_core::spi::{Bank, SlaveBanks, SlaveShared, SlaveTask};
     use nc_fw::backup_line::{IDLE_MS, PIECE};
@@ -168,29 +170,29 @@ mod fw {
     #[embassy_executor::task]
     async fn node_task(
         shared: &'static SlaveShared<'static>,
-        mut even: &'static mut [u8],
+        even: &'static mut [u8],
         odd: &'static mut [u8],
         backup: &'static Backup,
     ) {
         let mut renderer = nc_fw::Renderer::default();
         let mut link = shared.handle();
         let mut clock = RealTime;
+        // Frame f's scene in bank f % 2; while a run renders from one, the other is lent to
+        // the link task, which writes broadcast scene chunks straight into it.
+        let mut banks: [&'static mut [u8]; 2] = [even, odd];
         loop {
             let mut report = NodeReport::default();
-            let spi = run_node(
-                NodeConfig::default(),
-                &mut link,
-                &mut clock,
-                &mut renderer,
-                [&mut *even, &mut *odd],
-                &mut report,
-            );
-            match select(spi, WANT_BANK.wait()).await {
+            let parts = (&mut link, shared, &mut clock, &mut renderer);
+            let spi = run_node_landing(NodeConfig::default(), parts, &mut banks, &mut report);
+            let ended = select(spi, WANT_BANK.wait()).await;
+            // A bank still lent when the node logic was dropped comes back first.
+            restore_lent(shared, &mut banks);
+            match ended {
                 Either::First(Ok(())) => info!("stopped: {}", report),
                 Either::First(Err(e)) => warn!("node error {}: {}", e, report),
                 Either::Second(()) => {
                     info!("backup line: the RC serves this node over the line");
-                    serve_line(backup, &mut even, &mut renderer).await;
+                    serve_line(backup, &mut banks[0], &mut renderer).await;
                     // The even bank now holds the line's scene: no cache from it survives.
                     renderer.forget();
                     info!("backup line: back to SPI");

@@ -34,7 +34,7 @@ pub mod testkit;
 pub mod trace;
 
 // The short paths: every module at the crate root, as before the layers.
-pub use cluster::{backup, board, link, node, relay, root, sched, spi, wire};
+pub use cluster::{backup, board, landing, link, node, relay, root, sched, spi, wire};
 pub use math::{fixed, geom, num};
 pub use scene::image;
 #[cfg(any(test, feature = "std"))]

@@ -914,12 +914,10 @@ mod hostile_bus {
 fn a_slow_dm_sets_the_frame_interval_and_a_fast_one_changes_nothing() {
     use links_host::cluster::steady_state_interval;
     let img = image("photo1.ron", 64, 60);
-    // The idealised link: on the firmware's, a node drains its two RX banks only between
-    // runs, so the next frame's scene broadcast mostly overflows and is repaired point to
-    // point (tests/tests/sim_spi.rs, docs/cluster.md); this test is about the DM's pacing.
+    // The F407's firmware link (the default): the next frame's scene lands in the nodes'
+    // lent banks while they render.
     let cfg = SimConfig {
         nodes: 8,
-        link: LinkModel::Ideal,
         ..SimConfig::default()
     };
     let render = steady_state_interval(&img, &cfg, 8).expect("simulates");
@@ -1069,12 +1067,10 @@ fn a_death_during_an_animation_and_false_alarms_keep_every_frame_exact() {
     let a = image("photo1.ron", 64, 60);
     let b = image("reflections.ron", 64, 60);
     let scenes = [a.clone(), b.clone(), a.clone()];
-    // The idealised link (the death's timing assumes the pipelined broadcast; the firmware
-    // link's animation with a death is in tests/tests/sim_spi.rs).
+    // The F407's firmware link (the default).
     let cfg = SimConfig {
         nodes: 8,
         keep_frames: true,
-        link: LinkModel::Ideal,
         ..SimConfig::default()
     };
     let t = simulate(&scenes, &cfg).expect("simulates").frame_done_s;
@@ -1122,8 +1118,10 @@ fn rc_double_buffering_hides_the_rcs_work_and_keeps_the_frame() {
     use links_host::cluster::rccost::RcCost;
     let img = image("photo1.ron", 64, 60);
     let want = reference(&img);
-    // The idealised link: the firmware's MasterLink clocks the wire only inside `finish`
-    // (links_core::spi::RC_OVERLAPS), so on it buffering has nothing to hide behind.
+    // The idealised link: there the switch is the RC's buffering alone. On the firmware
+    // link it chooses between two masters (split as rc-fw's, or clocking inside `finish`)
+    // whose transfers also start at different times, so even a free RC's frame moves (by
+    // 0.05% here).
     let cfg = |double, rc_cost| SimConfig {
         nodes: 16,
         rc_double_buffer: double,

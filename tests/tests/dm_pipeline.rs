@@ -8,7 +8,6 @@ use std::path::Path;
 use links_core::dm::CompileOptions;
 use links_core::wire::SCENE_CHUNK;
 use links_host::cluster::dmcost::{DmCost, DmMachine};
-use links_host::cluster::spi_bus::LinkModel;
 use links_host::cluster::timeline::BusTransfer;
 use links_host::cluster::{steady_state_interval, SimConfig};
 use links_host::scene_file::load_film;
@@ -43,12 +42,10 @@ fn a_films_steady_state_comes_from_its_distinct_frames() {
         max_depth: Some(1),
         ..size
     });
-    // The idealised link: on the firmware's, a node drains its two RX banks only between
-    // runs, so the next frame's scene broadcast overflows and is repaired point to point
-    // (docs/cluster.md, "The simulator"); this test is about the DM pipeline's pacing.
+    // The F407's firmware link (the default): the next frame's scene lands in the nodes'
+    // lent banks while they render.
     let cfg = SimConfig {
         nodes: 8,
-        link: LinkModel::Ideal,
         ..SimConfig::default()
     };
     let t_light = steady_state_interval(&light, &cfg, 6).expect("simulates");

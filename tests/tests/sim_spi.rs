@@ -402,10 +402,12 @@ fn the_firmware_links_frame_time_is_the_idealised_links_within_a_percent() {
 
 /// An animation on the firmware link, with a node dying in the last frame: every frame
 /// exact. The next frame's scene is broadcast while the nodes render; a node's link has two
-/// RX banks, which its logic drains only between runs, so most of those broadcasts land in
-/// the scratch bank (counted as overflows) and the root repairs the scene point to point.
+/// RX banks, which its logic drains only between runs, but it writes a broadcast scene chunk
+/// straight into the scene bank the node lent it (the one it is not rendering from), so no
+/// chunk overflows and none is repaired. (Before the lent bank: 16 overflows and 8 repairs
+/// here, and at 512x480 most of a scene.)
 #[test]
-fn an_animation_on_the_firmware_link_is_exact_and_overflowed_broadcasts_are_repaired() {
+fn an_animation_on_the_firmware_link_is_exact_and_broadcasts_land_in_the_lent_bank() {
     let a = image("photo1.ron", 64, 60);
     let b = image("reflections.ron", 64, 60);
     let scenes = [a.clone(), b.clone(), a.clone()];
@@ -413,9 +415,13 @@ fn an_animation_on_the_firmware_link_is_exact_and_overflowed_broadcasts_are_repa
         keep_frames: true,
         ..f407(8)
     };
-    let t = links_host::cluster::simulate(&scenes, &cfg)
-        .expect("simulates")
-        .frame_done_s;
+    let calm = links_host::cluster::simulate(&scenes, &cfg).expect("simulates");
+    let l = calm.link.expect("firmware link");
+    // Every broadcast chunk sent while a node rendered or checked a scene landed in its other
+    // scene bank: none overflowed the RX banks, none needed a repair.
+    assert!(l.landed > 0 && l.overflows == 0, "{l:?}");
+    assert_eq!(calm.root.repairs, 0, "{:?}", calm.root);
+    let t = calm.frame_done_s;
     let r = links_host::cluster::simulate(
         &scenes,
         &SimConfig {
@@ -429,7 +435,8 @@ fn an_animation_on_the_firmware_link_is_exact_and_overflowed_broadcasts_are_repa
     )
     .expect("simulates");
     let (ra, rb) = (reference(&a), reference(&b));
+    assert!(calm.frames[0] == ra && calm.frames[1] == rb && calm.frames[2] == ra);
     assert!(r.frames[0] == ra && r.frames[1] == rb && r.frames[2] == ra);
     let l = r.link.expect("firmware link");
-    assert!(l.overflows > 0 && r.root.repairs > 0, "{l:?} {:?}", r.root);
+    assert!(l.landed > 0 && l.overflows == 0, "{l:?}");
 }

@@ -219,6 +219,95 @@ fn rc_refuses_to_clock_a_node_whose_ready_line_is_low() {
     assert!(run(master.broadcast(&big)).is_err());
 }
 
+/// A scene bank lent to the link (`SceneLanding`): broadcast scene chunks for it are written
+/// into it as they arrive, however many, with no RX bank taken; other broadcasts (a chunk of
+/// the other bank, a `SceneEnd`) still queue in the RX banks for the node logic.
+#[test]
+fn broadcast_scene_chunks_land_in_the_lent_bank_and_the_rest_queues() {
+    use links_core::landing::{LentBank, SceneKey, SceneLanding};
+    use links_core::wire::{Down, SCENE_CHUNK};
+    let bus = bus(1);
+    let mut master = master_link(&bus, 0);
+    let (shared, task, mut port) = slave_link(&bus, 0);
+    let scene: &'static mut [u8] = Box::leak(vec![0u8; 6 * SCENE_CHUNK].into_boxed_slice());
+    shared
+        .lend(LentBank::new(1, scene, None))
+        .map_err(|_| "refused")
+        .expect("the link takes a bank");
+    assert!(
+        shared.lend(LentBank::new(0, &mut [], None)).is_err(),
+        "one at a time"
+    );
+    let total = 5 * SCENE_CHUNK as u32 + 10;
+    let chunk = |frame: u16, c: u32| {
+        let offset = c * SCENE_CHUNK as u32;
+        let len = (total - offset).min(SCENE_CHUNK as u32) as usize;
+        let data = vec![c as u8 + 1; len];
+        let down = Down::Scene {
+            frame,
+            offset,
+            total,
+            crc: 9,
+            data: &data,
+        };
+        let mut buf = [0u8; MAX_MESSAGE];
+        let n = wire::encode(0, 0, &down, &mut buf).unwrap();
+        buf[..n].to_vec()
+    };
+    let mut end = [0u8; 64];
+    let n_end = wire::encode(
+        0,
+        0,
+        &Down::SceneEnd {
+            frame: 3,
+            len: total,
+            crc: 9,
+        },
+        &mut end,
+    )
+    .unwrap();
+    let rc = async {
+        // Frame 3's six chunks (bank 1), then a chunk of frame 2 (bank 0), then SceneEnd.
+        let frames = (0..6)
+            .map(|c| chunk(3, c))
+            .chain([chunk(2, 0), end[..n_end].to_vec()]);
+        for f in frames {
+            polls(50).await;
+            master.broadcast(&f).await.unwrap();
+        }
+        polls(50).await;
+    };
+    let link = task.run(&mut port, &shared);
+    let Either::First(()) = run(select(rc, link));
+    let c = shared.counters();
+    assert_eq!((c.broadcasts, c.landed, c.overflows), (8, 6, 0), "{c:?}");
+    let back = shared.reclaim().expect("the lent bank comes back");
+    let key = SceneKey {
+        frame: 3,
+        total,
+        crc: 9,
+    };
+    assert_eq!(
+        (back.index, back.landed.key, back.landed.count),
+        (1, Some(key), 6)
+    );
+    assert!(back.landed.ended && (0..6).all(|c| back.landed.has(c)));
+    assert!(shared.reclaim().is_none());
+    for c in 0..6usize {
+        let end = ((c + 1) * SCENE_CHUNK).min(total as usize);
+        let bytes = &back.bytes[c * SCENE_CHUNK..end];
+        assert!(bytes.iter().all(|&b| b == c as u8 + 1), "chunk {c}");
+    }
+    // The node logic gets the other two, in order.
+    let mut handle = shared.handle();
+    let mut rx = [0u8; MAX_MESSAGE];
+    for want in [chunk(2, 0), end[..n_end].to_vec()] {
+        let got = run(handle.recv(&mut rx)).unwrap();
+        assert_eq!(got, Incoming::Broadcast { len: want.len() });
+        assert_eq!(&rx[..want.len()], &want[..]);
+    }
+}
+
 #[test]
 fn broadcasts_fill_both_rx_banks_then_overflow_into_scratch() {
     let bus = bus(3);

@@ -4,6 +4,8 @@
 //! - [`profile`]: the board as one value: the SPI link, the node's memory, the core.
 //! - [`wire`]: every message on the RC-NC bus (postcard, CRC-32, run-length pixels).
 //! - [`link`]: the IMSU link as traits the node and root logic are generic over.
+//! - [`landing`]: broadcast scene chunks written by the node's link straight into the scene
+//!   bank the node logic is not rendering from (the IMSU's broadcast into node memory).
 //! - [`sched`]: sub-screen scheduling (which region a node renders next).
 //! - [`node`]: the NC's whole behaviour (scene, jobs, render, return pixel runs).
 //! - [`root`]: the RC's whole behaviour (broadcast, hand out, collect, detect completion).
@@ -15,6 +17,7 @@
 
 pub mod backup;
 pub mod board;
+pub mod landing;
 pub mod link;
 pub mod node;
 pub mod profile;

@@ -13,6 +13,7 @@
 //! RC's acknowledgements makes the node send them again (go-back-N). Nothing read from the
 //! bus can make it panic: bad frames are counted and otherwise ignored.
 
+use super::landing::{Landed, LentBank, NoLanding, SceneKey, SceneLanding};
 use super::link::{Incoming, LinkError, NodeLink};
 use super::wire::{
     self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
@@ -98,6 +99,9 @@ pub enum NodeError {
         image: Storage,
         kernels: Kernels,
     },
+    /// The scene bank lent to the link did not come back (a link that breaks
+    /// [`SceneLanding`]'s contract).
+    BankLost,
 }
 
 impl fmt::Display for NodeError {
@@ -110,6 +114,7 @@ impl fmt::Display for NodeError {
                 "a {} scene arrived but this node carries {kernels} only",
                 image.name()
             ),
+            NodeError::BankLost => write!(f, "the scene bank lent to the link did not come back"),
         }
     }
 }
@@ -215,6 +220,9 @@ struct Nc {
     last_rc_seq: u16,
     /// Scene state to report (sequenced).
     status: Option<SceneState>,
+    /// A bank whose state the RC must hear once `status` is free (what landed in a lent bank
+    /// changed it while the other bank's state still waited to be sent).
+    deferred: Option<usize>,
     /// The bank just checked (`check_scene`), whose time the clock has yet to hear of.
     checked: Option<usize>,
     /// The RC broadcast [`Down::Wake`] for this frame: answer if idle.
@@ -246,6 +254,7 @@ impl Nc {
             exchanges: 0,
             last_rc_seq: 0,
             status: None,
+            deferred: None,
             checked: None,
             wake: None,
             reask: false,
@@ -455,6 +464,27 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
     mut banks: [&mut [u8]; 2],
     report: &mut NodeReport,
 ) -> Result<(), NodeError> {
+    let parts = (link, &NoLanding, clock, renderer);
+    run_node_landing(cfg, parts, &mut banks, report).await
+}
+
+/// [`run_node`] on a link that takes a scene bank while the node renders from the other
+/// ([`SceneLanding`]: broadcast chunks land in it without waiting for the node logic).
+/// While a run renders, the bank it does not use is lent; it comes back (with what landed,
+/// booked as if the node logic had written it) before anything else touches it. If this
+/// future is dropped while a bank is lent, [`restore_lent`] puts it back into `banks`.
+pub async fn run_node_landing<'b, L, S, C, R>(
+    cfg: NodeConfig,
+    (link, landing, clock, renderer): (&mut L, &S, &mut C, &mut R),
+    banks: &mut [&'b mut [u8]; 2],
+    report: &mut NodeReport,
+) -> Result<(), NodeError>
+where
+    L: NodeLink,
+    S: SceneLanding<'b>,
+    C: WorkClock,
+    R: RunRenderer,
+{
     let mut nc = Nc::new(*report);
     let mut pix: [Rgb8; MAX_RUN] = [[0; 3]; MAX_RUN];
     let mut rx = [0u8; MAX_MESSAGE];
@@ -485,6 +515,9 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
             }
         }
         // 1. Choose what to post.
+        if nc.status.is_none() {
+            nc.status = nc.deferred.take().map(|b| nc.bank_state(b));
+        }
         let mut posted = false;
         if nc.resend < 2 {
             if let Some(s) = &mut nc.slots[nc.resend] {
@@ -546,9 +579,17 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
             posted = true;
         }
 
-        // 2. While that frame waits for the bus, render the next run.
+        // 2. While that frame waits for the bus, render the next run (the other scene bank
+        // lent to the link meanwhile).
         let rendered = if nc.built.is_none() {
-            render_next(&mut nc, &banks, renderer, &mut pix, clock).await
+            let lent = lend_other(&nc, landing, banks);
+            let rendered = render_next(&mut nc, banks, renderer, &mut pix, clock).await;
+            if lent {
+                let back = landing.reclaim().ok_or(NodeError::BankLost)?;
+                book_landed(&mut nc, banks, back);
+                settle_check(&mut nc, (landing, clock, renderer), banks, report).await?;
+            }
+            rendered
         } else {
             false
         };
@@ -573,22 +614,11 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
                         ack = Some(env.ack);
                         nc.last_rc_seq = env.seq;
                     }
-                    handle_down(&mut nc, &mut banks, env.msg, exchanged);
+                    handle_down(&mut nc, banks, env.msg, exchanged);
                 }
                 _ => nc.report.bad_messages += 1,
             }
-            if let Some(b) = nc.checked.take() {
-                let bank = &nc.banks[b];
-                if let Some(view) = bank.frame.and_then(|f| bank.view(banks[b], f)) {
-                    clock.checked_scene(&view).await;
-                    let kernels = renderer.kernels();
-                    if !kernels.run(view.storage()) {
-                        *report = nc.report;
-                        let image = view.storage();
-                        return Err(NodeError::NoKernel { image, kernels });
-                    }
-                }
-            }
+            settle_check(&mut nc, (landing, clock, renderer), banks, report).await?;
             *report = nc.report;
             if exchanged {
                 nc.reask = ack.is_none();
@@ -610,6 +640,145 @@ pub async fn run_node<L: NodeLink, C: WorkClock, R: RunRenderer>(
     }
     *report = nc.report;
     Ok(())
+}
+
+/// A bank just checked (`nc.checked`): charge the check's time (the other bank lent to the
+/// link meanwhile) and make sure a kernel of the node reads the scene's storage.
+async fn settle_check<'b, S, C, R>(
+    nc: &mut Nc,
+    (landing, clock, renderer): (&S, &mut C, &mut R),
+    banks: &mut [&'b mut [u8]; 2],
+    report: &mut NodeReport,
+) -> Result<(), NodeError>
+where
+    S: SceneLanding<'b>,
+    C: WorkClock,
+    R: RunRenderer,
+{
+    // Booking what landed meanwhile may complete the other bank: check it in turn.
+    while let Some(b) = nc.checked.take() {
+        let lent = lend(nc, landing, banks, 1 - b);
+        let bank = &nc.banks[b];
+        if let Some(view) = bank.frame.and_then(|f| bank.view(banks[b], f)) {
+            clock.checked_scene(&view).await;
+            let kernels = renderer.kernels();
+            if !kernels.run(view.storage()) {
+                *report = nc.report;
+                let image = view.storage();
+                return Err(NodeError::NoKernel { image, kernels });
+            }
+        }
+        if lent {
+            let back = landing.reclaim().ok_or(NodeError::BankLost)?;
+            book_landed(nc, banks, back);
+        }
+    }
+    Ok(())
+}
+
+/// Lend the scene bank the next run does not read to the link; whether it took it.
+fn lend_other<'b, S: SceneLanding<'b>>(
+    nc: &Nc,
+    landing: &S,
+    banks: &mut [&'b mut [u8]; 2],
+) -> bool {
+    let next = nc.cursor.map(|c| c.job).or(nc.queue[0]);
+    match next {
+        Some(job) => lend(nc, landing, banks, usize::from(job.frame % 2 == 0)),
+        None => false,
+    }
+}
+
+/// Lend scene bank `other` to the link; whether it took it.
+fn lend<'b, S: SceneLanding<'b>>(
+    nc: &Nc,
+    landing: &S,
+    banks: &mut [&'b mut [u8]; 2],
+    other: usize,
+) -> bool {
+    let (Some(bank), Some(slot)) = (nc.banks.get(other), banks.get_mut(other)) else {
+        return false;
+    };
+    let holds = match bank.frame {
+        Some(frame) if bank.ready => Some(SceneKey {
+            frame,
+            total: bank.total,
+            crc: bank.crc,
+        }),
+        _ => None,
+    };
+    let bytes = core::mem::take(slot);
+    match landing.lend(LentBank::new(other, bytes, holds)) {
+        Ok(()) => true,
+        Err(back) => {
+            *slot = back.bytes;
+            false
+        }
+    }
+}
+
+/// Put a lent bank back and book what landed in it as [`scene_chunk`] books broadcast
+/// chunks: the chunks' bits, the count, the end of the broadcast, the check once complete,
+/// and the state for the RC if it is ready or still incomplete after the end.
+fn book_landed<'b>(nc: &mut Nc, banks: &mut [&'b mut [u8]; 2], back: LentBank<'b>) {
+    let LentBank {
+        index,
+        bytes,
+        landed,
+        ..
+    } = back;
+    let Some(slot) = banks.get_mut(index) else {
+        return;
+    };
+    *slot = bytes;
+    let Landed {
+        key: Some(key),
+        count,
+        ended,
+        ..
+    } = landed
+    else {
+        return;
+    };
+    if count == 0 {
+        return;
+    }
+    let bank = &mut nc.banks[index];
+    bank.expect(key.frame, key.total, key.crc);
+    if bank.ready {
+        return;
+    }
+    // Its bytes were written: no longer the ones validated.
+    bank.validated = false;
+    let per = PIECES_PER_CHUNK as u32;
+    let all = key.total.div_ceil(SCENE_PIECE as u32);
+    for c in (0..bank.chunks()).filter(|&c| landed.has(c)) {
+        bank.got_pieces(c * per, ((c + 1) * per).min(all));
+    }
+    bank.ended |= ended;
+    nc.report.chunks += count;
+    check_scene(nc, banks, index);
+    if nc.banks[index].ready || nc.banks[index].ended {
+        let frame = match nc.status {
+            Some(SceneState::Ready { frame } | SceneState::Missing { frame, .. }) => Some(frame),
+            _ => None,
+        };
+        // Never overwrite the other bank's state before the RC has heard it.
+        match frame {
+            Some(f) if usize::from(f % 2) != index => nc.deferred = Some(index),
+            _ => nc.status = Some(nc.bank_state(index)),
+        }
+    }
+}
+
+/// After a [`run_node_landing`] future was dropped: take a bank it had lent back from the
+/// link into its slot of `banks` (what landed in it is dropped with the node's state).
+pub fn restore_lent<'b, S: SceneLanding<'b>>(landing: &S, banks: &mut [&'b mut [u8]; 2]) {
+    if let Some(back) = landing.reclaim() {
+        if let Some(slot) = banks.get_mut(back.index) {
+            *slot = back.bytes;
+        }
+    }
 }
 
 /// Render the next run of the current (or next queued) job into `pix`, then account for its

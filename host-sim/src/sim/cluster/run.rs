@@ -17,7 +17,7 @@ use super::timeline::{SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
 use crate::cost::{CycleModel, SceneCheckCost};
 use links_core::image::SceneView;
-use links_core::node::{run_node, Kernels, NodeReport, RunRenderer, WorkClock};
+use links_core::node::{run_node, run_node_landing, Kernels, NodeReport, RunRenderer, WorkClock};
 use links_core::num::{Fx, Real, Storage};
 use links_core::render::{render_run, RenderError, Rgb8, Stats, Techniques, Tracer};
 use links_core::root::{
@@ -674,14 +674,11 @@ fn node_tasks<'a>(
                         node: i,
                     };
                     let mut handle = shared.handle();
-                    let logic = run_node(
-                        node_cfg,
-                        &mut handle,
-                        &mut work,
-                        &mut renderer,
-                        scene,
-                        report,
-                    );
+                    // The node's link writes broadcast scene chunks straight into the bank
+                    // it is not rendering from, as nc-fw's does.
+                    let mut scene = scene;
+                    let parts = (&mut handle, &shared, &mut work, &mut renderer);
+                    let logic = run_node_landing(node_cfg, parts, &mut scene, report);
                     let _ = NodeOnLink {
                         link: Box::pin(task.run(&mut port, &shared)),
                         logic: Box::pin(logic),

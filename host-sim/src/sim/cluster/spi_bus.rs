@@ -789,8 +789,12 @@ pub struct FirmwareLinkCounters {
     pub no_ack: u64,
     /// Exchanges the root asked of a node whose line was low (not clocked).
     pub not_ready: u64,
-    /// Transfers that found both of a node's RX banks full.
+    /// Transfers that found both of a node's RX banks full (scene chunks written into a
+    /// lent scene bank not counted).
     pub overflows: u64,
+    /// Broadcast scene chunks the nodes' links wrote straight into a lent scene bank (not a
+    /// fault).
+    pub landed: u64,
 }
 
 impl FirmwareLinkCounters {
@@ -808,12 +812,13 @@ impl FirmwareLinkCounters {
             c.node_bad_headers += s.bad_headers as u64;
             c.node_bad_bodies += s.bad_bodies as u64;
             c.overflows += s.overflows as u64;
+            c.landed += s.landed as u64;
         }
         c
     }
 
     /// Whether anything went wrong on the link.
     pub fn any(&self) -> bool {
-        *self != Self::default()
+        Self { landed: 0, ..*self } != Self::default()
     }
 }

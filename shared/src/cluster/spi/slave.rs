@@ -2,8 +2,9 @@
 //! [`NodeLink`] handle the node logic uses, sharing banks through [`SlaveShared`].
 
 use super::framing::*;
+use crate::cluster::landing::{Landing, LentBank, SceneLanding};
 use crate::cluster::link::{Incoming, LinkError, NodeLink};
-use crate::cluster::wire::MAX_MESSAGE;
+use crate::cluster::wire::{self, Down, Envelope, MAX_MESSAGE};
 use core::cell::RefCell;
 use core::future::{poll_fn, Future};
 use core::task::{Poll, Waker};
@@ -52,8 +53,12 @@ pub struct SlaveCounters {
     pub bad_bodies: u32,
     /// Our frame answered with NAK (or no trailer): kept and sent again.
     pub retransmits: u32,
-    /// Transfers that found both RX banks full (absorbed by the scratch bank).
+    /// Transfers that found both RX banks full (absorbed by the scratch bank) and were not
+    /// scene chunks written into a lent scene bank.
     pub overflows: u32,
+    /// Broadcast scene chunks written straight into the lent scene bank ([`SceneLanding`]),
+    /// or dropped there as already held.
+    pub landed: u32,
     /// Armed transfers disarmed unused to take a newly posted frame.
     pub rearms: u32,
     pub port_errors: u32,
@@ -79,6 +84,8 @@ struct SlaveState<'b> {
     task_waker: Option<Waker>,
     recv_waker: Option<Waker>,
     counters: SlaveCounters,
+    /// The scene bank the node logic lent (see [`crate::cluster::landing`]).
+    lent: Option<LentBank<'b>>,
 }
 
 /// The state the node's link task and the node logic share (interrupt-safe: a critical
@@ -117,6 +124,7 @@ impl<'b> SlaveShared<'b> {
                 task_waker: None,
                 recv_waker: None,
                 counters: SlaveCounters::default(),
+                lent: None,
             })),
         };
         let task = SlaveTask {
@@ -191,8 +199,31 @@ impl<'b> SlaveTask<'b> {
             }
         };
         self.armed = Some(txb);
+        // A broadcast, decoded here (outside the critical section) if a scene bank is lent.
+        let landable = match outcome {
+            Some(Outcome::Deliver {
+                len,
+                exchanged: false,
+                body: true,
+            }) if shared.with(|s| s.lent.is_some()) => decode_down(&rxb[..], len),
+            _ => None,
+        };
+        let landed = landable.is_some_and(|env| {
+            shared.with(|s| {
+                let done = s
+                    .lent
+                    .as_mut()
+                    .is_some_and(|lent| lent.land(&env.msg) != Landing::NotMine);
+                s.counters.landed += u32::from(done);
+                done
+            })
+        });
         shared.with(|s| {
-            let deliver = count(&mut s.counters, outcome);
+            let mut deliver = count(&mut s.counters, outcome);
+            if landed {
+                // In the scene bank: nothing to queue for the node logic.
+                deliver = None;
+            }
             if let Some((_, true)) = deliver {
                 // Our frame went out and was acknowledged: the armed bank is idle.
                 self.armed_len = None;
@@ -282,6 +313,12 @@ impl<'b> SlaveTask<'b> {
     }
 }
 
+/// The `Down` message in the body of a received frame of `len` bytes, if it decodes.
+fn decode_down(rx: &[u8], len: usize) -> Option<Envelope<Down<'_>>> {
+    let body = rx.get(HEADER..HEADER.checked_add(len)?)?;
+    wire::decode::<Down>(body).ok()
+}
+
 /// Count a transfer's outcome (`None`: re-armed without one); returns what to hand the node
 /// logic: the body's length (0 if damaged) and whether it was an exchange.
 #[inline(always)]
@@ -339,6 +376,24 @@ enum Outcome {
     },
     BadBroadcast,
     BadHeader,
+}
+
+/// The node logic lends the scene bank it is not rendering from: broadcast chunks for it
+/// are written in by the link task as they arrive.
+impl<'b> SceneLanding<'b> for SlaveShared<'b> {
+    fn lend(&self, bank: LentBank<'b>) -> Result<(), LentBank<'b>> {
+        self.with(|s| {
+            if s.lent.is_some() {
+                return Err(bank);
+            }
+            s.lent = Some(bank);
+            Ok(())
+        })
+    }
+
+    fn reclaim(&self) -> Option<LentBank<'b>> {
+        self.with(|s| s.lent.take())
+    }
 }
 
 /// The node logic's end of the link: [`NodeLink`] over the shared state.
