@@ -46,7 +46,9 @@
 //! buffer), two RX banks handed to the node logic in turn (double buffer: a broadcast can
 //! land while the node still reads the previous frame) and a scratch bank that absorbs a
 //! transfer when both RX banks are full (counted as an overflow; scene chunks lost that way
-//! are repaired by the root logic).
+//! are repaired by the root logic). While the node logic renders, it lends the link the
+//! scene bank it is not reading ([`crate::landing`]): an intact broadcast scene chunk for that
+//! bank is written straight into it and takes no RX bank.
 
 mod bus_task;
 mod clock;
