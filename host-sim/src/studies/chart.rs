@@ -11,6 +11,7 @@
 
 use crate::studies::accuracy::{compare_to, reference, Accuracy, AccuracyError};
 use crate::studies::backend::Backend;
+use crate::studies::labels;
 use crate::studies::report::{replace_between, table_head, write_file};
 use links_core::num::{FastF32, Fx};
 use plotters::prelude::*;
@@ -230,12 +231,42 @@ pub fn points(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> Vec<Point> {
     out
 }
 
+/// Whether each point is on its scene's Pareto front: no other point of the same scene is
+/// as fast or faster and as accurate or more, and strictly better in one of the two.
+pub fn pareto_front(pts: &[Point]) -> Vec<bool> {
+    pts.iter()
+        .map(|p| {
+            !pts.iter().any(|q| {
+                q.scene == p.scene
+                    && q.instructions_per_pixel <= p.instructions_per_pixel
+                    && q.psnr_db >= p.psnr_db
+                    && (q.instructions_per_pixel < p.instructions_per_pixel
+                        || q.psnr_db > p.psnr_db)
+            })
+        })
+        .collect()
+}
+
+/// The targets (chart labels) on which backend x scene `a` is on its scene's Pareto front,
+/// space-separated.
+fn front_targets(a: &SceneAccuracy, pts: &[Point], front: &[bool]) -> String {
+    let on: Vec<&str> = pts
+        .iter()
+        .zip(front)
+        .filter(|(p, &f)| f && p.scene == a.scene && p.backend == a.backend)
+        .map(|(p, _)| p.target)
+        .collect();
+    on.join(" ")
+}
+
 /// The data behind the chart and the table, one row per backend x scene, with the
 /// instructions per pixel on each target (empty where not measured).
 pub fn csv(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
     let mut s = String::from(
-        "scene,backend,width,height,psnr_db,max_channel_error,pct_off_by_more_than_1,non_finite_pixels,hit_mismatches,hit_mismatches_off_silhouette,instr_per_pixel_m4f,instr_per_pixel_m3,instr_per_pixel_m0,note\n",
+        "scene,backend,width,height,psnr_db,max_channel_error,pct_off_by_more_than_1,non_finite_pixels,hit_mismatches,hit_mismatches_off_silhouette,instr_per_pixel_m4f,instr_per_pixel_m3,instr_per_pixel_m0,pareto_front,note\n",
     );
+    let pts = points(acc, speed);
+    let front = pareto_front(&pts);
     for a in acc {
         let ipp =
             |target: &str| speed_of(speed, target, a).map_or(String::new(), |v| format!("{v:.0}"));
@@ -243,7 +274,7 @@ pub fn csv(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
             Ok(x) => {
                 let _ = writeln!(
                     s,
-                    "{},{},{},{},{:.2},{},{:.3},{},{},{},{},{},{},",
+                    "{},{},{},{},{:.2},{},{:.3},{},{},{},{},{},{},{},",
                     a.scene,
                     a.backend,
                     x.width,
@@ -257,12 +288,13 @@ pub fn csv(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
                     ipp(TARGETS[0].0),
                     ipp(TARGETS[1].0),
                     ipp(TARGETS[2].0),
+                    front_targets(a, &pts, &front),
                 );
             }
             Err(why) => {
                 let _ = writeln!(
                     s,
-                    "{},{},,,,,,,,,,,,\"{}\"",
+                    "{},{},,,,,,,,,,,,,\"{}\"",
                     a.scene,
                     a.backend,
                     why.replace('"', "'")
@@ -282,7 +314,7 @@ pub fn markdown(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
         .map_or(String::new(), |a| format!("{}x{}", a.width, a.height));
     let _ = writeln!(
         s,
-        "Every backend against the f64 render of the same scene at {size} (host). Instructions per pixel: Cortex-M under QEMU from `docs/cortex-m-bench.csv` (smaller frames: see that file); `-` = not measured.\n"
+        "Every backend against the f64 render of the same scene at {size} (host). Instructions per pixel: Cortex-M under QEMU from `docs/cortex-m-bench.csv` (smaller frames: see that file); `-` = not measured. Pareto front: the targets on which this backend is on the scene's front (no other backend x target of the scene as fast and as accurate, and better in one).\n"
     );
     s.push_str(&table_head([
         "scene",
@@ -295,7 +327,10 @@ pub fn markdown(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
         "instr/pixel M4F",
         "M3",
         "M0",
+        "Pareto front",
     ]));
+    let pts = points(acc, speed);
+    let front = pareto_front(&pts);
     for a in acc {
         let ipp = |target: &str| speed_of(speed, target, a).map_or("-".to_string(), group);
         match &a.accuracy {
@@ -307,7 +342,7 @@ pub fn markdown(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
                 };
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {} | {:.3}% | {} | {} ({}) | {} | {} | {} |",
+                    "| {} | {} | {} | {} | {:.3}% | {} | {} ({}) | {} | {} | {} | {} |",
                     a.scene,
                     a.backend,
                     psnr,
@@ -319,12 +354,13 @@ pub fn markdown(acc: &[SceneAccuracy], speed: &[BenchSpeed]) -> String {
                     ipp(TARGETS[0].0),
                     ipp(TARGETS[1].0),
                     ipp(TARGETS[2].0),
+                    front_targets(a, &pts, &front),
                 );
             }
             Err(why) => {
                 let _ = writeln!(
                     s,
-                    "| {} | {} | rejected: {why} | | | | | | | |",
+                    "| {} | {} | rejected: {why} | | | | | | | | |",
                     a.scene, a.backend
                 );
             }
@@ -441,6 +477,76 @@ where
             )])
             .map_err(draw_err)?;
     }
+    draw_markers(&mut chart, pts)?;
+    let front = pareto_front(pts);
+    // A ring around each point on its scene's Pareto front.
+    let rings = pts.iter().zip(&front).filter(|(_, &f)| f).map(|(p, _)| {
+        Circle::new(
+            (p.instructions_per_pixel, p.psnr_db),
+            8,
+            BLACK.stroke_width(1),
+        )
+    });
+    chart
+        .draw_series(rings)
+        .map_err(draw_err)?
+        .label("on its scene's Pareto front")
+        .legend(|(x, y)| Circle::new((x + 8, y), 7, BLACK.stroke_width(1)));
+    draw_legend(&mut chart, SeriesLabelPosition::UpperRight).map_err(draw_err)?;
+    // Scene names beside the points, front points first, never over each other.
+    let mut order: Vec<usize> = (0..pts.len()).collect();
+    order.sort_by_key(|&i| !front[i]);
+    let anchors: Vec<labels::Anchor> = order
+        .iter()
+        .map(|&i| {
+            let (x, y) = chart.backend_coord(&(pts[i].instructions_per_pixel, pts[i].psnr_db));
+            labels::Anchor {
+                x,
+                y,
+                text: pts[i].scene.clone(),
+            }
+        })
+        .collect();
+    let (xr, yr) = chart.plotting_area().get_pixel_range();
+    let plot = labels::Rect {
+        x0: xr.start,
+        y0: yr.start,
+        x1: xr.end,
+        y1: yr.end,
+    };
+    let layout = labels::place(&anchors, LABEL_FONT, 5, plot);
+    for (a, p) in anchors.iter().zip(&layout.placed) {
+        if let Some(p) = p {
+            area.draw(&Text::new(a.text.clone(), (p.x, p.y), ("sans-serif", 10)))
+                .map_err(draw_err)?;
+        }
+    }
+    if layout.dropped > 0 {
+        let note = format!(
+            "{} point label(s) left out where the points crowd (docs/accuracy.csv has every point)",
+            layout.dropped
+        );
+        let at = (plot.x0 + 4, plot.y1 - 14);
+        area.draw(&Text::new(note, at, ("sans-serif", 10)))
+            .map_err(draw_err)?;
+    }
+    area.present().map_err(draw_err)
+}
+
+/// The chart's 10-pixel label text, as the label placement measures it.
+const LABEL_FONT: labels::Font = labels::Font {
+    char_w: 6.0,
+    line_h: 11,
+};
+
+/// One series per backend x target: colour = backend, shape = target.
+fn draw_markers<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, PlotCoords>,
+    pts: &[Point],
+) -> Result<(), ChartError>
+where
+    DB::ErrorType: 'static,
+{
     for (i, backend) in BACKENDS.iter().enumerate() {
         let c = COLOURS[i];
         for (t, (_, target)) in TARGETS.iter().enumerate() {
@@ -453,13 +559,11 @@ where
             }
             let series = sel.iter().map(|p| {
                 let xy = (p.instructions_per_pixel, p.psnr_db);
-                EmptyElement::at(xy)
-                    + match t {
-                        0 => Circle::new((0, 0), 4, c.filled()).into_dyn(),
-                        1 => TriangleMarker::new((0, 0), 5, c.filled()).into_dyn(),
-                        _ => Cross::new((0, 0), 4, c.stroke_width(2)).into_dyn(),
-                    }
-                    + Text::new(p.scene.clone(), (5, -5), ("sans-serif", 10))
+                match t {
+                    0 => Circle::new(xy, 4, c.filled()).into_dyn(),
+                    1 => TriangleMarker::new(xy, 5, c.filled()).into_dyn(),
+                    _ => Cross::new(xy, 4, c.stroke_width(2)).into_dyn(),
+                }
             });
             chart
                 .draw_series(series)
@@ -472,9 +576,11 @@ where
                 });
         }
     }
-    draw_legend(&mut chart, SeriesLabelPosition::UpperRight).map_err(draw_err)?;
-    area.present().map_err(draw_err)
+    Ok(())
 }
+
+/// The chart's coordinates: instructions per pixel (log) x PSNR.
+type PlotCoords = Cartesian2d<LogCoord<f64>, plotters::coord::types::RangedCoordf64>;
 
 pub const CHART_SIZE: (u32, u32) = (960, 640);
 
@@ -577,6 +683,29 @@ mod tests {
 
     /// The committed chart data (docs/accuracy.csv) is what `links chart accuracy` makes
     /// from the committed benchmark counts and today's renderer.
+    #[test]
+    fn the_pareto_front_is_what_nothing_beats_on_both_axes_per_scene() {
+        let pt = |scene: &str, target: &'static str, ipp: f64, db: f64| Point {
+            target,
+            backend: "f32",
+            scene: scene.to_string(),
+            instructions_per_pixel: ipp,
+            psnr_db: db,
+        };
+        let pts = [
+            pt("a", "M4F", 100.0, 60.0), // front: fastest
+            pt("a", "M3", 200.0, 70.0),  // front: most accurate
+            pt("a", "M0", 300.0, 65.0),  // beaten by M3 on both
+            pt("a", "M0", 100.0, 50.0),  // as fast as the first, less accurate: beaten
+            pt("b", "M0", 900.0, 10.0),  // alone in its scene: front
+            pt("a", "M3", 200.0, 70.0),  // a tie with the second: neither beats the other
+        ];
+        assert_eq!(
+            pareto_front(&pts),
+            vec![true, true, false, false, true, true]
+        );
+    }
+
     #[test]
     fn committed_accuracy_csv_is_current() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");

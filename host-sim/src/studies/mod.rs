@@ -17,6 +17,7 @@ pub mod chart;
 pub mod cluster_sweep;
 pub mod faults;
 pub mod film_study;
+pub mod labels;
 pub mod report;
 pub mod sweep_commands;
 pub mod timeline_chart;
