@@ -4,11 +4,11 @@
 //! `links_core::node::run_node` loop the simulator and the STM32 firmware run, with the
 //! tracing kernels of its features ([`Renderer`], as nc-fw picks them: the f32 tracer on the
 //! Cortex-M4F build, the Q16.16 tracer on the FPU-less Cortex-M3 build) and the hardware
-//! clock ([`RealTime`]). Only the link differs: instead
-//! of SPI + DMA banks, [`SemihostLink`] carries the IMSU's transfers through two FIFOs that
-//! QEMU's semihosting opens on the host (`nc-down`: RC -> NC, `nc-up`: NC -> RC, relative
-//! to QEMU's working directory). On the other end the host runs the real RC logic
-//! (`links_core::root::run_bus`, `host-sim/src/qemu_node/`).
+//! clock ([`RealTime`]). Only the link differs: instead of SPI + DMA banks, [`SemihostLink`]
+//! carries the IMSU's transfers through two FIFOs that QEMU's semihosting opens on the host
+//! (`nc-down`: RC -> NC, `nc-up`: NC -> RC, relative to QEMU's working directory). On the
+//! other end the host runs the real RC logic (`links_core::root::run_bus`,
+//! `host-sim/src/qemu_node/`).
 //!
 //! Records on the FIFOs: a kind byte, a little-endian u32 length, then that many bytes.
 //! - NC -> RC: `P` a frame posted to the TX bank (the ready line goes up); `W` the node waits
