@@ -1,14 +1,17 @@
-//! The RC for the QEMU node check: compiles a scene, runs the firmware's node loop
-//! (`tests/qemu-node`) on Cortex-M4F under QEMU with the real root logic driving it over
-//! semihosting FIFOs, and checks the assembled frame against the simulator's single-node
-//! render and every transfer against the same node loop run on the host. See
-//! docs/qemu-node.md; scripts/qemu-node builds the firmware and runs this.
+//! The RC for the QEMU node check: compiles a scene (in f32, or rewritten as Q16.16 for the
+//! fixed-point kernel), runs the firmware's node loop (`tests/qemu-node`) on Cortex-M4F or
+//! Cortex-M3 under QEMU with the real root logic driving it over semihosting FIFOs, and
+//! checks the assembled frame against the simulator's single-node render of the same image
+//! and every transfer against the same node loop run on the host. See docs/qemu-node.md;
+//! scripts/qemu-node builds the firmware and runs this.
 
-use clap::Parser;
+use clap::{Parser, ValueEnum};
 use links_core::dm::{compile, CompileOptions};
+use links_core::node::Kernels;
+use links_host::frame::fixed_image;
 use links_host::qemu_node::{
-    check_outcome, compare_transcripts, run_rc, simulated_frame, Corrupt, Event, LocalNode,
-    QemuNode, RcOutcome,
+    check_outcome, check_single_render, compare_transcripts, run_rc, simulated_frame, Corrupt,
+    Event, LocalNode, QemuNode, RcOutcome,
 };
 use links_host::scene_file::load_scene;
 use std::fs::{self, File, OpenOptions};
@@ -19,12 +22,72 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+/// The core QEMU emulates for the node.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Core {
+    /// Cortex-M4F on mps2-an386 (tests/qemu-node built for thumbv7em-none-eabihf)
+    M4f,
+    /// Cortex-M3 on mps2-an385, no FPU (tests/qemu-node built for thumbv7m-none-eabi)
+    M3,
+}
+
+impl Core {
+    /// QEMU's board and CPU.
+    fn machine(self) -> [&'static str; 4] {
+        match self {
+            Core::M4f => ["-M", "mps2-an386", "-cpu", "cortex-m4"],
+            Core::M3 => ["-M", "mps2-an385", "-cpu", "cortex-m3"],
+        }
+    }
+
+    /// As `--core` spells it.
+    fn name(self) -> &'static str {
+        match self {
+            Core::M4f => "m4f",
+            Core::M3 => "m3",
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Core::M4f => "Cortex-M4F, mps2-an386",
+            Core::M3 => "Cortex-M3, mps2-an385",
+        }
+    }
+}
+
+/// The number format of the SceneImage the node receives (and so the kernel it runs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Precision {
+    /// The DM's f32 image: the f32 kernel
+    F32,
+    /// The DM's Q16.16 rewrite of it (`fixed_image::to_fixed`): the fixed-point kernel
+    Fixed,
+}
+
+impl Precision {
+    /// The host node's kernel: the one the firmware built for this precision carries.
+    fn kernels(self) -> Kernels {
+        match self {
+            Precision::F32 => Kernels::F32,
+            Precision::Fixed => Kernels::Fixed,
+        }
+    }
+}
+
 #[derive(Parser)]
-#[command(about = "Run the NC node loop on Cortex-M4F under QEMU against the real RC logic")]
+#[command(about = "Run the NC node loop on Cortex-M under QEMU against the real RC logic")]
 struct Args {
-    /// The firmware (tests/qemu-node, built for thumbv7em-none-eabihf)
+    /// The firmware (tests/qemu-node, built for the --core's target and kernel)
     #[arg(long)]
     elf: PathBuf,
+    /// The core QEMU runs the firmware on
+    #[arg(long, value_enum, default_value_t = Core::M4f)]
+    core: Core,
+    /// The image's number format: f32, or Q16.16 for the fixed-point kernel (checked against
+    /// host-sim's single-node fixed render)
+    #[arg(long, value_enum, default_value_t = Precision::F32)]
+    precision: Precision,
     /// Scene file to render
     #[arg(long)]
     scene: PathBuf,
@@ -91,7 +154,8 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
     let file = |p: &Path| File::create(p).map_err(|e| format!("{}: {e}", p.display()));
     let started = Instant::now();
     let child = Command::new(&a.qemu)
-        .args(["-M", "mps2-an386", "-cpu", "cortex-m4", "-nographic"])
+        .args(a.core.machine())
+        .arg("-nographic")
         .args(["-monitor", "none", "-serial", "none"])
         .args(["-semihosting-config", "enable=on,target=native"])
         .args(["-icount", "shift=0", "-kernel"])
@@ -191,7 +255,8 @@ fn qemu_run(a: &Args, image: &[u8], work: &Path) -> Result<(RcOutcome, f64), Str
     Ok((outcome, wall))
 }
 
-fn run(a: Args) -> Result<(), String> {
+/// The SceneImage the node receives: the DM's f32 image, or its Q16.16 rewrite.
+fn scene_image(a: &Args) -> Result<Vec<u8>, String> {
     let desc = load_scene(&a.scene).map_err(|e| e.to_string())?;
     let opts = CompileOptions {
         width: Some(a.width),
@@ -201,13 +266,30 @@ fn run(a: Args) -> Result<(), String> {
     let image = compile(&desc, &opts)
         .map_err(|e| format!("{}: {e}", a.scene.display()))?
         .bytes;
+    match a.precision {
+        Precision::F32 => Ok(image),
+        Precision::Fixed => fixed_image(&image).map_err(|e| format!("{}: {e}", a.scene.display())),
+    }
+}
+
+fn run(a: Args) -> Result<(), String> {
+    let image = scene_image(&a)?;
     let name = format!("{} {}x{}", a.scene.display(), a.width, a.height);
-    println!("qemu-node: {name}, SceneImage {} bytes", image.len());
+    println!(
+        "qemu-node: {name}, {} SceneImage {} bytes, node on {}",
+        a.precision.kernels().name(),
+        image.len(),
+        a.core.label()
+    );
 
     let want = simulated_frame(&image)?;
+    let single = check_single_render(&image, &want)?;
     let host = run_rc(
         &image,
-        Corrupt::new(LocalNode::new(), a.corrupt_down.clone()),
+        Corrupt::new(
+            LocalNode::with_kernels(a.precision.kernels()),
+            a.corrupt_down.clone(),
+        ),
     )
     .map_err(|e| format!("host node: {e}"))?;
     let downs: Vec<&Event> = host
@@ -227,8 +309,10 @@ fn run(a: Args) -> Result<(), String> {
     let corrupted = a.corrupt_down.len() as u32;
     check_outcome(&host, &want, corrupted).map_err(|e| format!("host node: {e}"))?;
     println!(
-        "  host node (run_node on the host) under the lock-step RC: {} transfers; frame equals the simulator's single-node render",
-        host.transcript.len()
+        "  host node (run_node on the host, {}) under the lock-step RC: {} transfers; frame equals the simulator's single-node render (= the {} single render)",
+        a.precision.kernels(),
+        host.transcript.len(),
+        single.name()
     );
 
     let work = a.work.clone().unwrap_or_else(|| {
@@ -265,72 +349,85 @@ fn qemu_runs(
             }
             Some(_) => {}
         }
-        let get = |k: &str| {
-            q.end
-                .counter(k)
-                .ok_or_else(|| format!("the node's end record lacks {k}"))
-        };
-        let (total, render, link) = (
-            get("instr_total")?,
-            get("instr_render")?,
-            get("instr_link")?,
-        );
-        let protocol = total
-            .checked_sub(render + link)
-            .ok_or("render + link instructions exceed the total")?;
-        let pixels = (q.width * q.height) as u64;
-        let pct = |x: u64| 100.0 * x as f64 / total as f64;
-        let r = &q.root;
-        println!(
-            "  QEMU node (run_node on Cortex-M4F, mps2-an386), run {run}: the same {} transfers byte for byte, the same node report; frame equals the simulator's ({} pixels)",
-            q.transcript.len(),
-            pixels
-        );
-        println!(
-            "  RC: {} exchanges, {} broadcasts, {} jobs, {} messages accepted, {} polls, {} scene chunks repaired, {} duplicates dropped; node: {} damaged messages counted",
-            r.exchanges, r.broadcasts, r.jobs, r.accepted, r.polls, r.repairs, r.out_of_order, corrupted
-        );
-        println!(
-            "  node loop: {total} instructions = render {render} ({:.1}%) + protocol {protocol} ({:.1}%) + link I/O {link} ({:.1}%); {} per pixel, {} of them outside rendering",
-            pct(render),
-            pct(protocol),
-            pct(link),
-            total / pixels,
-            (protocol + link) / pixels
-        );
-        // Where the protocol instructions go, from unit costs the firmware measured after the
-        // loop (estimates: counts x unit costs).
-        let (validate, open, crc, scene_bytes) = (
-            get("unit_validate")?,
-            get("unit_open")?,
-            get("unit_scene_crc")?,
-            get("scene_bytes")?.max(1),
-        );
-        let (validations, opens) = (get("validations")?, get("opens")?);
-        let crc_bytes = get("bytes_in")? + get("bytes_out")? + scene_bytes;
-        let v_est = validations * validate + opens * open;
-        let c_est = crc_bytes * crc / scene_bytes;
-        println!(
-            "  of the protocol work, about: scene validation {v_est} ({:.1}%: SceneView::new of the {scene_bytes}-byte scene, {validate} instructions, {validations} time(s), once per scene received; SceneView::open_validated, {open} instructions, {opens} times, once per run rendered and per Work reply); CRC-32 {c_est} ({:.1}%: {crc_bytes} bytes at {:.1} per byte); the rest {} ({:.1}%: postcard, RLE, chunk copies, bookkeeping)",
-            pct(v_est),
-            pct(c_est),
-            crc as f64 / scene_bytes as f64,
-            protocol.saturating_sub(v_est + c_est),
-            pct(protocol.saturating_sub(v_est + c_est))
-        );
+        report_run(a, &q, run, corrupted)?;
         println!("  QEMU wall time {wall:.2} s");
-        println!(
-            "RESULT scene={} w={} h={} pixels={pixels} transfers={} instr_total={total} instr_render={render} instr_protocol={protocol} instr_link={link} {}",
-            a.scene.display(),
-            q.width,
-            q.height,
-            q.transcript.len(),
-            c.iter()
-                .filter(|(k, _)| !k.starts_with("instr_"))
-                .map(|(k, v)| format!("{k}={v}"))
-                .collect::<Vec<_>>()
-                .join(" ")
-        );
     }
+    Ok(())
+}
+
+/// Print one checked QEMU run: the RC's and the node's counts, the node loop's instructions
+/// split into rendering, protocol and link I/O, and the `RESULT` line scripts/qemu-node reads.
+fn report_run(a: &Args, q: &RcOutcome, run: u32, corrupted: u32) -> Result<(), String> {
+    let get = |k: &str| {
+        q.end
+            .counter(k)
+            .ok_or_else(|| format!("the node's end record lacks {k}"))
+    };
+    let (total, render, link) = (
+        get("instr_total")?,
+        get("instr_render")?,
+        get("instr_link")?,
+    );
+    let protocol = total
+        .checked_sub(render + link)
+        .ok_or("render + link instructions exceed the total")?;
+    let pixels = (q.width * q.height) as u64;
+    let pct = |x: u64| 100.0 * x as f64 / total as f64;
+    let r = &q.root;
+    println!(
+        "  QEMU node (run_node on {}, {}), run {run}: the same {} transfers byte for byte, the same node report; frame equals the simulator's ({} pixels)",
+        a.core.label(),
+        a.precision.kernels(),
+        q.transcript.len(),
+        pixels
+    );
+    println!(
+        "  RC: {} exchanges, {} broadcasts, {} jobs, {} messages accepted, {} polls, {} scene chunks repaired, {} duplicates dropped; node: {} damaged messages counted",
+        r.exchanges, r.broadcasts, r.jobs, r.accepted, r.polls, r.repairs, r.out_of_order, corrupted
+    );
+    println!(
+        "  node loop: {total} instructions = render {render} ({:.1}%) + protocol {protocol} ({:.1}%) + link I/O {link} ({:.1}%); {} per pixel, {} of them outside rendering",
+        pct(render),
+        pct(protocol),
+        pct(link),
+        total / pixels,
+        (protocol + link) / pixels
+    );
+    // Where the protocol instructions go, from unit costs the firmware measured after the
+    // loop (estimates: counts x unit costs).
+    let (validate, open, crc, scene_bytes) = (
+        get("unit_validate")?,
+        get("unit_open")?,
+        get("unit_scene_crc")?,
+        get("scene_bytes")?.max(1),
+    );
+    let (validations, opens) = (get("validations")?, get("opens")?);
+    let crc_bytes = get("bytes_in")? + get("bytes_out")? + scene_bytes;
+    let v_est = validations * validate + opens * open;
+    let c_est = crc_bytes * crc / scene_bytes;
+    println!(
+        "  of the protocol work, about: scene validation {v_est} ({:.1}%: SceneView::new of the {scene_bytes}-byte scene, {validate} instructions, {validations} time(s), once per scene received; SceneView::open_validated, {open} instructions, {opens} times, once per run rendered and per Work reply); CRC-32 {c_est} ({:.1}%: {crc_bytes} bytes at {:.1} per byte); the rest {} ({:.1}%: postcard, RLE, chunk copies, bookkeeping)",
+        pct(v_est),
+        pct(c_est),
+        crc as f64 / scene_bytes as f64,
+        protocol.saturating_sub(v_est + c_est),
+        pct(protocol.saturating_sub(v_est + c_est))
+    );
+    println!(
+        "RESULT scene={} core={} precision={} w={} h={} pixels={pixels} transfers={} instr_total={total} instr_render={render} instr_protocol={protocol} instr_link={link} {}",
+        a.scene.display(),
+        a.core.name(),
+        a.precision.kernels().name(),
+        q.width,
+        q.height,
+        q.transcript.len(),
+        q.end
+            .counters
+            .iter()
+            .filter(|(k, _)| !k.starts_with("instr_"))
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    );
     Ok(())
 }

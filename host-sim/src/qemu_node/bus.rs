@@ -54,8 +54,12 @@ impl<N: NodeSide> BusInner<N> {
         if self.error.is_some() {
             return Err(LinkError::Aborted);
         }
-        if self.ended.is_some() {
-            self.fail("the node loop ended while the RC was still sending".into());
+        if let Some(end) = &self.ended {
+            let msg = format!(
+                "the node loop ended while the RC was still sending: {}",
+                end.result
+            );
+            self.fail(msg);
             return Err(LinkError::Aborted);
         }
         if let Err(e) = self.node.deliver(exchanged, frame) {

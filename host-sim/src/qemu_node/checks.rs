@@ -4,6 +4,9 @@
 
 use super::*;
 use crate::cluster::{render_cluster, SimConfig};
+use crate::frame::{render_single, Precision};
+use links_core::image::SceneView;
+use links_core::num::Storage;
 use links_core::wire::{self, Down, Up};
 use std::fmt;
 
@@ -20,6 +23,27 @@ pub fn simulated_frame(image: &[u8]) -> Result<Vec<u8>, String> {
         .frames
         .pop()
         .ok_or_else(|| "the simulator kept no frame".to_string())
+}
+
+/// The frame [`simulated_frame`] gave for `image` must equal host-sim's single-node render
+/// (`links render` without `--nodes`) in the kernel the image's storage picks: f32, or
+/// Q16.16 for the DM's fixed-point image. Returns that precision.
+pub fn check_single_render(image: &[u8], cluster: &[u8]) -> Result<Precision, String> {
+    let storage = SceneView::new(image).map_err(|e| e.to_string())?.storage();
+    let precision = match storage {
+        Storage::F32 => Precision::F32,
+        Storage::Q16_16 => Precision::Fixed,
+    };
+    let single = render_single(image, precision, 1, &|| {}).map_err(|e| e.to_string())?;
+    if single.rgb != cluster {
+        let p = (0..single.rgb.len().min(cluster.len()) / 3)
+            .find(|&p| single.rgb[3 * p..3 * p + 3] != cluster[3 * p..3 * p + 3]);
+        return Err(format!(
+            "the simulator's single-node cluster frame differs from the {} single render (first differing pixel index {p:?})",
+            precision.name()
+        ));
+    }
+    Ok(precision)
 }
 
 /// Every check of one run against the expected frame; the first failure, or Ok.

@@ -1,9 +1,13 @@
 //! The host's node: the same `run_node` compiled for the host, polled in lock step
-//! ([`LocalNode`]).
+//! ([`LocalNode`]), with the kernels of the firmware it stands for (f32, Q16.16 or both).
 
 use super::*;
 use links_core::link::{Incoming, LinkError, NodeLink};
-use links_core::node::{run_node, NodeConfig, NodeError, NodeReport, RealTime, Tracing};
+use links_core::node::{
+    run_node, Kernels, NodeConfig, NodeError, NodeReport, RealTime, RunRenderer, Tracing,
+    TracingByImage,
+};
+use links_core::num::Fx;
 use links_core::wire::MAX_SCENE;
 use std::cell::RefCell;
 use std::collections::VecDeque;
@@ -72,7 +76,22 @@ impl Default for LocalNode {
 }
 
 impl LocalNode {
+    /// A node with the f32 kernel (the Cortex-M4F firmware's).
     pub fn new() -> Self {
+        Self::with_kernels(Kernels::F32)
+    }
+
+    /// A node carrying `kernels`, as the firmware built with the same `kernel-*` features:
+    /// [`Tracing<f32>`], [`Tracing<Fx>`] or [`TracingByImage`].
+    pub fn with_kernels(kernels: Kernels) -> Self {
+        match kernels {
+            Kernels::F32 => Self::with_renderer(Tracing::<f32>::new()),
+            Kernels::Fixed => Self::with_renderer(Tracing::<Fx>::new()),
+            Kernels::Both => Self::with_renderer(TracingByImage::default()),
+        }
+    }
+
+    fn with_renderer<R: RunRenderer + 'static>(mut renderer: R) -> Self {
         let shared = Rc::new(RefCell::new(LocalShared::default()));
         let mut link = LocalLink(shared.clone());
         let fut: NodeFuture = Box::pin(async move {
@@ -83,7 +102,7 @@ impl LocalNode {
                 NodeConfig::default(),
                 &mut link,
                 &mut RealTime,
-                &mut Tracing::<f32>::new(),
+                &mut renderer,
                 [b0.as_mut_slice(), b1.as_mut_slice()],
                 &mut report,
             )

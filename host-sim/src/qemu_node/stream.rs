@@ -1,5 +1,6 @@
-//! The QEMU node: the firmware's `run_node` on Cortex-M4F under QEMU, speaking records over
-//! two streams (the FIFOs it opens through semihosting): [`StreamNode`], [`QemuNode`].
+//! The QEMU node: the firmware's `run_node` on Cortex-M (M4F or M3) under QEMU, speaking
+//! records over two streams (the FIFOs it opens through semihosting): [`StreamNode`],
+//! [`QemuNode`].
 
 use super::*;
 use links_core::wire::MAX_SCENE;

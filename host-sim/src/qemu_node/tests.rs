@@ -2,6 +2,7 @@ use super::bus::LockstepBus;
 use super::*;
 use links_core::dm::{compile, CompileOptions};
 use links_core::link::{LinkError, RootBus, Transfer};
+use links_core::node::Kernels;
 use links_core::wire::{self, Down, Up, MAX_MESSAGE};
 use std::future::Future;
 use std::task::{Context, Poll, Waker};
@@ -272,4 +273,48 @@ fn stream_node_speaks_the_record_protocol() {
     // A truncated stream is an error, not a hang or a panic.
     let mut cut = StreamNode::new(&up[..7], Vec::new());
     assert!(cut.settle().unwrap_err().contains("QEMU exited"));
+}
+
+/// The M3 run's path on the host: the DM's Q16.16 image, the node carrying the fixed-point
+/// kernel only. Its frame is the simulator's fixed render (and `links render`'s single fixed
+/// render), and it is not the f32 frame: the check would catch a node rendering in f32.
+#[test]
+fn fixed_point_node_gives_the_simulators_fixed_frame_not_the_f32_one() {
+    let f32_img = image("photo1.ron", 24, 20);
+    let fixed = crate::frame::fixed_image(&f32_img).unwrap();
+    let want = simulated_frame(&fixed).unwrap();
+    assert_eq!(
+        check_single_render(&fixed, &want).unwrap(),
+        crate::frame::Precision::Fixed
+    );
+    let q = run_rc(&fixed, LocalNode::with_kernels(Kernels::Fixed)).unwrap();
+    check_outcome(&q, &want, 0).unwrap();
+    assert_eq!(q.root.pixels, 24 * 20);
+
+    let f32_frame = simulated_frame(&f32_img).unwrap();
+    assert_eq!(
+        check_single_render(&f32_img, &f32_frame).unwrap(),
+        crate::frame::Precision::F32
+    );
+    let err = check_outcome(&q, &f32_frame, 0).unwrap_err();
+    assert!(err.contains("pixels differ"), "{err}");
+    // A node carrying both kernels renders the fixed image with the fixed one: the same
+    // transfers byte for byte.
+    let both = run_rc(&fixed, LocalNode::with_kernels(Kernels::Both)).unwrap();
+    compare_transcripts(&both, &q).unwrap();
+    // The single render check compares real pixels: the f32 frame is not the fixed image's.
+    assert!(check_single_render(&fixed, &f32_frame).is_err());
+}
+
+/// A node without the image's kernel (the f32 firmware sent a Q16.16 image) stops with
+/// `NoKernel`, and the check says so.
+#[test]
+fn a_node_without_the_images_kernel_fails_the_check() {
+    let fixed = crate::frame::fixed_image(&image("photo1.ron", 8, 6)).unwrap();
+    let want = simulated_frame(&fixed).unwrap();
+    let err = match run_rc(&fixed, LocalNode::with_kernels(Kernels::F32)) {
+        Ok(o) => check_outcome(&o, &want, 0).unwrap_err(),
+        Err(e) => e,
+    };
+    assert!(err.contains("NoKernel"), "{err}");
 }

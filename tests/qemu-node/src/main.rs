@@ -1,12 +1,14 @@
-//! The node computer's firmware logic on a real Cortex-M4F instruction set, under QEMU.
+//! The node computer's firmware logic on a real Cortex-M instruction set, under QEMU.
 //!
 //! This is a thin cortex-m-rt binary (embassy-stm32's `init` hangs on QEMU) around the very
-//! `links_core::node::run_node` loop the simulator and the STM32 firmware run, with the f32
-//! tracer ([`Tracing`]) and the hardware clock ([`RealTime`]). Only the link differs: instead
-//! of SPI + DMA banks, [`SemihostLink`] carries the IMSU's transfers through two FIFOs that
-//! QEMU's semihosting opens on the host (`nc-down`: RC -> NC, `nc-up`: NC -> RC, relative
-//! to QEMU's working directory). On the other end the host runs the real RC logic
-//! (`links_core::root::run_bus`, `host-sim/src/qemu_node/`).
+//! `links_core::node::run_node` loop the simulator and the STM32 firmware run, with the
+//! tracing kernels of its features ([`Renderer`], as nc-fw picks them: the f32 tracer on the
+//! Cortex-M4F build, the Q16.16 tracer on the FPU-less Cortex-M3 build) and the hardware
+//! clock ([`RealTime`]). Only the link differs: instead of SPI + DMA banks, [`SemihostLink`]
+//! carries the IMSU's transfers through two FIFOs that QEMU's semihosting opens on the host
+//! (`nc-down`: RC -> NC, `nc-up`: NC -> RC, relative to QEMU's working directory). On the
+//! other end the host runs the real RC logic (`links_core::root::run_bus`,
+//! `host-sim/src/qemu_node/`).
 //!
 //! Records on the FIFOs: a kind byte, a little-endian u32 length, then that many bytes.
 //! - NC -> RC: `P` a frame posted to the TX bank (the ready line goes up); `W` the node waits
@@ -32,7 +34,8 @@ use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hio, syscall};
 use links_core::image::SceneView;
 use links_core::link::{Incoming, LinkError, NodeLink};
-use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, RunRenderer, Tracing};
+use links_core::node::{run_node, Kernels, NodeConfig, NodeReport, RealTime, RunRenderer};
+use links_core::num::Storage;
 use links_core::render::{RenderError, Rgb8, Stats};
 use links_core::wire::{CRC32, MAX_MESSAGE, MAX_SCENE};
 
@@ -186,9 +189,24 @@ impl NodeLink for SemihostLink {
     }
 }
 
+/// The node's renderer: both kernels (the image picks) or the one built (features
+/// `kernel-f32` / `kernel-fixed`, as nc-fw's).
+#[cfg(all(feature = "kernel-f32", feature = "kernel-fixed"))]
+type Renderer = links_core::node::TracingByImage;
+/// The node's renderer: both kernels (the image picks) or the one built (features
+/// `kernel-f32` / `kernel-fixed`, as nc-fw's).
+#[cfg(all(feature = "kernel-f32", not(feature = "kernel-fixed")))]
+type Renderer = links_core::node::Tracing<f32>;
+/// The node's renderer: both kernels (the image picks) or the one built (features
+/// `kernel-f32` / `kernel-fixed`, as nc-fw's).
+#[cfg(all(feature = "kernel-fixed", not(feature = "kernel-f32")))]
+type Renderer = links_core::node::Tracing<links_core::num::Fx>;
+#[cfg(not(any(feature = "kernel-f32", feature = "kernel-fixed")))]
+compile_error!("the QEMU node needs a kernel: feature kernel-f32 or kernel-fixed");
+
 /// The real tracer, with the instructions it executes counted.
 struct Counted {
-    inner: Tracing<f32>,
+    inner: Renderer,
     instr: u64,
     runs: u32,
 }
@@ -209,8 +227,12 @@ impl RunRenderer for Counted {
         r
     }
 
-    fn kernels(&self) -> links_core::node::Kernels {
+    fn kernels(&self) -> Kernels {
         self.inner.kernels()
+    }
+
+    fn forget(&mut self) {
+        self.inner.forget();
     }
 }
 
@@ -279,7 +301,7 @@ fn main() -> ! {
         bytes_out: 0,
     };
     let mut renderer = Counted {
-        inner: Tracing::new(),
+        inner: Renderer::default(),
         instr: 0,
         runs: 0,
     };
@@ -322,7 +344,7 @@ fn main() -> ! {
     };
     let _ = write!(
         t,
-        "instr_total={} instr_render={} instr_link={} render_calls={} records_in={} records_out={} bytes_in={} bytes_out={} scene_bytes={} scene_valid={} validations={} opens={} unit_validate={} unit_open={} unit_scene_crc={}\nresult={:?}\nreport={:?}",
+        "instr_total={} instr_render={} instr_link={} render_calls={} records_in={} records_out={} bytes_in={} bytes_out={} scene_bytes={} scene_valid={} validations={} opens={} unit_validate={} unit_open={} unit_scene_crc={} kernels_f32={} kernels_fixed={}\nresult={:?}\nreport={:?}",
         total,
         renderer.instr,
         link.instr,
@@ -338,6 +360,8 @@ fn main() -> ! {
         validate,
         open,
         scene_crc,
+        renderer.kernels().run(Storage::F32) as u8,
+        renderer.kernels().run(Storage::Q16_16) as u8,
         result,
         report
     );
