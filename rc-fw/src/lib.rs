@@ -27,8 +27,17 @@ pub mod link {
     pub const CS_SETUP_US: u64 = LINK.cs_setup_ns as u64 / 1000;
     /// Chip-select high before the next selection: the node stops its DMA and re-arms.
     pub const CS_HOLD_US: u64 = LINK.cs_hold_ns as u64 / 1000;
-    /// Nodes on the one bus this firmware drives.
+    /// Nodes on the one bus this firmware drives (as the root of a relay tree, feature
+    /// `relay-root`: its relays, each a node on this bus).
     pub const NODES: usize = LINK.nodes_per_bus as usize;
+    /// The NCs the root logic hands work to: those on its bus, or, as the root of a relay
+    /// tree (`relay-root`), the nodes behind its relays (one level: each relay's bus holds
+    /// as many as the root's).
+    pub const RENDER_NODES: usize = if cfg!(feature = "relay-root") {
+        NODES * LINK.nodes_per_bus as usize
+    } else {
+        NODES
+    };
     // The timer counts whole microseconds: the profile's times must be whole too.
     const _: () =
         assert!(LINK.cs_setup_ns.is_multiple_of(1000) && LINK.cs_hold_ns.is_multiple_of(1000));
@@ -44,9 +53,17 @@ pub mod plan {
     /// other waits for or crosses the bus) and one RX (in SRAM), each the board profile's
     /// bank size (`links_core::spi::BANK`).
     pub const LINK_BANKS: usize = 3 * BANK;
+    /// As the root of a relay tree (feature `relay-root`): the buffers of
+    /// `links_core::relay::RelayedBus` (two compose buffers, the answer, the relay's batch),
+    /// in SRAM (the CCM has no room), taken from the scene's share.
+    pub const RELAYED: usize = if cfg!(feature = "relay-root") {
+        core::mem::size_of::<links_core::relay::RelayedBuffers>()
+    } else {
+        0
+    };
     /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
-    /// through the TX bank): what the DMA banks leave, in whole KB.
-    pub const SCENE: usize = (SRAM - LINK_BANKS) / 1024 * 1024;
+    /// through the TX bank): what the DMA banks (and the relay buffers) leave, in whole KB.
+    pub const SCENE: usize = (SRAM - LINK_BANKS - RELAYED) / 1024 * 1024;
     /// The first of a film's two scene banks, which split [`SCENE`]: frame k is uploaded
     /// into one while frame k - 1 renders from the other (`links_core::serial::film`); a
     /// still scene uses the first. Half of [`SCENE`], or a node's larger scene bank if that
@@ -66,7 +83,7 @@ pub mod plan {
     /// Bytes of serial frames queued for USB (in CCM).
     pub const USB_QUEUE: usize = 8 * 1024;
 
-    const _: () = assert!(LINK_BANKS + SCENE <= SRAM);
+    const _: () = assert!(LINK_BANKS + RELAYED + SCENE <= SRAM);
     const _: () = assert!(SCENE <= links_core::wire::MAX_SCENE);
     // Every SceneImage a node's bank holds fits one film bank of the RC.
     const _: () = assert!(FILM_BANK >= crate::link::PROFILE.node.bank(0));
@@ -227,7 +244,7 @@ pub mod backup_line {
     /// how long the line rests when no served node has anything to do
     /// (`links_core::backup::serve_root`).
     pub const SERVE: links_core::backup::ServeConfig = links_core::backup::ServeConfig {
-        nodes: crate::link::NODES as u16,
+        nodes: crate::link::RENDER_NODES as u16,
         call_gap_us: 100_000,
         idle_us: 1_000,
     };
@@ -242,6 +259,29 @@ mod tests {
     use links_core::board::BoardProfile;
 
     /// Every link number of this firmware is its board profile's (the F207's with
+    /// The root of a relay tree (`--features relay-root`, run by `scripts/test-all`) reaches
+    /// the nodes behind its relays and pays for `RelayedBus`'s buffers out of the scene's
+    /// SRAM; the plain root drives its own bus's nodes and keeps all of it.
+    #[test]
+    fn the_root_of_relays_reaches_64_nodes_and_its_buffers_come_from_the_scene() {
+        use super::link::{NODES, PROFILE, RENDER_NODES};
+        use super::plan::{FILM_BANK, LINK_BANKS, RELAYED, SCENE, SRAM};
+        let per_bus = PROFILE.link.nodes_per_bus as usize;
+        let relayed = core::mem::size_of::<links_core::relay::RelayedBuffers>();
+        assert_eq!(relayed, 4 * links_core::wire::MAX_MESSAGE);
+        if cfg!(feature = "relay-root") {
+            assert_eq!((RENDER_NODES, RELAYED), (NODES * per_bus, relayed));
+            if !cfg!(feature = "board-f207") {
+                // 128 KB - 3 DMA banks - 6,304 B, in whole KB; a film's second bank is what
+                // the first (a node's 61,440-byte bank) leaves.
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 119_808, 61_440));
+            }
+        } else {
+            assert_eq!((RENDER_NODES, RELAYED), (NODES, 0));
+        }
+        assert!(LINK_BANKS + RELAYED + SCENE <= SRAM && FILM_BANK <= SCENE);
+    }
+
     /// `--no-default-features --features board-f207`).
     #[test]
     fn the_firmware_constants_are_the_board_profile() {

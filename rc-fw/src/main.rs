@@ -46,6 +46,9 @@ mod fw {
     use links_core::serial::{Encoder, FrameStreamer};
     use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
     use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS, SERVE};
+    #[cfg(feature = "relay-root")]
+    use links_core::relay::{RelayedBuffers, RelayedBus};
+    use rc_fw::link::RENDER_NODES;
     use rc_fw::pins::NODES;
     use rc_fw::plan::{FILM_BANK, SCENE};
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
@@ -55,7 +58,12 @@ mod fw {
     use {defmt_rtt as _, panic_probe as _};
 
     type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
+    /// The root logic's bus: the NCs on SPI1, or (feature `relay-root`) the nodes behind
+    /// the relay RCs on SPI1.
+    #[cfg(not(feature = "relay-root"))]
     type Link = MasterFront<'static, 'static>;
+    #[cfg(feature = "relay-root")]
+    type Link = RelayedBus<'static, MasterFront<'static, 'static>>;
 
     bind_interrupts!(struct Irqs {
         OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
@@ -76,6 +84,8 @@ mod fw {
     /// DMA banks and the uploaded scene, in SRAM (`.sram`, see memory.x).
     struct Sram {
         link: [Bank; 3],
+        #[cfg(feature = "relay-root")]
+        relayed: RelayedBuffers,
         scene: [u8; SCENE],
     }
 
@@ -138,7 +148,7 @@ mod fw {
     #[embassy_executor::task]
     async fn backup_task(line: &'static Line) {
         loop {
-            for a in 1..=NODES as u8 {
+            for a in 1..=RENDER_NODES as u8 {
                 let mut rs485 = line.lock().await;
                 let mut port = PortLine {
                     port: &mut *rs485,
@@ -152,6 +162,16 @@ mod fw {
             }
             Timer::after_millis(ROLL_CALL_PERIOD_MS).await;
         }
+    }
+
+    /// The SPI link's counters after a render (as the root of relays: the relay link's).
+    #[cfg(not(feature = "relay-root"))]
+    fn link_counters(link: &Link) -> links_core::spi::MasterCounters {
+        link.counters()
+    }
+    #[cfg(feature = "relay-root")]
+    fn link_counters(link: &Link) -> links_core::spi::MasterCounters {
+        link.link().counters()
     }
 
     async fn queue(bytes: &[u8]) {
@@ -188,7 +208,7 @@ mod fw {
                 &mut out,
                 &buf[..len],
                 frame,
-                NODES as u16,
+                RENDER_NODES as u16,
                 film_enc,
                 last,
             );
@@ -285,7 +305,7 @@ mod fw {
                     &mut PipeQueue(&USB_QUEUE),
                     image,
                     frames,
-                    NODES as u16,
+                    RENDER_NODES as u16,
                     &mut session.enc,
                     last,
                     Some((&mut port, SERVE)),
@@ -293,7 +313,7 @@ mod fw {
                 .await;
                 drop(rs485);
                 match r {
-                    Ok(report) => info!("rendered: {} / link {}", report, link.counters()),
+                    Ok(report) => info!("rendered: {} / link {}", report, link_counters(link)),
                     Err(e) => warn!("render failed: {}", e),
                 }
             }
@@ -382,7 +402,16 @@ mod fw {
         let (tx, rx) = class.split();
 
         let [btx0, btx1, brx] = &mut sram.link;
-        let link = MasterFront::new(&BUS, 0, NODES as u16, [btx0, btx1], brx);
+        let front = MasterFront::new(&BUS, 0, NODES as u16, [btx0, btx1], brx);
+        #[cfg(not(feature = "relay-root"))]
+        let link = front;
+        #[cfg(feature = "relay-root")]
+        let link = unwrap!(RelayedBus::new(
+            front,
+            &mut sram.relayed,
+            0,
+            rc_fw::link::PROFILE.link.nodes_per_bus
+        ));
 
         // The serial backup line: USART2 and its driver enable (rc_fw::pins::BACKUP).
         #[cfg(not(feature = "board-f207"))]

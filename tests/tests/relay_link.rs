@@ -11,7 +11,7 @@ use embassy_futures::join::join;
 use embassy_futures::select::{select, Either};
 use links_core::dm::{compile, CompileOptions};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
-use links_core::relay::{run_relay, RelayBuffers, RelayReport, RelayedBus};
+use links_core::relay::{run_relay, RelayBuffers, RelayReport, RelayedBuffers, RelayedBus};
 use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
 use links_core::testkit::spi::*;
@@ -160,7 +160,8 @@ fn tree(
     let relay_buses: Vec<SharedBus> = (0..relays).map(|_| bus(per)).collect();
     relay_buses[0].borrow_mut().faults = relay0_faults;
     let (shared, front, task, mut port) = master_split(&root_bus, 0);
-    let mut relayed = RelayedBus::new(front, 0, per as u16).expect("a tree that fits");
+    let mut bufs = Box::new(RelayedBuffers::new());
+    let mut relayed = RelayedBus::new(front, &mut bufs, 0, per as u16).expect("a tree that fits");
     let rc = async {
         let logic = run_bus(0, &mut relayed, &NoClock, &root, &scenes[..], &sink);
         match select(logic, task.run(&mut port, shared)).await {

@@ -39,7 +39,7 @@ pub use batch::{
     MAX_RELAY_NODES, MAX_ROUTED, RECORD, TAG_BATCH, TAG_FORWARD,
 };
 pub use node::{run_relay, RelayBuffers, RelayReport};
-pub use root::{RelayedBus, RelayedCounters};
+pub use root::{RelayedBuffers, RelayedBus, RelayedCounters};
 
 use crate::cluster::link::{LinkError, NodeId};
 use core::fmt;

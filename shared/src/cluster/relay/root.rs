@@ -24,6 +24,33 @@ pub struct RelayedCounters {
     pub stray_frames: u32,
 }
 
+/// The buffers of a [`RelayedBus`] (6.3 KB: the firmware places them in SRAM beside the
+/// scene, since all-zero bytes are a valid value).
+pub struct RelayedBuffers {
+    /// Two compose buffers (double buffering, as the SPI link's banks).
+    pub tx: [[u8; MAX_MESSAGE]; 2],
+    /// The node frame that answered the request in flight.
+    pub answer: [u8; MAX_MESSAGE],
+    /// What the link's last relay exchange brought.
+    pub rx: [u8; MAX_MESSAGE],
+}
+
+impl RelayedBuffers {
+    pub const fn new() -> Self {
+        RelayedBuffers {
+            tx: [[0; MAX_MESSAGE]; 2],
+            answer: [0; MAX_MESSAGE],
+            rx: [0; MAX_MESSAGE],
+        }
+    }
+}
+
+impl Default for RelayedBuffers {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
 /// The link operation the root has started and not yet taken.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Op {
@@ -37,30 +64,33 @@ enum Op {
 /// `link`'s `finish` must be safe to drop while awaited (a relay exchange is started and
 /// finished inside `wait_ready`, which `run_bus` races against its timers): the split link
 /// ([`crate::spi::MasterFront`]) is; a dropped exchange is taken before the next one.
-pub struct RelayedBus<L> {
+pub struct RelayedBus<'m, L> {
     link: L,
+    buf: &'m mut RelayedBuffers,
     first: NodeId,
     per_relay: u16,
     relays: u16,
     /// Per relay: its nodes waiting to be asked, as it last reported (bit `i`: its `i`-th).
     waiting: [u32; MAX_RELAYS],
-    /// Two compose buffers (double buffering, as the SPI link's banks).
-    tx: [[u8; MAX_MESSAGE]; 2],
+    /// Which of `buf.tx` is idle (the other one may be on the wire).
     idle: usize,
     started: Option<(Op, usize)>,
-    /// The node frame that answered the request in flight.
+    /// The length of the node frame in `buf.answer` that answered the request in flight.
     answer: Option<usize>,
-    answer_buf: [u8; MAX_MESSAGE],
     /// A relay exchange started on the link and not yet taken (its relay index).
     dangling: Option<u16>,
-    rx: [u8; MAX_MESSAGE],
     next_scan: u16,
     pub counters: RelayedCounters,
 }
 
-impl<L: RootBus> RelayedBus<L> {
+impl<'m, L: RootBus> RelayedBus<'m, L> {
     /// The nodes `first..first + relays * per_relay` behind every relay on `link`.
-    pub fn new(link: L, first: NodeId, per_relay: u16) -> Result<Self, RelayError> {
+    pub fn new(
+        link: L,
+        buf: &'m mut RelayedBuffers,
+        first: NodeId,
+        per_relay: u16,
+    ) -> Result<Self, RelayError> {
         let relays = link.nodes().1;
         let total = relays as u32 * per_relay as u32;
         if relays as usize > MAX_RELAYS || per_relay > MAX_RELAY_NODES {
@@ -77,17 +107,15 @@ impl<L: RootBus> RelayedBus<L> {
         }
         Ok(RelayedBus {
             link,
+            buf,
             first,
             per_relay,
             relays,
             waiting: [0; MAX_RELAYS],
-            tx: [[0; MAX_MESSAGE]; 2],
             idle: 0,
             started: None,
             answer: None,
-            answer_buf: [0; MAX_MESSAGE],
             dangling: None,
-            rx: [0; MAX_MESSAGE],
             next_scan: 0,
             counters: RelayedCounters::default(),
         })
@@ -136,7 +164,7 @@ impl<L: RootBus> RelayedBus<L> {
         let bank = self.link.tx_bank();
         let mut w = BatchWriter::new(bank).map_err(|_| LinkError::Aborted)?;
         if let Some((node, len)) = request {
-            let data = self.tx[self.idle ^ 1].get(..len).unwrap_or(&[]);
+            let data = self.buf.tx[self.idle ^ 1].get(..len).unwrap_or(&[]);
             w.push(Record {
                 kind: Kind::Request,
                 node,
@@ -161,7 +189,7 @@ impl<L: RootBus> RelayedBus<L> {
         let Some(r) = self.dangling else {
             return Ok(());
         };
-        let got = self.link.finish(&mut self.rx).await?;
+        let got = self.link.finish(&mut self.buf.rx).await?;
         self.dangling = None;
         self.apply(r, got);
         Ok(())
@@ -179,7 +207,7 @@ impl<L: RootBus> RelayedBus<L> {
         };
         // Records name a relay's nodes by their index on its bus.
         let base = self.first + r * self.per_relay;
-        let Ok(Relayed::Batch { waiting, records }) = parse(&self.rx[..got]) else {
+        let Ok(Relayed::Batch { waiting, records }) = parse(&self.buf.rx[..got]) else {
             self.counters.bad_batches += 1;
             return;
         };
@@ -199,7 +227,7 @@ impl<L: RootBus> RelayedBus<L> {
                 }) if asking.is_some_and(|a| a.checked_sub(base) == Some(node))
                     && self.answer.is_none() =>
                 {
-                    self.answer_buf[..data.len()].copy_from_slice(data);
+                    self.buf.answer[..data.len()].copy_from_slice(data);
                     self.answer = Some(data.len());
                 }
                 Ok(Record {
@@ -211,7 +239,7 @@ impl<L: RootBus> RelayedBus<L> {
     }
 }
 
-impl<L: RootBus> RootBus for RelayedBus<L> {
+impl<L: RootBus> RootBus for RelayedBus<'_, L> {
     fn nodes(&self) -> (NodeId, u16) {
         (self.first, self.relays * self.per_relay)
     }
@@ -246,7 +274,7 @@ impl<L: RootBus> RootBus for RelayedBus<L> {
     }
 
     fn tx_bank(&mut self) -> &mut [u8] {
-        &mut self.tx[self.idle][..MAX_ROUTED]
+        &mut self.buf.tx[self.idle][..MAX_ROUTED]
     }
 
     fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
@@ -280,7 +308,7 @@ impl<L: RootBus> RootBus for RelayedBus<L> {
         match op {
             Op::Broadcast => {
                 let n =
-                    forward(&self.tx[self.idle ^ 1][..len], self.link.tx_bank()).map_err(|_| {
+                    forward(&self.buf.tx[self.idle ^ 1][..len], self.link.tx_bank()).map_err(|_| {
                         LinkError::TooLong {
                             len: len as u32 + 1,
                             max: MAX_MESSAGE as u32,
@@ -306,7 +334,7 @@ impl<L: RootBus> RootBus for RelayedBus<L> {
                 let dst = rx
                     .get_mut(..n)
                     .ok_or(LinkError::TooLong { len: n as u32, max })?;
-                dst.copy_from_slice(&self.answer_buf[..n]);
+                dst.copy_from_slice(&self.buf.answer[..n]);
                 Ok(n)
             }
         }
