@@ -40,14 +40,14 @@ mod fw {
     use embassy_usb::{Builder, UsbDevice};
     use links_board::rs485::Rs485;
     use links_core::backup::{self, PortLine};
+    #[cfg(feature = "relay-root")]
+    use links_core::relay::{RelayedBuffers, RelayedBus};
     use links_core::serial::film::bank_of;
     use links_core::serial::readback::ByteQueue;
     use links_core::serial::throttle::Room;
     use links_core::serial::{Encoder, FrameStreamer};
     use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
     use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS, SERVE};
-    #[cfg(feature = "relay-root")]
-    use links_core::relay::{RelayedBuffers, RelayedBus};
     use rc_fw::link::RENDER_NODES;
     use rc_fw::pins::NODES;
     use rc_fw::plan::{FILM_BANK, SCENE};

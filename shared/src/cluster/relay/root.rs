@@ -307,13 +307,12 @@ impl<L: RootBus> RootBus for RelayedBus<'_, L> {
         self.settle().await?;
         match op {
             Op::Broadcast => {
-                let n =
-                    forward(&self.buf.tx[self.idle ^ 1][..len], self.link.tx_bank()).map_err(|_| {
-                        LinkError::TooLong {
-                            len: len as u32 + 1,
-                            max: MAX_MESSAGE as u32,
-                        }
-                    })?;
+                let n = forward(&self.buf.tx[self.idle ^ 1][..len], self.link.tx_bank()).map_err(
+                    |_| LinkError::TooLong {
+                        len: len as u32 + 1,
+                        max: MAX_MESSAGE as u32,
+                    },
+                )?;
                 self.link.start(Transfer::Broadcast, n)?;
                 self.link.finish(&mut []).await?;
                 self.started = None;
