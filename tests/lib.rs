@@ -221,3 +221,27 @@ pub fn host_reference(img: &[u8]) -> Vec<u8> {
         .expect("renders")
         .rgb
 }
+
+/// A frame the root logic writes pixel runs into (`links_core::root::PixelSink`), `w` pixels
+/// wide, RGB8.
+pub struct FrameSink {
+    pub w: usize,
+    pub rgb: Vec<u8>,
+}
+
+impl FrameSink {
+    /// A black `w` x `h` frame.
+    pub fn new(w: u32, h: u32) -> Self {
+        FrameSink {
+            w: w as usize,
+            rgb: vec![0; (w * h * 3) as usize],
+        }
+    }
+}
+
+impl links_core::root::PixelSink for FrameSink {
+    fn pixels(&mut self, _frame: u16, y: u16, x: u16, rgb: &[u8]) {
+        let at = 3 * (y as usize * self.w + x as usize);
+        self.rgb[at..at + rgb.len()].copy_from_slice(rgb);
+    }
+}

@@ -9,40 +9,15 @@ use core::pin::Pin;
 use core::task::Poll;
 use embassy_futures::join::join;
 use embassy_futures::select::{select, Either};
-use links_core::dm::{compile, CompileOptions};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
 use links_core::relay::{run_relay, RelayBuffers, RelayReport, RelayedBuffers, RelayedBus};
-use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootReport, RootState};
+use links_core::root::{run_bus, NoClock, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
 use links_core::testkit::spi::*;
 use links_core::wire::MAX_MESSAGE;
 use links_host::frame::{render_frame, Precision};
-use links_host::scene_file::load_scene;
+use links_tests::{bundled_image, FrameSink};
 use std::cell::RefCell;
-use std::path::Path;
-
-fn image(w: u32, h: u32) -> Vec<u8> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
-    let desc = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
-    let opts = CompileOptions {
-        width: Some(w),
-        height: Some(h),
-        ..Default::default()
-    };
-    compile(&desc, &opts).expect("compiles").bytes
-}
-
-struct Frame {
-    w: usize,
-    rgb: Vec<u8>,
-}
-
-impl PixelSink for Frame {
-    fn pixels(&mut self, _frame: u16, y: u16, x: u16, rgb: &[u8]) {
-        let at = 3 * (y as usize * self.w + x as usize);
-        self.rgb[at..at + rgb.len()].copy_from_slice(rgb);
-    }
-}
 
 type Task<T> = Pin<Box<dyn Future<Output = T>>>;
 
@@ -137,7 +112,7 @@ fn tree(
     relay0_faults: Vec<(u64, Dir, usize)>,
 ) -> Run {
     let (w, h) = (24u32, 16u32);
-    let img = image(w, h);
+    let img = bundled_image("photo1.ron", w, h);
     let want = render_frame(&img, Precision::F32, 1, &|| {})
         .expect("renders")
         .rgb;
@@ -151,10 +126,7 @@ fn tree(
     };
     let scenes = [img.as_slice()];
     let root = RefCell::new(RootState::new(cfg, &scenes[..]).expect("valid"));
-    let sink = RefCell::new(Frame {
-        w: w as usize,
-        rgb: vec![0; (w * h * 3) as usize],
-    });
+    let sink = RefCell::new(FrameSink::new(w, h));
     let root_bus = bus(relays);
     root_bus.borrow_mut().faults = faults;
     let relay_buses: Vec<SharedBus> = (0..relays).map(|_| bus(per)).collect();

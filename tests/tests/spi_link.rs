@@ -8,19 +8,17 @@
 use core::task::Poll;
 use embassy_futures::join::{join, join_array};
 use embassy_futures::select::{select, Either};
-use links_core::dm::{compile, CompileOptions};
 use links_core::link::{Incoming, LinkError, NodeLink, RootBus, Transfer};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
-use links_core::root::{run_bus, NoClock, PixelSink, RootConfig, RootState};
+use links_core::root::{run_bus, NoClock, RootConfig, RootState};
 use links_core::sched::Policy;
 use links_core::spi::{ACK, BANK, HEADER, NAK};
 use links_core::testkit::serial::{read_back, ReadBack};
 use links_core::testkit::spi::*;
 use links_core::wire::{self, MAX_MESSAGE};
 use links_host::frame::{render_frame, Precision};
-use links_host::scene_file::load_scene;
+use links_tests::{bundled_image, FrameSink};
 use std::cell::RefCell;
-use std::path::Path;
 
 /// One node posts a frame; the RC exchanges with it; returns (what the RC got, what the
 /// node got) after the exchange that delivered the node's frame.
@@ -491,29 +489,6 @@ fn a_corrupt_broadcast_is_counted_and_dropped() {
 // End to end: root and node logic over the link
 // ---------------------------------------------------------------------------------------
 
-fn image(w: u32, h: u32) -> Vec<u8> {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
-    let desc = load_scene(&path).unwrap_or_else(|e| panic!("{e}"));
-    let opts = CompileOptions {
-        width: Some(w),
-        height: Some(h),
-        ..Default::default()
-    };
-    compile(&desc, &opts).expect("compiles").bytes
-}
-
-struct Frame {
-    w: usize,
-    rgb: Vec<u8>,
-}
-
-impl PixelSink for Frame {
-    fn pixels(&mut self, _frame: u16, y: u16, x: u16, rgb: &[u8]) {
-        let at = 3 * (y as usize * self.w + x as usize);
-        self.rgb[at..at + rgb.len()].copy_from_slice(rgb);
-    }
-}
-
 async fn node(
     bus: SharedBus,
     i: usize,
@@ -549,7 +524,7 @@ enum RcLink {
 
 fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32, link: RcLink) {
     let (w, h) = (24u32, 16u32);
-    let img = image(w, h);
+    let img = bundled_image("photo1.ron", w, h);
     let want = render_frame(&img, Precision::F32, 1, &|| {})
         .expect("renders")
         .rgb;
@@ -565,10 +540,7 @@ fn cluster(faults: Vec<(u64, Dir, usize)>, lose_edges: u32, link: RcLink) {
     };
     let scenes = [img.as_slice()];
     let root = RefCell::new(RootState::new(cfg, &scenes[..]).expect("valid"));
-    let sink = RefCell::new(Frame {
-        w: w as usize,
-        rgb: vec![0; (w * h * 3) as usize],
-    });
+    let sink = RefCell::new(FrameSink::new(w, h));
     let mut scene_banks: Vec<Vec<u8>> = (0..4).map(|_| vec![0u8; img.len()]).collect();
     let [s0, s1, s2, s3] = &mut scene_banks[..] else {
         unreachable!()
@@ -744,7 +716,7 @@ async fn drain(q: &RefCell<UsbQueue>, done: &core::cell::Cell<bool>) {
 #[test]
 fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
     let (w, h) = (24u32, 16u32);
-    let img = image(w, h);
+    let img = bundled_image("photo1.ron", w, h);
     let want = render_frame(&img, Precision::F32, 1, &|| {})
         .expect("renders")
         .rgb;
