@@ -63,7 +63,7 @@ mod fw {
     #[cfg(not(feature = "relay-root"))]
     type Link = MasterFront<'static, 'static>;
     #[cfg(feature = "relay-root")]
-    type Link = RelayedBus<'static, MasterFront<'static, 'static>>;
+    type Link = RelayedBus<'static, MasterFront<'static, 'static>, Clock>;
 
     bind_interrupts!(struct Irqs {
         OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
@@ -411,7 +411,8 @@ mod fw {
             &mut sram.relayed,
             0,
             rc_fw::link::PROFILE.link.nodes_per_bus
-        ));
+        ))
+        .with_timeout(Clock, rc_fw::link::RELAY_TIMEOUT_US);
 
         // The serial backup line: USART2 and its driver enable (rc_fw::pins::BACKUP).
         #[cfg(not(feature = "board-f207"))]

@@ -11,7 +11,7 @@ use embassy_futures::join::join;
 use embassy_futures::select::{select, Either};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
 use links_core::relay::{run_relay, RelayBuffers, RelayReport, RelayedBuffers, RelayedBus};
-use links_core::root::{run_bus, NoClock, RootConfig, RootReport, RootState};
+use links_core::root::{run_bus, NoClock, RootClock, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
 use links_core::testkit::spi::*;
 use links_core::wire::MAX_MESSAGE;
@@ -239,4 +239,114 @@ fn corrupt_bytes_on_a_relays_bus_are_the_nodes_business_as_on_a_direct_bus() {
     );
     let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
     assert_eq!(routed, run.root.exchanges);
+}
+
+/// Time for the harness, which has no other: each poll of a pending `at_us` is a
+/// microsecond, and each transfer on the root's bus 50 (as on the wire).
+struct PollClock {
+    now: std::cell::Cell<u64>,
+    bus: SharedBus,
+}
+
+impl RootClock for &PollClock {
+    fn now_us(&self) -> u64 {
+        self.now.get() + 50 * self.bus.borrow().transfers
+    }
+    async fn at_us(&self, t: u64) {
+        core::future::poll_fn(|cx| {
+            if self.now_us() >= t {
+                return Poll::Ready(());
+            }
+            self.now.set(self.now.get() + 1);
+            cx.waker().wake_by_ref();
+            Poll::Pending
+        })
+        .await
+    }
+}
+
+/// A relay that stops answering mid-frame (its task dropped: its links disarmed, its ready
+/// line low for good) costs the root its nodes, not the frame:
+/// `RelayedBus` gives the exchange up at its time-out, the root logic's node time-out retires
+/// the nodes behind the dead relay and their jobs go to the other relay's nodes. Without the
+/// relay time-out the root waited for ever in `finish`.
+#[test]
+fn a_relay_that_stops_answering_costs_its_nodes_not_the_frame() {
+    let (w, h, per) = (24u32, 16u32, 2usize);
+    let img = bundled_image("photo1.ron", w, h);
+    let want = render_frame(&img, Precision::F32, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    let cfg = RootConfig {
+        policy: Policy::DECREASING,
+        nodes: (2 * per) as u16,
+        frames: 1,
+        timeout_us: 200_000,
+        double_buffer: true,
+    };
+    let scenes = [img.as_slice()];
+    let root = RefCell::new(RootState::new(cfg, &scenes[..]).expect("valid"));
+    let sink = RefCell::new(FrameSink::new(w, h));
+    let root_bus = bus(2);
+    let relay_buses: Vec<SharedBus> = (0..2).map(|_| bus(per)).collect();
+    let (shared, front, task, mut port) = master_split(&root_bus, 0);
+    let clock = PollClock {
+        now: std::cell::Cell::new(0),
+        bus: root_bus.clone(),
+    };
+    let mut bufs = Box::new(RelayedBuffers::new());
+    let mut relayed = RelayedBus::new(front, &mut bufs, 0, per as u16)
+        .expect("a tree that fits")
+        .with_timeout(&clock, 20_000);
+    let root_clock = &clock;
+    let rc = async {
+        let logic = run_bus(0, &mut relayed, &root_clock, &root, &scenes[..], &sink);
+        match select(logic, task.run(&mut port, shared)).await {
+            Either::First(r) => r.expect("root runs"),
+        }
+    };
+    // Relay 1 dies once its own bus has carried the scene (19 broadcasts) and a few node
+    // exchanges: its nodes hold jobs by then.
+    let dying: Task<()> = {
+        let bus1 = relay_buses[1].clone();
+        let relay1 = relay(root_bus.clone(), 1, bus1.clone());
+        let died = core::future::poll_fn(move |cx| {
+            if bus1.borrow().transfers > 24 {
+                return Poll::Ready(());
+            }
+            cx.waker().wake_by_ref();
+            Poll::Pending
+        });
+        Box::pin(async move {
+            let _ = select(relay1, died).await;
+            core::future::pending::<()>().await
+        })
+    };
+    let others: Vec<Task<()>> = std::iter::once(relay(root_bus.clone(), 0, relay_buses[0].clone()))
+        .map(|t| -> Task<()> {
+            Box::pin(async move {
+                t.await;
+                core::future::pending::<()>().await
+            })
+        })
+        .chain(std::iter::once(dying))
+        .chain((0..2 * per).map(|k| -> Task<()> {
+            let n = node(relay_buses[k / per].clone(), k % per, img.len());
+            Box::pin(async move {
+                n.await;
+                core::future::pending::<()>().await
+            })
+        }))
+        .collect();
+    let report = match run(select(rc, join_all(others))) {
+        Either::First(r) => r,
+        Either::Second(_) => unreachable!("the others never end"),
+    };
+    assert_eq!(
+        sink.borrow().rgb,
+        want,
+        "the frame is the single-node render"
+    );
+    assert!(report.timeouts > 0, "{report:?}");
+    assert!(relayed.counters.timeouts > 0, "{:?}", relayed.counters);
 }

@@ -27,8 +27,9 @@
 //! either link can make the relay panic; no heap: the relay's buffers are the caller's.
 //!
 //! Limits of this version: [`RelayedBus`] has one node exchange in flight per root bus (a
-//! frame crosses the parent's link twice per exchange, request down and frame up), and a
-//! relay that stops answering stalls the root's `finish` (no time-out through a relay yet).
+//! frame crosses the parent's link twice per exchange, request down and frame up). A relay
+//! that stops answering costs the root a time-out per exchange ([`RelayedBus::with_timeout`];
+//! without one, `finish` waits for ever).
 
 mod batch;
 mod node;

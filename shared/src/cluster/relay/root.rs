@@ -4,7 +4,9 @@
 use super::batch::{forward, parse, BatchWriter, Kind, Record, Relayed};
 use super::{RelayError, MAX_RELAY_NODES, MAX_ROUTED};
 use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
+use crate::cluster::root::{NoClock, RootClock};
 use crate::cluster::wire::MAX_MESSAGE;
+use embassy_futures::select::{select, Either};
 
 /// Most relays on one link.
 const MAX_RELAYS: usize = 32;
@@ -22,6 +24,9 @@ pub struct RelayedCounters {
     pub bad_batches: u32,
     /// Node frames for a node not being asked (dropped).
     pub stray_frames: u32,
+    /// Node exchanges given up (handed to the root logic empty) because no frame came up
+    /// within the time-out ([`RelayedBus::with_timeout`]): a relay that stopped answering.
+    pub timeouts: u32,
 }
 
 /// The buffers of a [`RelayedBus`] (6.3 KB: the firmware places them in SRAM beside the
@@ -64,9 +69,12 @@ enum Op {
 /// `link`'s `finish` must be safe to drop while awaited (a relay exchange is started and
 /// finished inside `wait_ready`, which `run_bus` races against its timers): the split link
 /// ([`crate::spi::MasterFront`]) is; a dropped exchange is taken before the next one.
-pub struct RelayedBus<'m, L> {
+pub struct RelayedBus<'m, L, C = NoClock> {
     link: L,
     buf: &'m mut RelayedBuffers,
+    /// How long a node exchange may wait for its frame (µs; 0: for ever), by `clock`.
+    clock: C,
+    timeout_us: u64,
     first: NodeId,
     per_relay: u16,
     relays: u16,
@@ -108,6 +116,8 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
         Ok(RelayedBus {
             link,
             buf,
+            clock: NoClock,
+            timeout_us: 0,
             first,
             per_relay,
             relays,
@@ -121,6 +131,31 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
         })
     }
 
+    /// Give a node exchange up after `timeout_us` of `clock` without its frame: `finish`
+    /// hands the root logic an empty frame (counted in `timeouts`), so a relay that stopped
+    /// answering costs the root its nodes (their jobs time out and go elsewhere), not its
+    /// bus. Without it `finish` waits for ever.
+    pub fn with_timeout<C: RootClock>(self, clock: C, timeout_us: u64) -> RelayedBus<'m, L, C> {
+        RelayedBus {
+            link: self.link,
+            buf: self.buf,
+            clock,
+            timeout_us,
+            first: self.first,
+            per_relay: self.per_relay,
+            relays: self.relays,
+            waiting: self.waiting,
+            idle: self.idle,
+            started: self.started,
+            answer: self.answer,
+            dangling: self.dangling,
+            next_scan: self.next_scan,
+            counters: self.counters,
+        }
+    }
+}
+
+impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
     pub fn link(&self) -> &L {
         &self.link
     }
@@ -239,7 +274,7 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
     }
 }
 
-impl<L: RootBus> RootBus for RelayedBus<'_, L> {
+impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
     fn nodes(&self) -> (NodeId, u16) {
         (self.first, self.relays * self.per_relay)
     }
@@ -320,9 +355,27 @@ impl<L: RootBus> RootBus for RelayedBus<'_, L> {
             }
             Op::Exchange(node) => {
                 // Gather from ready relays (round the link) until the node's frame is up,
-                // with the request to every exchange with its relay.
+                // with the request to every exchange with its relay; give up at the
+                // deadline (a relay that stopped answering).
+                let deadline = self.clock.now_us().saturating_add(self.timeout_us);
                 while self.answer.is_none() {
-                    let relay = self.link.wait_ready().await;
+                    // (Checked before waiting too: other relays may be ready all the time.)
+                    let late = self.timeout_us > 0 && self.clock.now_us() >= deadline;
+                    let relay = if self.timeout_us == 0 {
+                        Some(self.link.wait_ready().await)
+                    } else if late {
+                        None
+                    } else {
+                        match select(self.link.wait_ready(), self.clock.at_us(deadline)).await {
+                            Either::First(relay) => Some(relay),
+                            Either::Second(()) => None,
+                        }
+                    };
+                    let Some(relay) = relay else {
+                        self.started = None;
+                        self.counters.timeouts += 1;
+                        return Ok(0);
+                    };
                     let r = relay.wrapping_sub(self.link.nodes().0);
                     self.start_gather(r, Some((node, len)))?;
                     self.settle().await?;
