@@ -137,6 +137,9 @@ struct BusPins {
     frames: (usize, usize),
     /// Rising edges the nodes drove on their handshake lines so far.
     edges: u64,
+    /// The earliest time the next selection may start: a leaf relay's scene piece is
+    /// clocked on its bus only once it has reached the relay (relay tree; 0: at once).
+    not_before: Ps,
 }
 
 /// The chip-select, handshake and DMA state of every bus and node.
@@ -167,6 +170,7 @@ impl Wire {
                     clocked: 0,
                     frames: (0, 0),
                     edges: 0,
+                    not_before: 0,
                 }
             })
             .collect();
@@ -400,6 +404,16 @@ impl MasterPort for SpiMaster {
     }
 
     async fn select(&mut self, sel: Select) {
+        // A relay's broadcast waits for its scene piece (the split master's task takes the
+        // transfer the moment the front hands it over).
+        let (now, not_before, clock) = {
+            let mut w = self.wire.borrow_mut();
+            let at = std::mem::take(&mut w.buses[self.bus].not_before);
+            (w.now(), at, w.clock.clone())
+        };
+        if not_before > now {
+            Delay::new(&clock, not_before).await;
+        }
         self.wire.borrow_mut().select(self.bus, sel);
         self.owed = self.wire.borrow().timing.cs_setup_ps;
     }
@@ -634,6 +648,7 @@ pub async fn master_task(wire: SharedWire, bus: usize, shared: &MasterShared<'_>
 /// arriving, node frames forwarded up, the collector's snoop, the bus's counters).
 pub struct FirmwareBus<'s, 'b> {
     link: MasterEnd<'s, 'b>,
+    wire: SharedWire,
     star: SharedStar,
     clock: SharedClock,
     bus: usize,
@@ -672,6 +687,7 @@ impl<'s, 'b> FirmwareBus<'s, 'b> {
         };
         Self {
             link,
+            wire: wire.clone(),
             star,
             clock,
             bus,
@@ -708,6 +724,8 @@ impl RootBus for FirmwareBus<'_, '_> {
                 at = r.broadcast_ready(self.bus, &frame, now);
             }
         }
+        // The wire does not clock it before then, whichever master half clocks it.
+        self.wire.borrow_mut().buses[self.bus].not_before = at;
         self.link.start(transfer, len)?;
         self.started = Some((transfer, at, len));
         Ok(())
