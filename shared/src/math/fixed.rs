@@ -83,6 +83,38 @@ impl Fx {
         }
     }
 
+    /// The dot product of finite raw values, rounded once. Three exact products below
+    /// 2^62 each; their sum fits an i64 unless it is far beyond the format (then an
+    /// infinity).
+    #[inline(always)]
+    fn dot3_finite(a: [i32; 3], b: [i32; 3]) -> Fx {
+        let (p0, p1, p2) = (
+            wide::mul_i32(a[0], b[0]),
+            wide::mul_i32(a[1], b[1]),
+            wide::mul_i32(a[2], b[2]),
+        );
+        match p0.checked_add(p1).and_then(|s| s.checked_add(p2)) {
+            Some(p) => Fx::from_wide(p.saturating_add(1 << (FRAC_BITS - 1)) >> FRAC_BITS),
+            None => Fx::dot3_overflow(p0, p1, p2),
+        }
+    }
+
+    /// [`Fx::dot3_finite`] on a core without a 32x32->64 multiply: 32-bit steps when they
+    /// all fit, else the 64-bit path (out of line).
+    #[inline(always)]
+    fn dot3_finite_halves(a: [i32; 3], b: [i32; 3]) -> Fx {
+        match wide::dot3_q16_i32(a, b) {
+            Some(p) => Fx(p.max(NEG_INF_RAW)),
+            None => Fx::dot3_finite_wide(a, b),
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn dot3_finite_wide(a: [i32; 3], b: [i32; 3]) -> Fx {
+        Fx::dot3_finite(a, b)
+    }
+
     /// The product of two finite raw values on a core without a 32x32->64 multiply: in
     /// 32-bit steps when they all fit (the common case), else through the 64-bit product.
     #[inline(always)]
@@ -439,16 +471,11 @@ impl Real for Fx {
         {
             return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         }
-        // Three exact products below 2^62 each; their sum fits an i64 unless it is far
-        // beyond the format (then an infinity); one rounding at the end.
-        let (p0, p1, p2) = (
-            wide::mul_i32(a[0].0, b[0].0),
-            wide::mul_i32(a[1].0, b[1].0),
-            wide::mul_i32(a[2].0, b[2].0),
-        );
-        match p0.checked_add(p1).and_then(|s| s.checked_add(p2)) {
-            Some(p) => Fx::from_wide(p.saturating_add(1 << (FRAC_BITS - 1)) >> FRAC_BITS),
-            None => Fx::dot3_overflow(p0, p1, p2),
+        let (a, b) = (a.map(Fx::raw), b.map(Fx::raw));
+        if wide::HALVES {
+            Fx::dot3_finite_halves(a, b)
+        } else {
+            Fx::dot3_finite(a, b)
         }
     }
 
@@ -725,6 +752,30 @@ mod wide {
         let low = (((ll >> 15) + 1) >> 1) as i32;
         let c = (ah * bl).checked_add(al * bh)?.checked_add(low)?;
         let hh = ah * bh; // |hh| <= 2^30
+        if !(-(1 << 15)..1 << 15).contains(&hh) {
+            return None;
+        }
+        (hh << 16).checked_add(c)
+    }
+
+    /// `(a0 b0 + a1 b1 + a2 b2 + 2^15) >> 16` (one rounding of the exact sum) in 32-bit
+    /// steps when they all fit, as [`mul_q16_i32`] does for one product; the low
+    /// products (up to 2^32 each) are summed as their high and low halves:
+    /// `(sum ll + 2^15) >> 16 = sum (ll >> 16) + ((sum (ll & 0xffff) + 2^15) >> 16)`.
+    #[inline(always)]
+    pub(super) fn dot3_q16_i32(a: [i32; 3], b: [i32; 3]) -> Option<i32> {
+        let (mut hh, mut c, mut ll_hi, mut ll_lo) = (0i32, 0i32, 0u32, 0u32);
+        for i in 0..3 {
+            let (ah, al) = (a[i] >> 16, a[i] & 0xffff);
+            let (bh, bl) = (b[i] >> 16, b[i] & 0xffff);
+            let ll = (al as u32) * (bl as u32);
+            ll_hi += ll >> 16; // three terms below 2^16 each
+            ll_lo += ll & 0xffff;
+            c = c.checked_add(ah * bl)?.checked_add(al * bh)?;
+            hh = hh.checked_add(ah * bh)?;
+        }
+        let low = (ll_hi + ((ll_lo + (1 << 15)) >> 16)) as i32;
+        let c = c.checked_add(low)?;
         if !(-(1 << 15)..1 << 15).contains(&hh) {
             return None;
         }
@@ -1157,6 +1208,15 @@ mod same_as_reference {
             let got = Fx::dot3(a.map(Fx::from_raw), b.map(Fx::from_raw));
             let want = RefFx::dot3(a.map(RefFx::from_raw), b.map(RefFx::from_raw));
             assert_eq!(got.raw(), want.raw(), "dot3 {a:?} {b:?}");
+            if a.iter().chain(&b).all(|&v| Fx::from_raw(v).is_finite()) {
+                // The ARMv6-M path, whichever target runs the test.
+                let halves = Fx::dot3_finite_halves(a, b);
+                assert_eq!(halves.raw(), want.raw(), "dot3 (halves) {a:?} {b:?}");
+                let exact: i64 = (0..3).map(|i| a[i] as i64 * b[i] as i64).sum();
+                if let Some(p) = wide::dot3_q16_i32(a, b) {
+                    assert_eq!(p as i64, (exact + (1 << 15)) >> 16, "{a:?} . {b:?}");
+                }
+            }
         }
     }
 
