@@ -808,7 +808,7 @@ mod wide {
         while i < 48 {
             // 2^30 * sqrt(128 / (2i + 33)) = sqrt(2^67 / (2i + 33)), rounded.
             let v = (1u128 << 69) / (2 * i as u128 + 33);
-            t[i] = ((v.isqrt() + 1) / 2) as u32;
+            t[i] = v.isqrt().div_ceil(2) as u32;
             i += 1;
         }
         t
@@ -1042,7 +1042,7 @@ mod same_as_reference {
         /// appear, not just ones near 2^31), sometimes an edge value.
         fn raw(&mut self) -> i32 {
             let r = self.next();
-            if r % 8 == 0 {
+            if r.is_multiple_of(8) {
                 return EDGES[(r >> 8) as usize % EDGES.len()];
             }
             let bits = (r >> 8) % 32;
