@@ -747,8 +747,9 @@ mod wide {
     pub(super) fn mul_q16_i32(a: i32, b: i32) -> Option<i32> {
         let (ah, al) = (a >> 16, a & 0xffff);
         let (bh, bl) = (b >> 16, b & 0xffff);
-        let ll = (al as u32) * (bl as u32); // at most (2^16 - 1)^2
-                                            // (ll + 2^15) >> 16 without overflowing: ((ll >> 15) + 1) >> 1.
+        // ll is at most (2^16 - 1)^2; (ll + 2^15) >> 16 without overflowing is
+        // ((ll >> 15) + 1) >> 1.
+        let ll = (al as u32) * (bl as u32);
         let low = (((ll >> 15) + 1) >> 1) as i32;
         let c = (ah * bl).checked_add(al * bh)?.checked_add(low)?;
         let hh = ah * bh; // |hh| <= 2^30
@@ -784,8 +785,9 @@ mod wide {
 
     /// The rounded Q16.16 quotient of two magnitudes,
     /// `min(((n << 16) + d / 2) / d, i32::MAX)` for `d != 0`, `n < 2^31`. A numerator
-    /// below 2^32 (`n` below 1.0) takes one 32-bit division (UDIV on the M3); the others
-    /// the compiler's 64-bit division. (A hand-written 64/32 long division with 16-bit
+    /// below 2^32 (`n` below 1.0) takes one 32-bit division (UDIV on the M3; on photo1
+    /// no numerator is that small, so it did not move the benchmark); the others the
+    /// compiler's 64-bit division. (A hand-written 64/32 long division with 16-bit
     /// digits, Hacker's Delight `divlu`, measured 30% slower than `__aeabi_uldivmod` on
     /// the M3, whose compiler-builtins already divides by a 32-bit divisor with UDIV, and
     /// slower on the M0 too; not kept.)
