@@ -17,6 +17,10 @@ use core::cmp::Ordering;
 use core::fmt;
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
+#[cfg(test)]
+#[path = "fixed_reference.rs"]
+mod reference;
+
 /// Fraction bits.
 pub const FRAC_BITS: u32 = 16;
 const ONE_RAW: i32 = 1 << FRAC_BITS;
@@ -62,15 +66,120 @@ impl Fx {
     }
 
     /// A 64-bit raw result, saturated to an infinity when it leaves the finite range.
+    ///
+    /// One compare of the high word against the low word's sign decides whether `v` fits
+    /// an i32; inside the i32 range the only values outside the finite range are
+    /// `i32::MAX` (which already is [`INF_RAW`]) and `i32::MIN`, `i32::MIN + 1` (both
+    /// become [`NEG_INF_RAW`], the larger of the two): a `max`.
+    /// The rare overflow is a cold call, so the common case is one compare and a branch
+    /// not taken.
     #[inline(always)]
     fn from_wide(v: i64) -> Fx {
-        if v > MAX_RAW as i64 {
-            Fx::INFINITY
-        } else if v < -(MAX_RAW as i64) {
+        let lo = v as i32;
+        if (v >> 32) as i32 == lo >> 31 {
+            Fx(lo.max(NEG_INF_RAW))
+        } else {
+            Fx::wide_overflow(v)
+        }
+    }
+
+    /// The dot product of finite raw values, rounded once. Three exact products below
+    /// 2^62 each; their sum fits an i64 unless it is far beyond the format (then an
+    /// infinity).
+    #[inline(always)]
+    fn dot3_finite(a: [i32; 3], b: [i32; 3]) -> Fx {
+        let (p0, p1, p2) = (
+            wide::mul_i32(a[0], b[0]),
+            wide::mul_i32(a[1], b[1]),
+            wide::mul_i32(a[2], b[2]),
+        );
+        match p0.checked_add(p1).and_then(|s| s.checked_add(p2)) {
+            Some(p) => Fx::from_wide(p.saturating_add(1 << (FRAC_BITS - 1)) >> FRAC_BITS),
+            None => Fx::dot3_overflow(p0, p1, p2),
+        }
+    }
+
+    /// [`Fx::dot3_finite`] on a core without a 32x32->64 multiply: 32-bit steps when they
+    /// all fit, else the 64-bit path (out of line).
+    #[inline(always)]
+    fn dot3_finite_halves(a: [i32; 3], b: [i32; 3]) -> Fx {
+        match wide::dot3_q16_i32(a, b) {
+            Some(p) => Fx(p.max(NEG_INF_RAW)),
+            None => Fx::dot3_finite_wide(a, b),
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn dot3_finite_wide(a: [i32; 3], b: [i32; 3]) -> Fx {
+        Fx::dot3_finite(a, b)
+    }
+
+    /// The product of two finite raw values on a core without a 32x32->64 multiply: in
+    /// 32-bit steps when they all fit (the common case), else through the 64-bit product.
+    #[inline(always)]
+    fn mul_finite_halves(a: i32, b: i32) -> Fx {
+        match wide::mul_q16_i32(a, b) {
+            Some(p) => Fx(p.max(NEG_INF_RAW)),
+            None => Fx::mul_finite_wide(a, b),
+        }
+    }
+
+    /// The rare products whose 32-bit steps overflow (out of line).
+    #[cold]
+    #[inline(never)]
+    fn mul_finite_wide(a: i32, b: i32) -> Fx {
+        Fx::from_wide(wide::mul_q16(a, b))
+    }
+
+    /// The infinity of `v`'s sign (`v` is outside the i32 range).
+    #[cold]
+    #[inline(never)]
+    fn wide_overflow(v: i64) -> Fx {
+        if v < 0 {
             Fx::NEG_INFINITY
         } else {
-            Fx(v as i32)
+            Fx::INFINITY
         }
+    }
+
+    /// The sum of two finite raw values: an i32 add whose overflow flag picks the infinity
+    /// (the sum of two finite values is within twice the range, so its sign is the
+    /// operands' sign when it overflows).
+    #[inline(always)]
+    fn add_finite(a: i32, b: i32) -> Fx {
+        match a.checked_add(b) {
+            Some(s) => Fx(s.max(NEG_INF_RAW)),
+            None => Fx::sum_overflow(a),
+        }
+    }
+
+    /// The difference of two finite raw values, `a + (-b)` (see [`Fx::add_finite`]).
+    #[inline(always)]
+    fn sub_finite(a: i32, b: i32) -> Fx {
+        match a.checked_sub(b) {
+            Some(s) => Fx(s.max(NEG_INF_RAW)),
+            None => Fx::sum_overflow(a),
+        }
+    }
+
+    /// The infinity of `a`'s sign: a sum of two finite values of `a`'s sign overflowed.
+    #[cold]
+    #[inline(never)]
+    fn sum_overflow(a: i32) -> Fx {
+        if a < 0 {
+            Fx::NEG_INFINITY
+        } else {
+            Fx::INFINITY
+        }
+    }
+
+    /// `+-mag`, or the infinity of that sign from `MAX_RAW + 1` up.
+    #[inline(always)]
+    fn from_sign_magnitude(negative: bool, mag: u32) -> Fx {
+        // INF_RAW is MAX_RAW + 1, and NEG_INF_RAW its negation.
+        let m = mag.min(INF_RAW as u32) as i32;
+        Fx(if negative { -m } else { m })
     }
 
     /// The sign of a non-NaN value as -1, 0 or 1.
@@ -133,32 +242,6 @@ impl Fx {
             Fx::INFINITY
         } else {
             Fx::NEG_INFINITY
-        }
-    }
-
-    /// 64-bit intermediate square root: floor(sqrt(n)) with the remainder's rounding.
-    fn isqrt_rounded(n: u64) -> u64 {
-        if n == 0 {
-            return 0;
-        }
-        // Start from a power of two at or above the root and refine bit by bit from the top.
-        let shift = (63 - n.leading_zeros()) & !1;
-        let mut bit = 1u64 << shift;
-        let (mut rem, mut root) = (n, 0u64);
-        while bit != 0 {
-            if rem >= root + bit {
-                rem -= root + bit;
-                root = (root >> 1) + bit;
-            } else {
-                root >>= 1;
-            }
-            bit >>= 2;
-        }
-        // Round to nearest: root + 0.5 squared = root^2 + root + 0.25.
-        if rem > root {
-            root + 1
-        } else {
-            root
         }
     }
 
@@ -293,7 +376,7 @@ impl Add for Fx {
         if self.special() || o.special() {
             return self.add_special(o);
         }
-        Fx::from_wide(self.0 as i64 + o.0 as i64)
+        Fx::add_finite(self.0, o.0)
     }
 }
 
@@ -301,7 +384,11 @@ impl Sub for Fx {
     type Output = Fx;
     #[inline(always)]
     fn sub(self, o: Fx) -> Fx {
-        self + (-o)
+        // The same as self + (-o): an i32 subtract instead of a negation and an add.
+        if self.special() || o.special() {
+            return self.add_special(-o);
+        }
+        Fx::sub_finite(self.0, o.0)
     }
 }
 
@@ -325,8 +412,11 @@ impl Mul for Fx {
         if self.special() || o.special() {
             return self.mul_special(o);
         }
-        let p = self.0 as i64 * o.0 as i64;
-        Fx::from_wide((p + (1 << (FRAC_BITS - 1))) >> FRAC_BITS)
+        if wide::HALVES {
+            Fx::mul_finite_halves(self.0, o.0)
+        } else {
+            Fx::from_wide(wide::mul_q16(self.0, o.0))
+        }
     }
 }
 
@@ -337,11 +427,10 @@ impl Div for Fx {
         if self.special() || o.special() || o.0 == 0 {
             return self.div_special(o);
         }
-        // Quotient of magnitudes, rounded to nearest, then the sign.
-        let (n, d) = (self.0.unsigned_abs() as u64, o.0.unsigned_abs() as u64);
-        let q = ((n << FRAC_BITS) + (d >> 1)) / d;
-        let q = q.min(MAX_RAW as u64 + 1) as i64;
-        Fx::from_wide(if (self.0 < 0) != (o.0 < 0) { -q } else { q })
+        // Quotient of magnitudes, rounded to nearest, at most MAX_RAW + 1 (= INF_RAW, whose
+        // negation is NEG_INF_RAW), then the sign.
+        let q = wide::div_q16(self.0.unsigned_abs(), o.0.unsigned_abs()) as i32;
+        Fx(if (self.0 < 0) != (o.0 < 0) { -q } else { q })
     }
 }
 
@@ -382,16 +471,11 @@ impl Real for Fx {
         {
             return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         }
-        // Three exact products below 2^62 each; their sum fits an i64 unless it is far
-        // beyond the format (then an infinity); one rounding at the end.
-        let (p0, p1, p2) = (
-            a[0].0 as i64 * b[0].0 as i64,
-            a[1].0 as i64 * b[1].0 as i64,
-            a[2].0 as i64 * b[2].0 as i64,
-        );
-        match p0.checked_add(p1).and_then(|s| s.checked_add(p2)) {
-            Some(p) => Fx::from_wide(p.saturating_add(1 << (FRAC_BITS - 1)) >> FRAC_BITS),
-            None => Fx::dot3_overflow(p0, p1, p2),
+        let (a, b) = (a.map(Fx::raw), b.map(Fx::raw));
+        if wide::HALVES {
+            Fx::dot3_finite_halves(a, b)
+        } else {
+            Fx::dot3_finite(a, b)
         }
     }
 
@@ -406,25 +490,61 @@ impl Real for Fx {
         Fx(ONE_RAW << s)
     }
 
-    #[inline(always)]
-    fn from_f32(v: f32) -> Fx {
-        Fx::from_f64(v as f64)
-    }
+    /// Exactly `from_f64(v as f64)`, from the f32's bits (no float arithmetic: the M3
+    /// and M0 have no FPU).
     #[inline]
-    fn from_f64(v: f64) -> Fx {
-        if v.is_nan() {
+    fn from_f32(v: f32) -> Fx {
+        let bits = v.to_bits();
+        let exp = (bits >> 23) & 0xff;
+        let frac = bits & ((1 << 23) - 1);
+        if exp == 0xff && frac != 0 {
             return Fx::NAN;
         }
-        let s = v * ONE_RAW as f64;
-        // Round half away from zero, then saturate to an infinity.
-        let r = if s >= 0.0 { s + 0.5 } else { s - 0.5 };
-        if r >= MAX_RAW as f64 + 1.0 {
-            Fx::INFINITY
-        } else if r <= -(MAX_RAW as f64) - 1.0 {
-            Fx::NEG_INFINITY
+        // s = |v| * 2^16 = m * 2^(exp - 134); at or above 2^31 (|v| >= 2^15, infinities
+        // included) it saturates, below 1/2 (|v| < 2^-17, subnormals included) it rounds
+        // to 0 (the f64 sum s + 0.5 is exact for every such f32 s, so no tie rounds up).
+        let mag = if exp >= 142 {
+            INF_RAW as u32
+        } else if exp <= 109 {
+            0
+        } else if exp >= 134 {
+            // A whole number of steps below 2^31.
+            (frac | 1 << 23) << (exp - 134)
         } else {
-            Fx(r as i32)
+            let k = 134 - exp;
+            ((frac | 1 << 23) + (1 << (k - 1))) >> k
+        };
+        Fx::from_sign_magnitude(bits >> 31 != 0, mag)
+    }
+    /// `v * 2^16` rounded half away from zero, saturated to an infinity; from the f64's
+    /// bits (the same result as that float arithmetic, including the one input where the
+    /// float sum `s + 0.5` rounds up to 1: see below).
+    #[inline]
+    fn from_f64(v: f64) -> Fx {
+        let bits = v.to_bits();
+        let exp = ((bits >> 52) & 0x7ff) as u32;
+        let frac = bits & ((1 << 52) - 1);
+        if exp == 0x7ff && frac != 0 {
+            return Fx::NAN;
         }
+        // |v| * 2^16 = m * 2^(exp - 1059) with m = frac + 2^52.
+        let mag = if exp >= 1038 {
+            INF_RAW as u32
+        } else if exp <= 1004 {
+            // |v| below 2^-18 (subnormals included), so s < 1/4: 0.
+            0
+        } else {
+            let (k, m) = (1059 - exp, frac | 1 << 52);
+            if k <= 53 {
+                ((m + (1 << (k - 1))) >> k) as u32
+            } else {
+                // s = m / 2^k < 1/2, so s + 1/2 rounds to 0, except s = 1/2 - 2^-54: the
+                // float sum 1 - 2^-54 is a tie between 1 - 2^-53 and 1, and goes to the
+                // even one, 1.
+                (k == 54 && m == (1 << 53) - 1) as u32
+            }
+        };
+        Fx::from_sign_magnitude(bits >> 63 != 0, mag)
     }
     #[inline(always)]
     fn from_i32(v: i32) -> Fx {
@@ -460,8 +580,8 @@ impl Real for Fx {
         if self.0 == INF_RAW {
             return self;
         }
-        // sqrt(r / 2^16) * 2^16 = sqrt(r * 2^16).
-        Fx(Fx::isqrt_rounded((self.0 as u64) << FRAC_BITS) as i32)
+        // sqrt(r / 2^16) * 2^16 = sqrt(r * 2^16), below 2^23.5.
+        Fx(wide::isqrt_rounded((self.0 as u64) << FRAC_BITS) as i32)
     }
     #[inline(always)]
     fn abs(self) -> Fx {
@@ -552,6 +672,195 @@ impl Real for Fx {
         } else {
             Fx(self.0 - 1)
         }
+    }
+}
+
+/// The integer kernels under [`Fx`]'s arithmetic, written for 32-bit integer cores (issue 14):
+/// every function returns exactly what the 64-bit expression in its doc comment gives, but
+/// without 64-bit division and, on ARMv6-M (Cortex-M0/M0+: no 32x32->64 multiply, no
+/// divide), without the `__aeabi_lmul` call that a 64-bit product costs there.
+mod wide {
+    use super::FRAC_BITS;
+
+    /// ARMv6-M: no `UMULL`/`SMULL` (a 64-bit product is a library call), so products are
+    /// built from 16-bit halves with the 32-bit `MULS`. Everything else (Cortex-M3/M4, the
+    /// host) has a single-instruction 32x32->64 multiply. Stable Rust exposes no ARM
+    /// target feature to `cfg`; ARMv6-M is the one 32-bit ARM profile without atomic
+    /// read-modify-write (LDREX/STREX), which is what `target_has_atomic` reports.
+    pub(super) const HALVES: bool = cfg!(all(target_arch = "arm", not(target_has_atomic = "32")));
+
+    /// `a * b` exactly.
+    #[inline(always)]
+    pub(super) fn mul_i32(a: i32, b: i32) -> i64 {
+        if HALVES {
+            mul_i32_halves(a, b)
+        } else {
+            a as i64 * b as i64
+        }
+    }
+
+    /// `a * b` exactly, from four 16x16-bit products: with `a = ah * 2^16 + al` (`ah`
+    /// signed, `al` in `[0, 2^16)`), `a * b = ah*bh * 2^32 + (ah*bl + al*bh) * 2^16 + al*bl`;
+    /// each partial product fits 32 bits (|ah*bh| <= 2^30, |ah*bl| < 2^31, al*bl < 2^32).
+    #[inline(always)]
+    pub(super) fn mul_i32_halves(a: i32, b: i32) -> i64 {
+        let (ah, al) = (a >> 16, a & 0xffff);
+        let (bh, bl) = (b >> 16, b & 0xffff);
+        let hh = ah * bh;
+        let cross = (ah * bl) as i64 + (al * bh) as i64;
+        let ll = (al as u32).wrapping_mul(bl as u32);
+        ((hh as i64) << 32) + (cross << 16) + ll as i64
+    }
+
+    /// `a * b` exactly, unsigned.
+    #[inline(always)]
+    pub(super) fn mul_u32(a: u32, b: u32) -> u64 {
+        if HALVES {
+            mul_u32_halves(a, b)
+        } else {
+            a as u64 * b as u64
+        }
+    }
+
+    /// [`mul_u32`] from four 16x16-bit products (see [`mul_i32_halves`]).
+    #[inline(always)]
+    pub(super) fn mul_u32_halves(a: u32, b: u32) -> u64 {
+        let (ah, al) = (a >> 16, a & 0xffff);
+        let (bh, bl) = (b >> 16, b & 0xffff);
+        let cross = (ah * bl) as u64 + (al * bh) as u64;
+        (((ah * bh) as u64) << 32) + (cross << 16) + (al * bl) as u64
+    }
+
+    /// The Q16.16 product of two raw values rounded to nearest (ties up):
+    /// `(a * b + 2^15) >> 16`, exact in 64 bits.
+    #[inline(always)]
+    pub(super) fn mul_q16(a: i32, b: i32) -> i64 {
+        (mul_i32(a, b) + (1 << (FRAC_BITS - 1))) >> FRAC_BITS
+    }
+
+    /// [`mul_q16`] in 32-bit arithmetic only, when every step fits an i32 (`None`
+    /// otherwise: the product is large, or an intermediate overflowed; then the 64-bit
+    /// path decides). `(a * b + 2^15) >> 16 = ah*bh * 2^16 + ah*bl + al*bh +
+    /// ((al*bl + 2^15) >> 16)`, the first three terms being whole multiples of 2^16 before
+    /// the shift.
+    #[inline(always)]
+    pub(super) fn mul_q16_i32(a: i32, b: i32) -> Option<i32> {
+        let (ah, al) = (a >> 16, a & 0xffff);
+        let (bh, bl) = (b >> 16, b & 0xffff);
+        // ll is at most (2^16 - 1)^2; (ll + 2^15) >> 16 without overflowing is
+        // ((ll >> 15) + 1) >> 1.
+        let ll = (al as u32) * (bl as u32);
+        let low = (((ll >> 15) + 1) >> 1) as i32;
+        let c = (ah * bl).checked_add(al * bh)?.checked_add(low)?;
+        let hh = ah * bh; // |hh| <= 2^30
+        if !(-(1 << 15)..1 << 15).contains(&hh) {
+            return None;
+        }
+        (hh << 16).checked_add(c)
+    }
+
+    /// `(a0 b0 + a1 b1 + a2 b2 + 2^15) >> 16` (one rounding of the exact sum) in 32-bit
+    /// steps when they all fit, as [`mul_q16_i32`] does for one product; the low
+    /// products (up to 2^32 each) are summed as their high and low halves:
+    /// `(sum ll + 2^15) >> 16 = sum (ll >> 16) + ((sum (ll & 0xffff) + 2^15) >> 16)`.
+    #[inline(always)]
+    pub(super) fn dot3_q16_i32(a: [i32; 3], b: [i32; 3]) -> Option<i32> {
+        let (mut hh, mut c, mut ll_hi, mut ll_lo) = (0i32, 0i32, 0u32, 0u32);
+        for i in 0..3 {
+            let (ah, al) = (a[i] >> 16, a[i] & 0xffff);
+            let (bh, bl) = (b[i] >> 16, b[i] & 0xffff);
+            let ll = (al as u32) * (bl as u32);
+            ll_hi += ll >> 16; // three terms below 2^16 each
+            ll_lo += ll & 0xffff;
+            c = c.checked_add(ah * bl)?.checked_add(al * bh)?;
+            hh = hh.checked_add(ah * bh)?;
+        }
+        let low = (ll_hi + ((ll_lo + (1 << 15)) >> 16)) as i32;
+        let c = c.checked_add(low)?;
+        if !(-(1 << 15)..1 << 15).contains(&hh) {
+            return None;
+        }
+        (hh << 16).checked_add(c)
+    }
+
+    /// The rounded Q16.16 quotient of two magnitudes,
+    /// `min(((n << 16) + d / 2) / d, i32::MAX)` for `d != 0`, `n < 2^31`. A numerator
+    /// below 2^32 (`n` below 1.0) takes one 32-bit division (UDIV on the M3; on photo1
+    /// no numerator is that small, so it did not move the benchmark); the others the
+    /// compiler's 64-bit division. (A hand-written 64/32 long division with 16-bit
+    /// digits, Hacker's Delight `divlu`, measured 30% slower than `__aeabi_uldivmod` on
+    /// the M3, whose compiler-builtins already divides by a 32-bit divisor with UDIV, and
+    /// slower on the M0 too; not kept.)
+    #[inline]
+    pub(super) fn div_q16(n: u32, d: u32) -> u32 {
+        let num = ((n as u64) << FRAC_BITS) + (d >> 1) as u64;
+        let d = core::num::NonZeroU32::new(d).unwrap_or(core::num::NonZeroU32::MIN);
+        let q = match u32::try_from(num) {
+            Ok(num) => num / d,
+            Err(_) => (num / core::num::NonZeroU64::from(d)).min(i32::MAX as u64) as u32,
+        };
+        q.min(i32::MAX as u32)
+    }
+
+    /// Initial `1/sqrt(x)` for `x = (i + 0.5) / 64`, `i` in `16..64` (x in [1/4, 1)), in
+    /// Q2.30: `round(2^30 / sqrt((2i + 1) / 128))`, computed at compile time.
+    const RSQRT_SEED: [u32; 48] = {
+        let mut t = [0u32; 48];
+        let mut i = 0;
+        while i < 48 {
+            // 2^30 * sqrt(128 / (2i + 33)) = sqrt(2^67 / (2i + 33)), rounded.
+            let v = (1u128 << 69) / (2 * i as u128 + 33);
+            t[i] = v.isqrt().div_ceil(2) as u32;
+            i += 1;
+        }
+        t
+    };
+
+    /// `round(sqrt(n))` for `n < 2^48`: the floor root `s`, plus one when `n - s^2 > s`
+    /// (`n` is an integer, so there are no ties). A reciprocal square root from a 48-entry
+    /// table and two Newton steps (about 25 correct bits, multiplies only) gives an
+    /// estimate within a few units; an exact correction on `n - r^2` then finds the one `r`
+    /// with `r^2 - r < n <= r^2 + r`, whatever the estimate's error.
+    #[inline(never)]
+    pub(super) fn isqrt_rounded(n: u64) -> u32 {
+        if n == 0 {
+            return 0;
+        }
+        // n = x / 2^(2k) with x's top bit at 62 or 63, a = x's high word in [2^30, 2^32).
+        let z = n.leading_zeros() & !1;
+        let a = ((n << z) >> 32) as u32;
+        let k = z / 2;
+        // y ~ 1/sqrt(a / 2^32) in Q2.30; Newton: y' = y * (3 - a y^2) / 2.
+        let mut y = RSQRT_SEED[((a >> 26) as usize).saturating_sub(16).min(47)];
+        for _ in 0..2 {
+            let ay = (mul_u32(a, y) >> 32) as u32; // a/2^32 * y, Q2.30
+            let ay2 = (mul_u32(ay, y) >> 30) as u32; // a/2^32 * y^2, Q2.30, ~2^30
+            let h = (3u32 << 30).saturating_sub(ay2); // (3 - a y^2), Q2.30
+            y = (mul_u32(y, h) >> 31) as u32;
+        }
+        // sqrt(x) ~ a * y / 2^30 (about 2^32), sqrt(n) = sqrt(x) / 2^k, k >= 8.
+        let root_x = mul_u32(a, y) >> 30;
+        let r = ((root_x + ((1u64 << k) >> 1)) >> k) as i64;
+        round_root(n, r)
+    }
+
+    /// The `r` with `r^2 - r < n <= r^2 + r` (the rounded square root of `n`), from an
+    /// estimate a few units off: walks `n - r^2` to that window one step at a time.
+    #[inline(always)]
+    fn round_root(n: u64, r: i64) -> u32 {
+        // r < 2^25 and n < 2^48: all of this fits an i64.
+        let mut r = r.clamp(0, 1 << 25);
+        let mut e = n as i64 - mul_u32(r as u32, r as u32) as i64;
+        while e > r {
+            // (r + 1)^2 = r^2 + 2r + 1
+            e -= 2 * r + 1;
+            r += 1;
+        }
+        while e <= -r {
+            e += 2 * r - 1;
+            r -= 1;
+        }
+        r as u32
     }
 }
 
@@ -709,5 +1018,295 @@ mod tests {
         assert_eq!(Fx::ONE.next_up().raw(), ONE_RAW + 1);
         assert_eq!(Fx::ONE.next_down().raw(), ONE_RAW - 1);
         assert_eq!(Fx::INFINITY.next_down(), Fx::INFINITY);
+    }
+}
+
+/// Issue 14: the integer kernels return exactly what the arithmetic before them returned
+/// ([`reference::RefFx`], kept verbatim), for every operation, on random raw values and on
+/// the edges: zero, one step, the ends of the finite range, the three reserved values,
+/// operands whose products and quotients land on rounding ties or just beside them.
+#[cfg(test)]
+mod same_as_reference {
+    use super::reference::RefFx;
+    use super::*;
+
+    /// SplitMix64: a fixed sequence, so a failure reproduces.
+    struct Rng(u64);
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+            let mut z = self.0;
+            z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+            z ^ (z >> 31)
+        }
+        /// A raw value of a random magnitude class (so small, mid and huge values all
+        /// appear, not just ones near 2^31), sometimes an edge value.
+        fn raw(&mut self) -> i32 {
+            let r = self.next();
+            if r.is_multiple_of(8) {
+                return EDGES[(r >> 8) as usize % EDGES.len()];
+            }
+            let bits = (r >> 8) % 32;
+            let v = ((r >> 16) as u32 >> (31 - bits)) as i32;
+            if r & 0x10 != 0 {
+                v.wrapping_neg()
+            } else {
+                v
+            }
+        }
+    }
+
+    const EDGES: [i32; 24] = [
+        0,
+        1,
+        -1,
+        2,
+        3,
+        0x8000,
+        -0x8000,
+        ONE_RAW,
+        -ONE_RAW,
+        ONE_RAW / 2,
+        ONE_RAW + 1,
+        181 << 16,
+        -(181 << 16),
+        46_341 << 8,
+        MAX_RAW,
+        -MAX_RAW,
+        MAX_RAW - 1,
+        -MAX_RAW + 1,
+        1 << 30,
+        -(1 << 30),
+        INF_RAW,
+        NEG_INF_RAW,
+        NAN_RAW,
+        0x7fff,
+    ];
+
+    fn pairs(n: usize, seed: u64) -> impl Iterator<Item = (i32, i32)> {
+        let mut rng = Rng(seed);
+        let edges = EDGES
+            .iter()
+            .flat_map(|&a| EDGES.iter().map(move |&b| (a, b)));
+        let random: Vec<(i32, i32)> = (0..n).map(|_| (rng.raw(), rng.raw())).collect();
+        edges.chain(random)
+    }
+
+    fn same(what: &str, a: i32, b: i32, got: Fx, want: RefFx) {
+        assert_eq!(
+            got.raw(),
+            want.raw(),
+            "{what}: raw {a} and {b} (new {got:?}, reference {want:?})"
+        );
+    }
+
+    #[test]
+    fn add_sub_mul_div_neg_match_bit_for_bit() {
+        for (a, b) in pairs(400_000, 1) {
+            let (x, y) = (Fx::from_raw(a), Fx::from_raw(b));
+            let (rx, ry) = (RefFx::from_raw(a), RefFx::from_raw(b));
+            same("add", a, b, x + y, rx + ry);
+            same("sub", a, b, x - y, rx - ry);
+            same("mul", a, b, x * y, rx * ry);
+            same("div", a, b, x / y, rx / ry);
+            same("neg", a, b, -x, -rx);
+            if x.is_finite() && y.is_finite() {
+                // The ARMv6-M product path, whichever target runs the test.
+                let halves = Fx::mul_finite_halves(a, b);
+                same("mul (halves)", a, b, halves, rx * ry);
+            }
+        }
+    }
+
+    #[test]
+    fn products_and_quotients_on_rounding_ties_match() {
+        // a * b with a product of exactly k + 1/2 steps (ties: rounded up), and one
+        // below and above it; quotients whose exact value is k + 1/2 +- 2^-32.
+        let mut rng = Rng(2);
+        for _ in 0..100_000 {
+            let a = (rng.raw() | 1) >> 1; // any magnitude, odd or even
+            for b in [
+                ONE_RAW / 2,
+                ONE_RAW / 2 + 1,
+                ONE_RAW / 2 - 1,
+                3 << 15,
+                -(3 << 15),
+            ] {
+                same("mul tie", a, b, Fx::from_raw(a) * Fx::from_raw(b), {
+                    RefFx::from_raw(a) * RefFx::from_raw(b)
+                });
+            }
+            let d = rng.raw();
+            for n in [
+                d,
+                d / 2,
+                d.wrapping_mul(3) / 2,
+                d / 2 + 1,
+                d / 2 - 1,
+                d >> 17,
+            ] {
+                same("div tie", n, d, Fx::from_raw(n) / Fx::from_raw(d), {
+                    RefFx::from_raw(n) / RefFx::from_raw(d)
+                });
+            }
+        }
+    }
+
+    #[test]
+    fn dot3_matches_bit_for_bit() {
+        let mut rng = Rng(3);
+        for _ in 0..200_000 {
+            let a: [i32; 3] = core::array::from_fn(|_| rng.raw());
+            let b: [i32; 3] = core::array::from_fn(|_| rng.raw());
+            let got = Fx::dot3(a.map(Fx::from_raw), b.map(Fx::from_raw));
+            let want = RefFx::dot3(a.map(RefFx::from_raw), b.map(RefFx::from_raw));
+            assert_eq!(got.raw(), want.raw(), "dot3 {a:?} {b:?}");
+            if a.iter().chain(&b).all(|&v| Fx::from_raw(v).is_finite()) {
+                // The ARMv6-M path, whichever target runs the test.
+                let halves = Fx::dot3_finite_halves(a, b);
+                assert_eq!(halves.raw(), want.raw(), "dot3 (halves) {a:?} {b:?}");
+                let exact: i64 = (0..3).map(|i| a[i] as i64 * b[i] as i64).sum();
+                if let Some(p) = wide::dot3_q16_i32(a, b) {
+                    assert_eq!(p as i64, (exact + (1 << 15)) >> 16, "{a:?} . {b:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sqrt_matches_bit_for_bit_on_every_octave_and_square() {
+        let mut rng = Rng(4);
+        let squares = (0..46_341).flat_map(|r: i32| {
+            let s = r * r;
+            [s, s - 1, s + 1, s + r, s + r + 1, s - r, s - r + 1]
+        });
+        let random = (0..300_000).map(|_| rng.raw());
+        for a in EDGES.into_iter().chain(squares).chain(random) {
+            same(
+                "sqrt",
+                a,
+                0,
+                Fx::from_raw(a).sqrt(),
+                RefFx::from_raw(a).sqrt(),
+            );
+        }
+        // Every raw value below 2^20 (the small ones use the deepest normalisation).
+        for a in 0..1 << 20 {
+            same(
+                "sqrt",
+                a,
+                0,
+                Fx::from_raw(a).sqrt(),
+                RefFx::from_raw(a).sqrt(),
+            );
+        }
+    }
+
+    #[test]
+    fn transcendental_and_other_operations_match() {
+        for (a, b) in pairs(100_000, 5) {
+            let (x, y) = (Fx::from_raw(a), Fx::from_raw(b));
+            let (rx, ry) = (RefFx::from_raw(a), RefFx::from_raw(b));
+            same("powf", a, b, x.abs().powf(y), rx.abs().powf(ry));
+            same("atan2", a, b, x.atan2(y), rx.atan2(ry));
+            same("acos", a, b, (x / (y.abs() + Fx::ONE)).acos(), {
+                (rx / (ry.abs() + RefFx::ONE)).acos()
+            });
+            same("floor", a, b, x.floor(), rx.floor());
+            same("unit_scale", a, b, Fx::unit_scale(x), RefFx::unit_scale(rx));
+            same(
+                "from_i32",
+                a,
+                b,
+                Fx::from_i32(a >> 8),
+                RefFx::from_i32(a >> 8),
+            );
+            same("next_up", a, b, x.next_up(), rx.next_up());
+            same("next_down", a, b, x.next_down(), rx.next_down());
+        }
+    }
+
+    #[test]
+    fn kernels_equal_their_64_bit_definitions() {
+        // The two product paths (long multiply and 16-bit halves) on every target, not
+        // just the one the host compiles in.
+        for (a, b) in pairs(300_000, 6) {
+            let exact = a as i64 * b as i64;
+            assert_eq!(wide::mul_i32_halves(a, b), exact, "{a} * {b}");
+            let (ua, ub) = (a as u32, b as u32);
+            assert_eq!(wide::mul_u32_halves(ua, ub), ua as u64 * ub as u64);
+            assert_eq!(wide::mul_u32(ua, ub), ua as u64 * ub as u64);
+            assert_eq!(wide::mul_i32(a, b), exact);
+            if let Some(p) = wide::mul_q16_i32(a, b) {
+                assert_eq!(p as i64, (exact + (1 << 15)) >> 16, "{a} * {b} rounded");
+            }
+            if b != 0 && a != i32::MIN {
+                let (n, d) = (a.unsigned_abs(), b.unsigned_abs());
+                let want = ((((n as u64) << 16) + (d >> 1) as u64) / d as u64).min(i32::MAX as u64);
+                assert_eq!(wide::div_q16(n, d) as u64, want, "{n} / {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn float_conversions_match_bit_for_bit() {
+        let mut rng = Rng(7);
+        let check64 = |v: f64| {
+            let (got, want) = (Fx::from_f64(v), RefFx::from_f64(v));
+            assert_eq!(
+                got.raw(),
+                want.raw(),
+                "from_f64({v:e}) bits {:#x}",
+                v.to_bits()
+            );
+        };
+        // Halves of a step and their neighbours, the range's ends, the tie that f64's own
+        // rounding of s + 1/2 takes up to 1 (s = 1/2 - 2^-54), specials.
+        for k in 0..40 {
+            for m in [0.5, 1.0, 1.5, 2.5, 32767.5, 32768.0] {
+                let v = m * 2f64.powi(-16) * 2f64.powi(k);
+                for x in [v, -v] {
+                    check64(x);
+                    check64(f64::from_bits(x.to_bits() + 1));
+                    check64(f64::from_bits(x.to_bits() - 1));
+                }
+            }
+        }
+        for v in [
+            0.0,
+            -0.0,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            f64::MIN_POSITIVE,
+        ] {
+            check64(v);
+        }
+        let tie = (0.5 - 2f64.powi(-54)) / 65536.0;
+        check64(tie);
+        check64(-tie);
+        assert_eq!(Fx::from_f64(tie).raw(), 1);
+        for _ in 0..300_000 {
+            let r = rng.next();
+            // Random bits, and random values of a random magnitude near the format.
+            check64(f64::from_bits(r));
+            let v = (r >> 11) as f64 / (1u64 << 53) as f64 * 2f64.powi((r % 50) as i32 - 25);
+            check64(if r & 1 == 0 { v } else { -v });
+            let w = f32::from_bits(r as u32);
+            let (got, want) = (Fx::from_f32(w), RefFx::from_f32(w));
+            assert_eq!(
+                got.raw(),
+                want.raw(),
+                "from_f32({w:e}) bits {:#x}",
+                w.to_bits()
+            );
+            let w = v as f32;
+            assert_eq!(
+                Fx::from_f32(w).raw(),
+                RefFx::from_f32(w).raw(),
+                "from_f32({w:e})"
+            );
+        }
     }
 }

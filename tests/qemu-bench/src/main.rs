@@ -611,14 +611,24 @@ fn main() -> ! {
     );
 
     let mut pixels = [[0u8; 3]; MAX_PIXELS];
-    // `--features profile` (scripts/qemu-profile): one frame only in f32 (photo1 primary
-    // rays + shading unless LINKS_PROFILE_SCENE names another scene at build time), the
-    // window an instruction trace of QEMU is taken over.
+    // `--features profile` (scripts/qemu-profile): one frame only (photo1 primary rays +
+    // shading unless LINKS_PROFILE_SCENE names another scene at build time; in f32 unless
+    // LINKS_PROFILE_BACKEND names another backend by `Real::NAME`, with Techniques::ALL),
+    // the window an instruction trace of QEMU is taken over.
     #[cfg(feature = "profile")]
     {
         let s = scene(option_env!("LINKS_PROFILE_SCENE").unwrap_or("photo1-noshadow"));
-        let r = &s.runs[0];
-        ok &= render_scene::<f32>(&mut o, s, r, &mut pixels, overhead);
+        let want = option_env!("LINKS_PROFILE_BACKEND").unwrap_or(<f32 as Real>::NAME);
+        let r = s
+            .runs
+            .iter()
+            .find(|r| r.backend.name() == want && r.name == "all")
+            .expect("LINKS_PROFILE_BACKEND names a backend the scene is rendered in");
+        ok &= match r.backend {
+            Backend::F32 => render_scene::<f32>(&mut o, s, r, &mut pixels, overhead),
+            Backend::F32Fast => render_scene::<FastF32>(&mut o, s, r, &mut pixels, overhead),
+            Backend::Fx => render_scene::<Fx>(&mut o, s, r, &mut pixels, overhead),
+        };
         say!(o, "END ok={}", ok);
         debug::exit(if ok {
             debug::EXIT_SUCCESS
