@@ -74,7 +74,12 @@ fn frames_are_bit_identical_on_the_firmware_link_for_every_count_policy_and_topo
                     batch: true,
                 },
             ];
-            for topology in topologies {
+            // The relay tree also with the root's children on three buses (SPI1/2/3).
+            let shapes = topologies
+                .iter()
+                .flat_map(|&t| [(t, 1u16), (t, 3)])
+                .filter(|&(t, buses)| buses == 1 || t != Topology::Star);
+            for (topology, buses) in shapes {
                 if nodes == 1 && topology != Topology::Star {
                     continue;
                 }
@@ -83,10 +88,11 @@ fn frames_are_bit_identical_on_the_firmware_link_for_every_count_policy_and_topo
                     SimConfig {
                         policy,
                         topology,
+                        buses,
                         ..f407(nodes)
                     },
                 );
-                let what = format!("{nodes} nodes, {policy:?}, {topology:?}");
+                let what = format!("{nodes} nodes, {policy:?}, {topology:?}, {buses} root bus(es)");
                 assert!(r.frames[0] == want, "{what}");
                 assert_eq!(r.root.pixels, 64 * 60, "{what}");
                 let link = r.link.expect("the firmware link ran");

@@ -86,7 +86,8 @@ pub struct ClusterArgs {
     /// board's (firmware on f407, ideal on ideal)
     #[arg(long, value_parser = cli_cluster::parse_link)]
     pub link: Option<crate::cluster::spi_bus::LinkModel>,
-    /// SPI buses from the root computer of a star (cluster only)
+    /// SPI buses from the root computer (cluster only): a star's node buses, or under a
+    /// relay tree the root's buses to its children (the F407 has SPI1/2/3)
     #[arg(long, default_value_t = 1)]
     pub buses: u16,
     /// SPI bit rate in MHz, 0.001..=10000 (cluster only; default: the board's)

@@ -139,10 +139,11 @@ pub fn topology_text(cfg: &SimConfig) -> String {
             t.leaves,
             cfg.profile.link.nodes_per_bus,
             t.levels(),
-            if t.mids > 0 {
-                format!(" ({} mid relays)", t.mids)
-            } else {
-                String::new()
+            match (t.mids, t.roots) {
+                (0, 1) => String::new(),
+                (0, r) => format!(" (the root on {r} buses)"),
+                (m, 1) => format!(" ({m} mid relays)"),
+                (m, r) => format!(" ({m} mid relays, the root on {r} buses)"),
             }
         ),
     }
@@ -154,7 +155,7 @@ pub fn tree_summary(r: &SimReport) -> String {
     let Some(t) = &r.tree else {
         return String::new();
     };
-    let root_link = t.links.first().map_or(0, |l| l.busy_ps) as f64 * 1e-12;
+    let root_link = t.root_link_busy_s();
     format!(
         " per relay; root link busy {:.1}%, root busy {:.1}%",
         100.0 * root_link / r.time_s,

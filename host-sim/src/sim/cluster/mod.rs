@@ -83,7 +83,8 @@ pub struct SimConfig {
     /// Node computers (1..=256).
     pub nodes: u16,
     /// SPI buses from the RC (1..=8) of a [`Topology::Star`]; nodes are split evenly
-    /// across them. A relay tree has one bus per leaf relay instead.
+    /// across them. A relay tree has one bus per leaf relay instead, and this is the root's
+    /// buses to its children (1, the buildable default; the F407 has SPI1/2/3).
     pub buses: u16,
     /// How the nodes are wired to the root. [`SimConfig::for_board`]: a star of `buses`
     /// buses; [`SimConfig::buildable`]: what the board can be built as.
@@ -222,11 +223,10 @@ impl SimConfig {
     pub fn tree(&self) -> Option<Result<TreeShape, relay::TreeError>> {
         match self.topology {
             Topology::Star => None,
-            Topology::RelayTree { fanout, .. } => Some(TreeShape::of(
-                self.nodes,
-                self.profile.link.nodes_per_bus,
-                fanout,
-            )),
+            Topology::RelayTree { fanout, .. } => Some(
+                TreeShape::of(self.nodes, self.profile.link.nodes_per_bus, fanout)
+                    .map(|t| t.with_roots(self.buses)),
+            ),
         }
     }
 

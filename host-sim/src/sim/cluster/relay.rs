@@ -98,6 +98,9 @@ pub struct TreeShape {
     pub leaves: u16,
     pub mids: u16,
     pub fanout: u16,
+    /// The root's SPI buses to its children (the F407 has SPI1/2/3): child `c` (a leaf
+    /// relay in a one-level tree, a mid relay in a two-level one) hangs off bus `c % roots`.
+    pub roots: u16,
 }
 
 impl TreeShape {
@@ -124,7 +127,16 @@ impl TreeShape {
             leaves,
             mids,
             fanout,
+            roots: 1,
         })
+    }
+
+    /// The same tree with the root's children spread over `roots` buses (at least 1).
+    pub fn with_roots(self, roots: u16) -> TreeShape {
+        TreeShape {
+            roots: roots.max(1),
+            ..self
+        }
     }
 
     /// Levels of relays between the root and the nodes' buses.
@@ -136,21 +148,38 @@ impl TreeShape {
         }
     }
 
-    /// Links between RCs: the root's, then each mid relay's.
+    /// Links between RCs: the root's (`roots` of them), then each mid relay's.
     pub fn links(&self) -> usize {
-        1 + self.mids as usize
+        self.roots as usize + self.mids as usize
+    }
+
+    /// The root's child above leaf relay `leaf` (the leaf itself in a one-level tree, its
+    /// mid relay in a two-level one).
+    fn child_of_root(&self, leaf: usize) -> usize {
+        if self.mids == 0 {
+            leaf
+        } else {
+            leaf / self.fanout as usize
+        }
+    }
+
+    /// The root's link to its child `child`.
+    fn root_link(&self, child: usize) -> usize {
+        child % self.roots.max(1) as usize
     }
 
     /// The links from the root down to leaf relay `leaf`, root first (1 or 2).
     fn path_down(&self, leaf: usize) -> impl Iterator<Item = usize> {
-        let mid = (self.mids > 0).then(|| 1 + leaf / self.fanout as usize);
-        std::iter::once(0).chain(mid)
+        let root = self.root_link(self.child_of_root(leaf));
+        let mid = (self.mids > 0).then(|| self.roots as usize + leaf / self.fanout as usize);
+        std::iter::once(root).chain(mid)
     }
 
     /// The links from leaf relay `leaf` up to the root, the leaf's parent's first.
     fn path_up(&self, leaf: usize) -> impl Iterator<Item = usize> {
-        let mid = (self.mids > 0).then(|| 1 + leaf / self.fanout as usize);
-        mid.into_iter().chain(std::iter::once(0))
+        let root = self.root_link(self.child_of_root(leaf));
+        let mid = (self.mids > 0).then(|| self.roots as usize + leaf / self.fanout as usize);
+        mid.into_iter().chain(std::iter::once(root))
     }
 }
 
@@ -171,10 +200,24 @@ pub struct TreeLink {
 #[derive(Clone, Debug, PartialEq)]
 pub struct TreeReport {
     pub shape: TreeShape,
-    /// The root's link first, then each mid relay's.
+    /// The root's links first (`shape.roots`), then each mid relay's.
     pub links: Vec<TreeLink>,
     /// Time the root's CPU was busy taking forwarded frames (s).
     pub root_busy_s: f64,
+}
+
+impl TreeReport {
+    /// The busiest of the root's links: its busy time (s).
+    pub fn root_link_busy_s(&self) -> f64 {
+        let roots = self.shape.roots.max(1) as usize;
+        self.links
+            .iter()
+            .take(roots)
+            .map(|l| l.busy_ps)
+            .max()
+            .unwrap_or(0) as f64
+            * 1e-12
+    }
 }
 
 /// Most bytes one forwarded exchange carries each way: the firmware's relay link, one link
@@ -256,7 +299,8 @@ impl Wires {
     /// first (what they deliver waits for the root's), then the root's (the root's CPU
     /// takes what it delivers).
     fn commit_until(&mut self, t: Ps) {
-        for link in (1..self.links.len()).chain(std::iter::once(0)) {
+        let roots = self.shape.roots.max(1) as usize;
+        for link in (roots..self.links.len()).chain(0..roots) {
             while let Some(b) = self.waiting[link].front().copied() {
                 let start = b.ready.max(self.links[link].busy_until);
                 if start > t {
@@ -265,18 +309,19 @@ impl Wires {
                 self.waiting[link].pop_front();
                 let end = self.claim(link, start, BATCH_HEADER + b.up.max(b.down), true);
                 self.links[link].frames_up += b.frames;
-                if link == 0 {
+                if link < roots {
                     let done = end.max(self.root_cpu_free) + b.work;
                     self.root_cpu_free = done;
                     self.root_busy += b.work;
                     self.taken_up_to = self.taken_up_to.max(done);
                 } else {
+                    let mid = link - roots;
                     let up = Batch {
-                        child: link - 1,
+                        child: mid,
                         ready: end,
                         ..b
                     };
-                    self.enqueue(0, up);
+                    self.enqueue(self.shape.root_link(mid), up);
                 }
             }
         }
@@ -347,7 +392,7 @@ impl Relays {
         self.wires.commit_until(at);
         let shape = self.wires.shape;
         let link = shape.path_up(leaf).next().unwrap_or(0);
-        let child = if link == 0 {
+        let child = if shape.mids == 0 {
             leaf
         } else {
             leaf % shape.fanout as usize
@@ -403,6 +448,13 @@ mod tests {
         let t = TreeShape::of(256, 8, 8).unwrap();
         assert_eq!(t.path_down(17).collect::<Vec<_>>(), [0, 3]);
         assert_eq!(t.path_up(31).collect::<Vec<_>>(), [4, 0]);
+        // The root on three buses: mid relay m on bus m % 3, the mids' links after them.
+        let t3 = t.with_roots(3);
+        assert_eq!(t3.links(), 3 + 4);
+        assert_eq!(t3.path_down(17).collect::<Vec<_>>(), [2, 5]);
+        assert_eq!(t3.path_up(31).collect::<Vec<_>>(), [6, 0]);
+        let one = TreeShape::of(64, 8, 8).unwrap().with_roots(3);
+        assert_eq!(one.path_up(7).collect::<Vec<_>>(), [1]);
         assert_eq!(Topology::buildable(&BoardProfile::F407, 8), Topology::Star);
         assert_eq!(
             Topology::buildable(&BoardProfile::F407, 64),
