@@ -59,9 +59,9 @@ pub struct RenderArgs {
 pub struct ClusterArgs {
     /// The board profile the cluster is built of (cluster only): f407 (the firmware's:
     /// 21 MHz SPI, 8-byte header + 1-byte trailer, 8 + 15 us chip-select set-up and hold,
-    /// an RC that does not overlap), f207 (the FPU-less NUCLEO-F207ZG: Cortex-M3 at
-    /// 120 MHz, 15 MHz SPI, Q16.16 nodes) or ideal (42 MHz, 4-byte header, 0.5 us per
-    /// transfer, an RC that overlaps)
+    /// an RC whose bus task clocks the wire while it composes), f207 (the FPU-less
+    /// NUCLEO-F207ZG: Cortex-M3 at 120 MHz, 15 MHz SPI, Q16.16 nodes) or ideal (42 MHz,
+    /// 4-byte header, 0.5 us per transfer, an RC that overlaps)
     #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
     pub board: &'static BoardProfile,
     /// The node computers' board (cluster only; known: f407, f207; default: the --board's):
