@@ -1031,6 +1031,108 @@ mod tests {
         assert!(!nc.banks[0].validated && !nc.banks[0].ready);
     }
 
+    /// A valid scene of several chunks: `tris` triangles, one leaf.
+    fn big_image(tris: usize) -> std::vec::Vec<u8> {
+        use crate::num::Storage;
+        use crate::testkit::scene::SceneBuilder;
+        let mut b = SceneBuilder::new(Storage::F32);
+        b.camera(8, 8, [-1.0, 1.0, 0.1, 0.1], 0.0).grey_material();
+        for i in 0..tris {
+            let z = 1.0 + i as f32 * 1e-3;
+            b.triangle([0.0, 0.0, z, 1.0, 0.0, z, 0.0, 1.0, z]);
+        }
+        b.node([-1.0; 3], [1.0; 3], 1, 0);
+        b.finish()
+    }
+
+    /// Chunks that land in a lent bank and are booked when it comes back leave the bank as
+    /// the node logic's own handling of the same broadcasts does: the same bytes, bitmap,
+    /// readiness and end, whatever the order, repeats and interleaved scenes (random
+    /// sequences of whole chunks of two scenes for the same bank, some chunks missing).
+    #[test]
+    fn landed_chunks_are_booked_as_the_node_logic_handles_them() {
+        let scenes = [big_image(120), big_image(90)];
+        assert!(scenes
+            .iter()
+            .all(|s| SceneView::new(s).is_ok() && s.len() > 2 * SCENE_CHUNK));
+        let mut seed = 0x9e37_79b9u32;
+        let mut next = |n: u32| {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed % n
+        };
+        for case in 0..300 {
+            // Frames 1 and 3 both go to bank 1; the later scene of the sequence is the one
+            // that must win in both paths.
+            let len = 1 + next(24) as usize;
+            let seq: std::vec::Vec<(usize, u16, usize)> = (0..len)
+                .map(|_| {
+                    let k = next(2) as usize;
+                    let chunks = scenes[k].len().div_ceil(SCENE_CHUNK);
+                    (k, 1 + 2 * k as u16, next(chunks as u32) as usize)
+                })
+                .collect();
+            let chunk_of = |&(k, frame, c): &(usize, u16, usize)| {
+                let img = &scenes[k];
+                let end = ((c + 1) * SCENE_CHUNK).min(img.len());
+                let (total, crc) = (img.len() as u32, wire::CRC32.checksum(img));
+                (
+                    frame,
+                    (c * SCENE_CHUNK) as u32,
+                    total,
+                    crc,
+                    &img[c * SCENE_CHUNK..end],
+                )
+            };
+            // (a) The node logic handles each chunk as it arrives.
+            let (mut a0, mut a1) = ([0u8; 8192], [0u8; 8192]);
+            let mut mem_a = [&mut a0[..], &mut a1[..]];
+            let mut nc_a = Nc::new(NodeReport::default());
+            for m in &seq {
+                let (frame, offset, total, crc, data) = chunk_of(m);
+                scene_chunk(
+                    &mut nc_a, &mut mem_a, frame, offset, total, crc, data, false,
+                );
+            }
+            // (b) They land in bank 1 lent to the link, booked when it comes back.
+            let (mut b0, mut b1) = ([0u8; 8192], [0u8; 8192]);
+            let mut nc_b = Nc::new(NodeReport::default());
+            let mut lent = LentBank::new(1, &mut b1[..], None);
+            for m in &seq {
+                let (frame, offset, total, crc, data) = chunk_of(m);
+                let msg = Down::Scene {
+                    frame,
+                    offset,
+                    total,
+                    crc,
+                    data,
+                };
+                assert_ne!(lent.land(&msg), crate::landing::Landing::NotMine);
+            }
+            let mut mem_b = [&mut b0[..], &mut []];
+            book_landed(&mut nc_b, &mut mem_b, lent);
+            let (x, y) = (&nc_a.banks[1], &nc_b.banks[1]);
+            let last = seq.last().map(|m| m.0);
+            // Both keep the last scene's chunks since the scene last changed (the node
+            // logic restarts its bitmap then, the landed record too).
+            assert_eq!(x.frame, y.frame, "case {case}: {seq:?}");
+            assert_eq!((x.total, x.crc), (y.total, y.crc), "case {case}");
+            assert_eq!(x.got, y.got, "case {case}: {seq:?}");
+            assert_eq!(
+                (x.ready, x.ended),
+                (y.ready, y.ended),
+                "case {case}: {seq:?}"
+            );
+            if x.ready {
+                let n = x.total as usize;
+                assert_eq!(mem_a[1][..n], mem_b[1][..n], "case {case}");
+                assert_eq!(last.map(|k| &scenes[k][..]), Some(&mem_b[1][..n]));
+                assert_eq!(nc_b.status, Some(nc_b.bank_state(1)), "case {case}");
+            }
+        }
+    }
+
     #[test]
     fn a_corrupt_scene_with_a_good_crc_is_never_rendered() {
         // The leaf names triangle 5 of 1: the CRC matches, the validation fails.
