@@ -14,7 +14,7 @@
 //! the bank and the scene, of the lent bank's parity; a new scene (frame, length, CRC) starts
 //! the record over; a chunk of the scene the bank already holds ready is not written again.
 
-use super::wire::{Down, MAX_CHUNKS, MAX_SCENE, SCENE_CHUNK};
+use super::wire::{Down, MAX_CHUNKS, MAX_SCENE, SCENE_CHUNK, SCENE_PIECE};
 
 /// Which scene a chunk belongs to: every chunk carries all three.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -52,6 +52,35 @@ impl Landed {
             .get((c / 32) as usize)
             .is_some_and(|w| w & (1 << (c % 32)) != 0)
     }
+}
+
+/// Where `len` bytes of scene data at `offset` of a `total`-byte scene go in a bank of `cap`
+/// bytes: their end, if they are a whole chunk (the scene's last may be short) or, when
+/// `pieces` (a repair in an exchange), whole pieces of one chunk, inside the scene and the
+/// bank. The one rule for the node logic and for chunks landing in a lent bank.
+pub(crate) fn scene_range(
+    offset: u32,
+    len: usize,
+    total: u32,
+    cap: usize,
+    pieces: bool,
+) -> Option<u32> {
+    let (chunk, piece) = (SCENE_CHUNK as u32, SCENE_PIECE as u32);
+    // Saturated on overflow: then past `total`, refused below.
+    let end = offset.saturating_add(u32::try_from(len).unwrap_or(u32::MAX));
+    let whole_chunk =
+        offset.is_multiple_of(chunk) && end == total.min(offset.saturating_add(chunk));
+    let in_pieces = pieces
+        && offset.is_multiple_of(piece)
+        && len > 0
+        && (end.is_multiple_of(piece) || end == total)
+        && offset / chunk == (end - 1) / chunk;
+    let fits = total as usize <= MAX_SCENE
+        && total as usize <= cap
+        && total > 0
+        && offset < total
+        && end <= total;
+    (fits && (whole_chunk || in_pieces)).then_some(end)
 }
 
 /// What [`LentBank::land`] did with a message.
@@ -104,22 +133,10 @@ impl<'b> LentBank<'b> {
         if usize::from(frame % 2) != self.index {
             return Landing::NotMine;
         }
-        let chunk = SCENE_CHUNK as u32;
-        let Ok(len) = u32::try_from(data.len()) else {
-            return Landing::NotMine;
-        };
-        let end = offset.saturating_add(len);
-        let whole_chunk =
-            offset.is_multiple_of(chunk) && end == total.min(offset.saturating_add(chunk));
-        let fits = total as usize <= MAX_SCENE
-            && total as usize <= self.bytes.len()
-            && total > 0
-            && offset < total
-            && end <= total;
-        if !(whole_chunk && fits) {
+        let Some(end) = scene_range(offset, data.len(), total, self.bytes.len(), false) else {
             // The node logic counts it as a bad message.
             return Landing::NotMine;
-        }
+        };
         let key = SceneKey { frame, total, crc };
         if self.holds == Some(key) {
             return Landing::Held;
@@ -136,7 +153,7 @@ impl<'b> LentBank<'b> {
                 ..Landed::NONE
             };
         }
-        let c = offset / chunk;
+        let c = offset / SCENE_CHUNK as u32;
         if let Some(w) = self.landed.chunks.get_mut((c / 32) as usize) {
             *w |= 1 << (c % 32);
         }

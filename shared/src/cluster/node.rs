@@ -13,7 +13,7 @@
 //! RC's acknowledgements makes the node send them again (go-back-N). Nothing read from the
 //! bus can make it panic: bad frames are counted and otherwise ignored.
 
-use super::landing::{Landed, LentBank, NoLanding, SceneKey, SceneLanding};
+use super::landing::{scene_range, Landed, LentBank, NoLanding, SceneKey, SceneLanding};
 use super::link::{Incoming, LinkError, NodeLink};
 use super::wire::{
     self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
@@ -385,29 +385,11 @@ fn scene_chunk(
     direct: bool,
 ) -> bool {
     let b = (frame % 2) as usize;
-    let cap = banks[b].len() as u32;
-    // A whole chunk (broadcast or repair), or, in an exchange, whole pieces of one chunk (the
-    // scene's last piece may be short).
-    let (chunk, piece) = (SCENE_CHUNK as u32, SCENE_PIECE as u32);
-    // Saturated on overflow: then past `total`, refused below.
-    let end = offset.saturating_add(u32::try_from(data.len()).unwrap_or(u32::MAX));
-    let whole_chunk =
-        offset.is_multiple_of(chunk) && end == total.min(offset.saturating_add(chunk));
-    let pieces = direct
-        && offset.is_multiple_of(piece)
-        && !data.is_empty()
-        && (end.is_multiple_of(piece) || end == total)
-        && offset / chunk == (end - 1) / chunk;
-    if total as usize > wire::MAX_SCENE
-        || total > cap
-        || total == 0
-        || offset >= total
-        || end > total
-        || !(whole_chunk || pieces)
-    {
+    let piece = SCENE_PIECE as u32;
+    let Some(end) = scene_range(offset, data.len(), total, banks[b].len(), direct) else {
         nc.report.bad_messages += 1;
         return false;
-    }
+    };
     nc.banks[b].expect(frame, total, crc);
     if nc.banks[b].ready {
         return false;
