@@ -91,8 +91,12 @@ include!(concat!(env!("OUT_DIR"), "/scenes.rs"));
 /// per ns, so one tick is 40 instructions.
 const INSTR_PER_TICK: u64 = 40;
 const RELOAD: u32 = 0x00FF_FFFF;
-/// Largest frame the benchmark renders (pixels).
+/// Largest frame the benchmark renders (pixels); the profile build also takes the larger
+/// frames of `scripts/qemu-profile --size` (up to 128x128: 48 KB of pixels on the stack).
+#[cfg(not(feature = "profile"))]
 const MAX_PIXELS: usize = 1024;
+#[cfg(feature = "profile")]
+const MAX_PIXELS: usize = 128 * 128;
 /// Micro-benchmark rays: an 8x8 grid of primary rays over the frame.
 const GRID: u32 = 8;
 
