@@ -24,6 +24,8 @@ mod reference;
 /// Fraction bits.
 pub const FRAC_BITS: u32 = 16;
 const ONE_RAW: i32 = 1 << FRAC_BITS;
+/// Up to this `n`, Q16.16's `err_gamma(n)` is `n` steps (see its doc).
+const GAMMA_EXACT: i32 = 180;
 const INF_RAW: i32 = i32::MAX;
 const NEG_INF_RAW: i32 = -i32::MAX;
 const NAN_RAW: i32 = i32::MIN;
@@ -563,7 +565,37 @@ impl Real for Fx {
         }
     }
     fn to_f32(self) -> f32 {
-        self.to_f64() as f32
+        // One rounding of the same value as `to_f64() as f32` (the i32 to f32 conversion;
+        // the power-of-two scale is exact), without the soft-float f64 arithmetic of
+        // integer cores.
+        match self.0 {
+            NAN_RAW => f32::NAN,
+            INF_RAW => f32::INFINITY,
+            NEG_INF_RAW => f32::NEG_INFINITY,
+            r => r as f32 * (1.0 / ONE_RAW as f32),
+        }
+    }
+    /// The default's value in integers: for `r` in [0, 2^16], `r * 255 + 2^15 < 2^24`, so the
+    /// f32 formula's product and sum are exact and its truncation is this shift.
+    #[inline]
+    fn to_unit_u8(self) -> u8 {
+        let c = self.clamp01();
+        match c.0 {
+            r @ 0..=ONE_RAW => ((r as u32 * 255 + ONE_RAW as u32 / 2) >> 16) as u8,
+            _ => (c.to_f32() * 255.0 + 0.5) as u8,
+        }
+    }
+    /// gamma(n) = n eps / (1 - n eps) with eps one step: `n / (2^16 - n)` steps rounded to
+    /// nearest is `n` itself while `n^2 < 2^15 - n/2`; the generic formula (two products and
+    /// a 64-bit division per call) gives the same bits.
+    #[inline]
+    fn err_gamma(n: i32) -> Fx {
+        if (0..=GAMMA_EXACT).contains(&n) {
+            Fx(n)
+        } else {
+            let ne = Fx::from_i32(n) * Fx::epsilon();
+            ne / (Fx::ONE - ne)
+        }
     }
     /// One step relative to 1.0. Fixed-point rounding is absolute (half a step per
     /// operation), so relative error bounds built from this hold near magnitude 1 and above.
@@ -867,6 +899,61 @@ mod wide {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Raw values to check conversions on: the special values, the edges of [0, 1], and a
+    /// spread of others.
+    fn probe_raws() -> impl Iterator<Item = i32> {
+        let mut x = 0x9e37_79b9u32;
+        let spread = (0..20_000).map(move |_| {
+            x ^= x << 13;
+            x ^= x >> 17;
+            x ^= x << 5;
+            x as i32 >> (x % 24)
+        });
+        [
+            NAN_RAW,
+            INF_RAW,
+            NEG_INF_RAW,
+            MAX_RAW,
+            -MAX_RAW,
+            0,
+            1,
+            -1,
+            ONE_RAW,
+            ONE_RAW - 1,
+            ONE_RAW + 1,
+            ONE_RAW / 2,
+            (1 << 24) + 1,
+            -(1 << 24) - 1,
+        ]
+        .into_iter()
+        .chain(-70_000..70_000)
+        .chain(spread)
+    }
+
+    /// The shortcuts for integer cores give the generic definitions' bits.
+    #[test]
+    fn conversions_and_gamma_equal_their_generic_definitions() {
+        for r in probe_raws() {
+            let v = Fx(r);
+            let want = v.to_f64() as f32;
+            let got = v.to_f32();
+            assert!(
+                got.to_bits() == want.to_bits() || (got.is_nan() && want.is_nan()),
+                "to_f32 of raw {r}: {got} against {want}"
+            );
+            let want = (v.clamp01().to_f64() as f32 * 255.0 + 0.5) as u8;
+            assert_eq!(v.to_unit_u8(), want, "to_unit_u8 of raw {r}");
+        }
+        for n in -5..=400 {
+            let ne = Fx::from_i32(n) * Fx::epsilon();
+            let want = ne / (Fx::ONE - ne);
+            assert_eq!(Fx::err_gamma(n), want, "gamma({n})");
+        }
+        // The range the shortcut takes is exactly where the formula gives n steps.
+        let ne = Fx::from_i32(GAMMA_EXACT + 1) * Fx::epsilon();
+        assert_ne!((ne / (Fx::ONE - ne)).0, GAMMA_EXACT + 1);
+    }
 
     #[test]
     fn dot3_of_large_vectors_saturates_instead_of_wrapping() {

@@ -173,6 +173,12 @@ pub trait Real:
     fn sq(self) -> Self {
         self * self
     }
+    /// A colour channel as 8 bits: clamped to [0, 1], scaled by 255, rounded to nearest
+    /// (`as u8` saturates and takes NaN to 0).
+    #[inline]
+    fn to_unit_u8(self) -> u8 {
+        (self.clamp01().to_f32() * 255.0 + 0.5) as u8
+    }
     /// pbrt's gamma(n) = n*eps / (1 - n*eps): the bound on relative error after n roundings.
     #[inline]
     fn err_gamma(n: i32) -> Self {

@@ -307,9 +307,7 @@ impl<'a, T: Real, S: BorrowMut<TracerState<T>>> Tracer<'a, T, S> {
 /// Quantise a linear colour to 8 bits (clamped, rounded to nearest).
 #[inline]
 pub fn to_rgb8<T: Real>(c: Vec3<T>) -> Rgb8 {
-    // `as u8` saturates (and takes NaN to 0), so values at or above 255 give 255.
-    let q = |v: T| (v.clamp01().to_f32() * 255.0 + 0.5) as u8;
-    [q(c.x), q(c.y), q(c.z)]
+    [c.x.to_unit_u8(), c.y.to_unit_u8(), c.z.to_unit_u8()]
 }
 
 /// Render `out.len()` pixels of scanline `y` starting at column `x`: the node's unit of work.
