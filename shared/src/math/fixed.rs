@@ -597,6 +597,17 @@ impl Real for Fx {
             ne / (Fx::ONE - ne)
         }
     }
+    /// `ONE / self` (the same bits) with one 32-bit division instead of a 64-bit one: every
+    /// primary ray takes four reciprocals (its length, its direction's three for the slab
+    /// tests).
+    #[inline]
+    fn recip(self) -> Fx {
+        if self.special() || self.0 == 0 {
+            return Fx::ONE.div_special(self);
+        }
+        let q = wide::recip_q16(self.0.unsigned_abs()) as i32;
+        Fx(if self.0 < 0 { -q } else { q })
+    }
     /// One step relative to 1.0. Fixed-point rounding is absolute (half a step per
     /// operation), so relative error bounds built from this hold near magnitude 1 and above.
     #[inline(always)]
@@ -834,6 +845,18 @@ mod wide {
         q.min(i32::MAX as u32)
     }
 
+    /// [`div_q16`] of one (`n = 2^16`): `min((2^32 + d / 2) / d, i32::MAX)` for `d != 0`,
+    /// by one 32-bit division: `2^32 - 1 = q d + r` (UDIV on the M3), and the rest of the
+    /// numerator, `r + 1 + d / 2 < 2d`, adds at most one.
+    #[inline]
+    pub(super) fn recip_q16(d: u32) -> u32 {
+        let d = core::num::NonZeroU32::new(d).unwrap_or(core::num::NonZeroU32::MIN);
+        let q = u32::MAX / d;
+        let r = u32::MAX - q * d.get();
+        let bump = u64::from(r + 1 + (d.get() >> 1) >= d.get());
+        (q as u64 + bump).min(i32::MAX as u64) as u32
+    }
+
     /// Initial `1/sqrt(x)` for `x = (i + 0.5) / 64`, `i` in `16..64` (x in [1/4, 1)), in
     /// Q2.30: `round(2^30 / sqrt((2i + 1) / 128))`, computed at compile time.
     const RSQRT_SEED: [u32; 48] = {
@@ -944,6 +967,10 @@ mod tests {
             );
             let want = (v.clamp01().to_f64() as f32 * 255.0 + 0.5) as u8;
             assert_eq!(v.to_unit_u8(), want, "to_unit_u8 of raw {r}");
+        }
+        for r in probe_raws() {
+            let v = Fx(r);
+            assert_eq!(v.recip().0, (Fx::ONE / v).0, "recip of raw {r}");
         }
         for n in -5..=400 {
             let ne = Fx::from_i32(n) * Fx::epsilon();
