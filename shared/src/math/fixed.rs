@@ -462,7 +462,7 @@ impl Real for Fx {
     const STORAGE: crate::num::Storage = crate::num::Storage::Q16_16;
     const ABSOLUTE_ROUNDING: bool = true;
 
-    #[inline]
+    #[inline(always)]
     fn dot3(a: [Fx; 3], b: [Fx; 3]) -> Fx {
         if a[0].special()
             || a[1].special()
