@@ -1,6 +1,6 @@
-//! LINKS-1 node computer (NC) firmware for the STM32F407VG (feature `board-f407`, default)
-//! or the FPU-less STM32F207ZG (`board-f207`), with the tracing kernels of its
-//! `kernel-f32` / `kernel-fixed` features ([`KERNELS`]).
+//! LINKS-1 node computer (NC) firmware for the STM32F407VG (feature `board-f407`, default),
+//! the FPU-less STM32F207ZG (`board-f207`) or the Cortex-M0+ STM32G0B1RE (`board-g0b1`), with
+//! the tracing kernels of its `kernel-f32` / `kernel-fixed` features ([`KERNELS`]).
 //!
 //! The behaviour is `links_core::node::run_node`; the link protocol is
 //! `links_core::spi` (tested on the host against an emulated bus). This crate adds only the
@@ -37,7 +37,8 @@ pub type Renderer = links_core::node::Tracing<f32>;
 pub type Renderer = links_core::node::Tracing<links_core::num::Fx>;
 
 /// Where every large buffer lives (bytes): the board's data (the profile's node,
-/// [`links_core::board::NodeBoard::F407`] or [`links_core::board::NodeBoard::F207`]), which
+/// [`links_core::board::NodeBoard::F407`], [`links_core::board::NodeBoard::F207`] or
+/// [`links_core::board::NodeBoard::G0B1`]), which
 /// the host checks SceneImages against. See `docs/hardware.md`.
 pub mod plan {
     use links_core::board::{BoardProfile, Memory, NodeBoard};
@@ -77,7 +78,7 @@ pub mod plan {
 }
 
 /// Pins of the NC board (STM32F4DISCOVERY). See `docs/hardware.md`.
-#[cfg(not(feature = "board-f207"))]
+#[cfg(not(any(feature = "board-f207", feature = "board-g0b1")))]
 pub mod pins {
     /// SPI1 (slave): SCK, MISO, MOSI, NSS (hardware chip-select input).
     pub const SPI1: [&str; 4] = ["PA5", "PA6", "PA7", "PA4"];
@@ -88,10 +89,11 @@ pub mod pins {
     pub const READY: &str = "PB1";
     /// The Discovery's accelerometer shares SPI1: its chip-select is held high.
     pub const ACCEL_CS: &str = "PE3";
-    /// MISO pin number on GPIOA (driven by the slave-pin workaround in [`crate::port`]).
-    pub const MISO_PA: usize = 6;
-    /// MOSI pin number on GPIOA.
-    pub const MOSI_PA: usize = 7;
+    /// MISO's pin number on its port, GPIOA (driven by the slave-pin workaround in
+    /// [`crate::port`]).
+    pub const MISO_PIN: usize = 6;
+    /// MOSI's pin number on GPIOA.
+    pub const MOSI_PIN: usize = 7;
     /// The serial backup line (RS-485, `links_core::backup`): USART2 TX, RX, and the
     /// transceiver's driver enable (also its /RE).
     pub const BACKUP: [&str; 3] = ["PA2", "PA3", "PA1"];
@@ -112,14 +114,43 @@ pub mod pins {
     pub const CS_SENSE: &str = "PE0";
     /// Handshake output to the RC ("armed, frame posted").
     pub const READY: &str = "PB1";
-    /// MISO pin number on GPIOA (driven by the slave-pin workaround in [`crate::port`]).
-    pub const MISO_PA: usize = 6;
-    /// MOSI pin number on GPIOA.
-    pub const MOSI_PA: usize = 7;
+    /// MISO's pin number on its port, GPIOA (driven by the slave-pin workaround in
+    /// [`crate::port`]).
+    pub const MISO_PIN: usize = 6;
+    /// MOSI's pin number on GPIOA.
+    pub const MOSI_PIN: usize = 7;
     /// The serial backup line (RS-485): USART2 TX, RX, and the transceiver's driver enable.
     pub const BACKUP: [&str; 3] = ["PD5", "PD6", "PD4"];
     /// The node's backup-line address straps (as on the F407 board).
     pub const ADDRESS: [&str; 6] = ["PE7", "PE8", "PE9", "PE10", "PE11", "PE12"];
+}
+
+/// Pins of the NC board on the NUCLEO-G0B1RE (UM2324: Arduino connectors CN5/CN6/CN8/CN9,
+/// morpho CN7/CN10). SPI1 (AF0) on D3/D5/D4 = PB3/PB4/PB5, not on the Arduino SPI pins D13
+/// (PA5 also drives the user LED LD4, a load on a bus line shared by eight nodes) to D11;
+/// NSS on A2 = PA4, the F407's. The chip-select sense (D10 = PB0, EXTI0) and the handshake
+/// (A3 = PB1) are the F407's pins. The backup line on USART1, D1/D0 = PC4/PC5 (USART2's
+/// PA2/PA3 are the ST-LINK's virtual COM port), its driver enable on A1 = PA1 (the F407's);
+/// the address straps on morpho pins of port C (no port E on the LQFP64). See
+/// `docs/hardware.md`.
+#[cfg(feature = "board-g0b1")]
+pub mod pins {
+    /// SPI1 (slave): SCK, MISO, MOSI, NSS (hardware chip-select input).
+    pub const SPI1: [&str; 4] = ["PB3", "PB4", "PB5", "PA4"];
+    /// The RC's chip-select line also goes here (EXTI0).
+    pub const CS_SENSE: &str = "PB0";
+    /// Handshake output to the RC ("armed, frame posted").
+    pub const READY: &str = "PB1";
+    /// MISO's pin number on its port, GPIOB (driven by the slave-pin workaround in
+    /// [`crate::port`]).
+    pub const MISO_PIN: usize = 4;
+    /// MOSI's pin number on GPIOB.
+    pub const MOSI_PIN: usize = 5;
+    /// The serial backup line (RS-485): USART1 TX, RX, and the transceiver's driver enable.
+    pub const BACKUP: [&str; 3] = ["PC4", "PC5", "PA1"];
+    /// The node's backup-line address straps (pull-ups; a jumper to ground is a 1 bit),
+    /// bit 0 first: morpho CN10-18, CN10-16, CN7-35, CN7-37, CN10-4, CN10-2.
+    pub const ADDRESS: [&str; 6] = ["PC0", "PC1", "PC2", "PC3", "PC6", "PC8"];
 }
 
 /// The backup-line address the straps give: 1 + their value (1..=64).
@@ -197,8 +228,43 @@ mod tests {
         assert_eq!(all.len(), n, "no pin used twice");
     }
 
+    /// The G0B1 build: the G0B1 profile's plan, the Q16.16 kernel (the M0+ has no FPU), its
+    /// pins distinct (`cargo test -p nc-fw --no-default-features --features board-g0b1`).
+    #[cfg(feature = "board-g0b1")]
+    #[test]
+    fn the_firmware_constants_are_the_g0b1_profile() {
+        let p = BoardProfile::G0B1;
+        assert_eq!(super::plan::PROFILE, p);
+        assert_eq!(super::plan::BOARD, p.node);
+        assert_eq!(
+            (super::plan::SRAM, super::plan::CCM),
+            (80 * 1024, 64 * 1024)
+        );
+        assert_eq!(
+            [super::plan::SCENE_EVEN, super::plan::SCENE_ODD],
+            [40_960, 32_768]
+        );
+        assert_eq!(super::plan::LINK_BANKS, 5 * p.dma_bank_bytes());
+        assert_eq!(links_board::CORE_CLOCK_HZ, 64_000_000);
+        assert_eq!(super::KERNELS, p.kernels);
+        assert!(super::KERNELS.run(p.storage));
+        let mut all = super::pins::SPI1.to_vec();
+        all.extend([super::pins::CS_SENSE, super::pins::READY]);
+        all.extend(super::pins::BACKUP);
+        all.extend(super::pins::ADDRESS);
+        let n = all.len();
+        all.sort();
+        all.dedup();
+        assert_eq!(all.len(), n, "no pin used twice");
+        // The slave-pin workaround's pin numbers are SPI1's MISO and MOSI.
+        assert_eq!(
+            [super::pins::MISO_PIN, super::pins::MOSI_PIN].map(|n| format!("PB{n}")),
+            [super::pins::SPI1[1], super::pins::SPI1[2]]
+        );
+    }
+
     /// The node's memory plan and link banks are the F407 board profile's.
-    #[cfg(not(feature = "board-f207"))]
+    #[cfg(not(any(feature = "board-f207", feature = "board-g0b1")))]
     #[test]
     fn the_firmware_constants_are_the_f407_profile() {
         let p = BoardProfile::F407;

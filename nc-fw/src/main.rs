@@ -1,6 +1,6 @@
 //! NC bring-up: clocks, pins, the link task (interrupt executor, preempts rendering) and the
 //! node task (thread mode: `links_core::node::run_node` with the build's kernels,
-//! `nc_fw::Renderer`: f32 on the F407's FPU, Q16.16 on the F207).
+//! `nc_fw::Renderer`: f32 on the F407's FPU, Q16.16 on the F207 and the G0B1).
 #![cfg_attr(target_os = "none", no_std)]
 #![cfg_attr(target_os = "none", no_main)]
 
@@ -9,7 +9,8 @@ fn main() {
     eprintln!(
         "nc-fw is firmware for the STM32F407VG: \
          cargo run --release --target thumbv7em-none-eabihf -p nc-fw \
-         (NUCLEO-F207ZG: --target thumbv7m-none-eabi --no-default-features --features board-f207)"
+         (NUCLEO-F207ZG: --target thumbv7m-none-eabi --no-default-features --features board-f207; \
+         NUCLEO-G0B1RE: --target thumbv6m-none-eabi --no-default-features --features board-g0b1)"
     );
     std::process::exit(2);
 }
@@ -25,6 +26,9 @@ mod fw {
     use embassy_stm32::gpio::{Input, Level, Output, Pull, Speed};
     use embassy_stm32::interrupt;
     use embassy_stm32::interrupt::{InterruptExt, Priority};
+    #[cfg(feature = "board-g0b1")]
+    use embassy_stm32::peripherals::{DMA1_CH4, DMA1_CH5, USART1};
+    #[cfg(not(feature = "board-g0b1"))]
     use embassy_stm32::peripherals::{DMA1_CH5, DMA1_CH6, USART2};
     use embassy_stm32::usart::{self, Uart};
     use embassy_stm32::{bind_interrupts, dma};
@@ -69,19 +73,49 @@ mod fw {
     /// declared the SPI link dead, so the node task lends the line its even bank.
     static WANT_BANK: Signal<CriticalSectionRawMutex, ()> = Signal::new();
 
+    #[cfg(not(feature = "board-g0b1"))]
     bind_interrupts!(struct BackupIrqs {
         USART2 => usart::InterruptHandler<USART2>;
         DMA1_STREAM5 => dma::InterruptHandler<DMA1_CH5>;
         DMA1_STREAM6 => dma::InterruptHandler<DMA1_CH6>;
     });
+    // The G0B1: USART1 with DMA1 channels 4 (TX) and 5 (RX), whose interrupt line the G0
+    // shares among DMA1 channels 4-7 and DMA2's.
+    #[cfg(feature = "board-g0b1")]
+    bind_interrupts!(struct BackupIrqs {
+        USART1 => usart::InterruptHandler<USART1>;
+        DMA1_CH4_7_DMA2_CH1_5_DMAMUX1_OVR =>
+            dma::InterruptHandler<DMA1_CH4>, dma::InterruptHandler<DMA1_CH5>;
+    });
     static EXECUTOR_LINK: InterruptExecutor = InterruptExecutor::new();
     static EXECUTOR_NODE: StaticCell<Executor> = StaticCell::new();
 
+    /// The link executor's interrupt: one of a peripheral the board does not use (UART4 on
+    /// the F4 and F2 boards).
+    #[cfg(not(feature = "board-g0b1"))]
     #[interrupt]
     unsafe fn UART4() {
         // SAFETY: the interrupt executor's documented use: called from its own interrupt.
         unsafe { EXECUTOR_LINK.on_interrupt() }
     }
+    /// The link executor's interrupt on the G0B1: USART3-6's and LPUART1's shared line (none
+    /// of them used).
+    #[cfg(feature = "board-g0b1")]
+    #[interrupt]
+    unsafe fn USART3_4_5_6_LPUART1() {
+        // SAFETY: the interrupt executor's documented use: called from its own interrupt.
+        unsafe { EXECUTOR_LINK.on_interrupt() }
+    }
+    #[cfg(not(feature = "board-g0b1"))]
+    use interrupt::UART4 as LINK_IRQ;
+    #[cfg(feature = "board-g0b1")]
+    use interrupt::USART3_4_5_6_LPUART1 as LINK_IRQ;
+    /// The link executor's priority: above thread mode (the node task), below embassy's
+    /// drivers (priority 0): 6 of the F4's and F2's 16 levels, 2 of the G0's 4.
+    #[cfg(not(feature = "board-g0b1"))]
+    const LINK_PRIORITY: Priority = Priority::P6;
+    #[cfg(feature = "board-g0b1")]
+    const LINK_PRIORITY: Priority = Priority::P2;
 
     #[embassy_executor::task]
     async fn link_task(
@@ -222,43 +256,63 @@ mod fw {
         let shared: &'static SlaveShared<'static> = SHARED.init(shared);
 
         // The Discovery's accelerometer shares SPI1's pins: keep it deselected.
-        #[cfg(not(feature = "board-f207"))]
+        #[cfg(feature = "board-f407")]
         core::mem::forget(Output::new(p.PE3, Level::High, Speed::Low));
-        // The board's pins that differ (nc_fw::pins): chip-select sense, backup line.
-        #[cfg(not(feature = "board-f207"))]
+        // The board's pins that differ (nc_fw::pins): SPI1 and its DMA, chip-select sense,
+        // backup line, address straps.
+        #[cfg(not(feature = "board-g0b1"))]
+        let (sck, miso, mosi, tx_dma, rx_dma) = (p.PA5, p.PA6, p.PA7, p.DMA2_CH3, p.DMA2_CH0);
+        #[cfg(feature = "board-g0b1")]
+        let (sck, miso, mosi, tx_dma, rx_dma) = (p.PB3, p.PB4, p.PB5, p.DMA1_CH2, p.DMA1_CH1);
+        #[cfg(feature = "board-f407")]
         let (cs_sense, (line_tx, line_rx, line_de)) = (p.PB0, (p.PA2, p.PA3, p.PA1));
         #[cfg(feature = "board-f207")]
         let (cs_sense, (line_tx, line_rx, line_de)) = (p.PE0, (p.PD5, p.PD6, p.PD4));
+        #[cfg(feature = "board-g0b1")]
+        let (cs_sense, (line_tx, line_rx, line_de)) = (p.PB0, (p.PC4, p.PC5, p.PA1));
+        #[cfg(not(feature = "board-g0b1"))]
+        let (straps, line_uart, (line_tx_dma, line_rx_dma)) = (
+            (p.PE7, p.PE8, p.PE9, p.PE10, p.PE11, p.PE12),
+            p.USART2,
+            (p.DMA1_CH6, p.DMA1_CH5),
+        );
+        #[cfg(feature = "board-g0b1")]
+        let (straps, line_uart, (line_tx_dma, line_rx_dma)) = (
+            (p.PC0, p.PC1, p.PC2, p.PC3, p.PC6, p.PC8),
+            p.USART1,
+            (p.DMA1_CH4, p.DMA1_CH5),
+        );
         let port = NcPort {
             spi: p.SPI1,
-            sck: p.PA5,
-            miso: p.PA6,
-            mosi: p.PA7,
+            sck,
+            miso,
+            mosi,
             nss: p.PA4,
-            tx_dma: p.DMA2_CH3,
-            rx_dma: p.DMA2_CH0,
+            tx_dma,
+            rx_dma,
             cs: ExtiInput::new(cs_sense, p.EXTI0, Pull::Up, Irqs),
             ready: Output::new(p.PB1, Level::Low, Speed::VeryHigh),
             want_ready: false,
         };
 
-        // The backup line (USART2, driver enable; nc_fw::pins::BACKUP) and the address straps.
+        // The backup line (its UART, driver enable; nc_fw::pins::BACKUP) and the address
+        // straps.
         let straps = [
-            Input::new(p.PE7, Pull::Up),
-            Input::new(p.PE8, Pull::Up),
-            Input::new(p.PE9, Pull::Up),
-            Input::new(p.PE10, Pull::Up),
-            Input::new(p.PE11, Pull::Up),
-            Input::new(p.PE12, Pull::Up),
+            Input::new(straps.0, Pull::Up),
+            Input::new(straps.1, Pull::Up),
+            Input::new(straps.2, Pull::Up),
+            Input::new(straps.3, Pull::Up),
+            Input::new(straps.4, Pull::Up),
+            Input::new(straps.5, Pull::Up),
         ];
         let addr = nc_fw::backup_address(straps.each_ref().map(|s| s.is_low()));
         info!("backup line address {}", addr);
         let uart = unwrap!(Uart::new(
-            p.USART2,
+            line_uart,
             line_rx,
             line_tx,
-            p.DMA1_CH6,
-            p.DMA1_CH5,
+            line_tx_dma,
+            line_rx_dma,
             BackupIrqs,
             links_board::rs485::config(),
         ));
@@ -270,8 +324,8 @@ mod fw {
         let backup_node: &'static Backup =
             BACKUP_NODE.init(Mutex::new(RefCell::new(BackupNode::new(addr, &mut []))));
 
-        interrupt::UART4.set_priority(Priority::P6);
-        let spawner = EXECUTOR_LINK.start(interrupt::UART4);
+        LINK_IRQ.set_priority(LINK_PRIORITY);
+        let spawner = EXECUTOR_LINK.start(LINK_IRQ);
         spawner.spawn(unwrap!(link_task(port, task, shared)));
         spawner.spawn(unwrap!(backup_task(line, backup_node)));
 

@@ -13,7 +13,8 @@
 //! is left at OSPEEDR = low speed (edges for ~2 MHz, too slow for a 21-42 MHz SPI clock) with
 //! a pull resistor meant for an input. [`fix_slave_pins`] rewrites MISO to very-high speed,
 //! push-pull, no pull, and MOSI to no pull, through the PAC right after construction (fixed
-//! only on embassy's main branch; drop this when a release has it).
+//! only on embassy's main branch; drop this when a release has it). The G0's GPIO is the same
+//! (v2) and gets the same fix (its MISO and MOSI are on GPIOB).
 //!
 //! The F4's SPI slave also keeps driving MISO while NSS is high, so on a shared MISO line
 //! every node would fight the selected one: the port switches MISO to a high-impedance input
@@ -28,32 +29,62 @@ use embassy_stm32::exti::ExtiInput;
 use embassy_stm32::gpio::Output;
 use embassy_stm32::mode::Async;
 use embassy_stm32::pac::gpio::vals;
-use embassy_stm32::pac::GPIOA;
-use embassy_stm32::peripherals::{DMA2_CH0, DMA2_CH3, PA4, PA5, PA6, PA7, SPI1};
+use embassy_stm32::peripherals::SPI1;
 use embassy_stm32::spi::{self, Spi};
 use embassy_stm32::{bind_interrupts, dma, exti, interrupt, Peri};
 use links_core::spi::{Armed, PortError, SlavePort};
 
-use crate::pins::{MISO_PA, MOSI_PA};
+use crate::pins::{MISO_PIN, MOSI_PIN};
 
+/// The F4 and F2 boards: SPI1 on PA5 (SCK), PA6 (MISO), PA7 (MOSI), PA4 (NSS); DMA2 stream 3
+/// (TX) and stream 0 (RX), channel 3; the chip-select sense on EXTI0.
+#[cfg(not(feature = "board-g0b1"))]
+mod board {
+    pub use embassy_stm32::pac::GPIOA as DATA_GPIO;
+    pub use embassy_stm32::peripherals::{
+        DMA2_CH0 as RxDma, DMA2_CH3 as TxDma, PA4 as Nss, PA5 as Sck, PA6 as Miso, PA7 as Mosi,
+    };
+}
+#[cfg(not(feature = "board-g0b1"))]
 bind_interrupts!(pub struct Irqs {
-    DMA2_STREAM0 => dma::InterruptHandler<DMA2_CH0>;
-    DMA2_STREAM3 => dma::InterruptHandler<DMA2_CH3>;
+    DMA2_STREAM0 => dma::InterruptHandler<board::RxDma>;
+    DMA2_STREAM3 => dma::InterruptHandler<board::TxDma>;
     EXTI0 => exti::InterruptHandler<interrupt::typelevel::EXTI0>;
 });
+
+/// The G0B1 board: SPI1 on PB3 (SCK), PB4 (MISO), PB5 (MOSI), PA4 (NSS); DMA1 channel 2
+/// (TX) and channel 1 (RX) through the DMAMUX (each with an interrupt line of its own among
+/// the G0's three: the backup line's channels 4 and 5 share the third); the chip-select
+/// sense on EXTI0 (the G0's EXTI0_1 interrupt).
+#[cfg(feature = "board-g0b1")]
+mod board {
+    pub use embassy_stm32::pac::GPIOB as DATA_GPIO;
+    pub use embassy_stm32::peripherals::{
+        DMA1_CH1 as RxDma, DMA1_CH2 as TxDma, PA4 as Nss, PB3 as Sck, PB4 as Miso, PB5 as Mosi,
+    };
+}
+#[cfg(feature = "board-g0b1")]
+bind_interrupts!(pub struct Irqs {
+    DMA1_CHANNEL1 => dma::InterruptHandler<board::RxDma>;
+    DMA1_CHANNEL2_3 => dma::InterruptHandler<board::TxDma>;
+    EXTI0_1 => exti::InterruptHandler<interrupt::typelevel::EXTI0_1>;
+});
+
+use board::DATA_GPIO;
+pub use board::{Miso, Mosi, Nss, RxDma, Sck, TxDma};
 
 /// Correct the electrical set-up embassy-stm32 0.6.0's `new_slave` gives the data pins (see
 /// the module documentation), and release MISO until the node is selected.
 pub fn fix_slave_pins() {
-    GPIOA
+    DATA_GPIO
         .ospeedr()
-        .modify(|w| w.set_ospeedr(MISO_PA, vals::Ospeedr::VERY_HIGH_SPEED));
-    GPIOA
+        .modify(|w| w.set_ospeedr(MISO_PIN, vals::Ospeedr::VERY_HIGH_SPEED));
+    DATA_GPIO
         .otyper()
-        .modify(|w| w.set_ot(MISO_PA, vals::Ot::PUSH_PULL));
-    GPIOA.pupdr().modify(|w| {
-        w.set_pupdr(MISO_PA, vals::Pupdr::FLOATING);
-        w.set_pupdr(MOSI_PA, vals::Pupdr::FLOATING);
+        .modify(|w| w.set_ot(MISO_PIN, vals::Ot::PUSH_PULL));
+    DATA_GPIO.pupdr().modify(|w| {
+        w.set_pupdr(MISO_PIN, vals::Pupdr::FLOATING);
+        w.set_pupdr(MOSI_PIN, vals::Pupdr::FLOATING);
     });
     miso_drive(false);
 }
@@ -65,18 +96,18 @@ pub fn miso_drive(on: bool) {
     } else {
         vals::Moder::INPUT
     };
-    GPIOA.moder().modify(|w| w.set_moder(MISO_PA, mode));
+    DATA_GPIO.moder().modify(|w| w.set_moder(MISO_PIN, mode));
 }
 
 /// The node's link hardware.
 pub struct NcPort {
     pub spi: Peri<'static, SPI1>,
-    pub sck: Peri<'static, PA5>,
-    pub miso: Peri<'static, PA6>,
-    pub mosi: Peri<'static, PA7>,
-    pub nss: Peri<'static, PA4>,
-    pub tx_dma: Peri<'static, DMA2_CH3>,
-    pub rx_dma: Peri<'static, DMA2_CH0>,
+    pub sck: Peri<'static, Sck>,
+    pub miso: Peri<'static, Miso>,
+    pub mosi: Peri<'static, Mosi>,
+    pub nss: Peri<'static, Nss>,
+    pub tx_dma: Peri<'static, TxDma>,
+    pub rx_dma: Peri<'static, RxDma>,
     /// The RC's chip-select, sensed (same net as NSS).
     pub cs: ExtiInput<'static, Async>,
     pub ready: Output<'static>,

@@ -1,5 +1,6 @@
-//! LINKS-1 root computer (RC) firmware for the STM32F407VG (feature `board-f407`, default)
-//! or the STM32F207ZG (`board-f207`, NUCLEO-F207ZG).
+//! LINKS-1 root computer (RC) firmware for the STM32F407VG (feature `board-f407`, default),
+//! the STM32F207ZG (`board-f207`, NUCLEO-F207ZG) or the STM32G0B1RE (`board-g0b1`,
+//! NUCLEO-G0B1RE).
 //!
 //! The behaviour is `links_core::root::run_bus` over `links_core::spi::MasterLink` (the link
 //! protocol, tested on the host against an emulated bus); the PC side speaks
@@ -10,6 +11,10 @@
 
 #[cfg(target_os = "none")]
 pub mod port;
+
+// The relay role's pin table and port are the STM32F4DISCOVERY's (port E, DMA streams).
+#[cfg(all(feature = "relay", feature = "board-g0b1"))]
+compile_error!("the relay role (--features relay) is built for the F4 boards, not board-g0b1");
 
 /// The link's numbers, all the board profile's ([`links_core::board::BoardProfile::F407`]):
 /// the SPI clock, chip-select timing and nodes per bus the port and `main` use.
@@ -104,7 +109,7 @@ pub mod plan {
 /// The RC board's pin table (STM32F4DISCOVERY; see `docs/hardware.md`), written once: calls
 /// `$m!(args; table)` with every pin as an identifier. [`pins`] turns it into names for the
 /// host tests, the firmware's `main` into the peripherals it wires, so the two cannot drift.
-#[cfg(not(feature = "board-f207"))]
+#[cfg(not(any(feature = "board-f207", feature = "board-g0b1")))]
 #[macro_export]
 macro_rules! with_pins {
     ($m:ident $(, $arg:ident)*) => {
@@ -141,9 +146,30 @@ macro_rules! with_pins {
     };
 }
 
+/// The RC board's pin table on the NUCLEO-G0B1RE (UM2324; see `docs/hardware.md`): SPI1
+/// on the NC board's PB3/PB4/PB5 (D3/D5/D4, away from LD4 on PA5), USB on PA11/PA12 (morpho
+/// CN10-14/CN10-12, to a USB connector of its own: the board has only the ST-LINK's), the
+/// chip-selects on port C (morpho), the handshake lines on port B, each on its own EXTI
+/// line (0-2, 10-14), the MISO multiplexer's selects on D7/D8/D2 (PA8/PA9/PA10). No
+/// accelerometer shares SPI1 here.
+#[cfg(feature = "board-g0b1")]
+#[macro_export]
+macro_rules! with_pins {
+    ($m:ident $(, $arg:ident)*) => {
+        $m! {$($arg),*;
+            spi1: [PB3, PB4, PB5],
+            usb: [PA11, PA12],
+            cs: [PC0, PC1, PC2, PC3, PC6, PC7, PC8, PC9],
+            ready: [PB0 / EXTI0, PB1 / EXTI1, PB2 / EXTI2, PB10 / EXTI10,
+                    PB11 / EXTI11, PB12 / EXTI12, PB13 / EXTI13, PB14 / EXTI14],
+            miso_sel: [PA8, PA9, PA10]
+        }
+    };
+}
+
 /// The pin table's names (see [`with_pins!`]).
 macro_rules! pin_names {
-    (; spi1: [$($spi:ident),*], usb: [$($usb:ident),*], accel_cs: $acc:ident,
+    (; spi1: [$($spi:ident),*], usb: [$($usb:ident),*], $(accel_cs: $acc:ident,)?
        cs: [$($cs:ident),*], ready: [$($rdy:ident / $exti:ident),*],
        miso_sel: [$($sel:ident),*]) => {
         /// SPI1 (master): SCK, MISO, MOSI.
@@ -158,8 +184,19 @@ macro_rules! pin_names {
         pub const MISO_SEL: [&str; 3] = [$(stringify!($sel)),*];
         /// USB OTG FS (the Discovery's micro-USB CN5): D-, D+.
         pub const USB: [&str; 2] = [$(stringify!($usb)),*];
-        /// The Discovery's accelerometer shares SPI1: its chip-select is held high.
-        pub const ACCEL_CS: &str = stringify!($acc);
+        /// The Discovery's accelerometer shares SPI1: its chip-select is held high (the
+        /// F4 and F2 tables; none on the G0B1's).
+        pub const ACCEL_CS: Option<&str> = optional_pin!($($acc)?);
+    };
+}
+
+/// A pin the table may leave out, by name.
+macro_rules! optional_pin {
+    () => {
+        None
+    };
+    ($pin:ident) => {
+        Some(stringify!($pin))
     };
 }
 
@@ -174,12 +211,16 @@ pub mod pins {
     /// The serial backup line (RS-485, `links_core::backup`): USART2 TX, RX, and the
     /// transceiver's driver enable (also its /RE). Free of every pin above and of the
     /// Discovery's on-board parts.
-    #[cfg(not(feature = "board-f207"))]
+    #[cfg(not(any(feature = "board-f207", feature = "board-g0b1")))]
     pub const BACKUP: [&str; 3] = ["PA2", "PA3", "PA1"];
     /// The serial backup line: USART2 on PD5 (TX), PD6 (RX), driver enable PD4 (the
     /// Nucleo's PA1/PA2 are the Ethernet PHY's).
     #[cfg(feature = "board-f207")]
     pub const BACKUP: [&str; 3] = ["PD5", "PD6", "PD4"];
+    /// The serial backup line: USART1 on PC4 (TX, D1), PC5 (RX, D0), driver enable PA1
+    /// (A1): the NC board's (USART2's PA2/PA3 are the ST-LINK's virtual COM port).
+    #[cfg(feature = "board-g0b1")]
+    pub const BACKUP: [&str; 3] = ["PC4", "PC5", "PA1"];
 }
 
 /// The relay role's pin table (`--features relay`; `docs/hardware.md`, "Reaching 64 and
@@ -264,7 +305,6 @@ pub use links_core::serial::{readback, render, session, throttle};
 mod tests {
     use links_core::board::BoardProfile;
 
-    /// Every link number of this firmware is its board profile's (the F207's with
     /// The root of a relay tree (`--features relay-root`, run by `scripts/test-all`) reaches
     /// the nodes behind its relays and pays for `RelayedBus`'s buffers out of the scene's
     /// SRAM; the plain root drives its own bus's nodes and keeps all of it.
@@ -277,10 +317,15 @@ mod tests {
         assert_eq!(relayed, 4 * links_core::wire::MAX_MESSAGE);
         if cfg!(feature = "relay-root") {
             assert_eq!((RENDER_NODES, RELAYED), (NODES * per_bus, relayed));
-            if !cfg!(feature = "board-f207") {
+            if cfg!(feature = "board-f407") {
                 // 128 KB - 3 DMA banks - 6,304 B, in whole KB; a film's second bank is what
                 // the first (a node's 61,440-byte bank) leaves.
                 assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 119_808, 61_440));
+            }
+            if cfg!(feature = "board-g0b1") {
+                // 80 KB - 3 DMA banks - 6,304 B = 70,852 -> 69 KB; the first film bank is a
+                // node's 40 KB bank, as without the relays.
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 70_656, 40_960));
             }
         } else {
             assert_eq!((RENDER_NODES, RELAYED), (NODES, 0));
@@ -289,11 +334,14 @@ mod tests {
         // compile-time assertions.
     }
 
-    /// `--no-default-features --features board-f207`).
+    /// Every link number of this firmware is its board profile's (the F207's with
+    /// `--no-default-features --features board-f207`, the G0B1's with `board-g0b1`).
     #[test]
     fn the_firmware_constants_are_the_board_profile() {
         let p = if cfg!(feature = "board-f207") {
             BoardProfile::F207
+        } else if cfg!(feature = "board-g0b1") {
+            BoardProfile::G0B1
         } else {
             BoardProfile::F407
         };
@@ -301,6 +349,8 @@ mod tests {
         assert_eq!(super::link::SPI_HZ, p.link.bit_rate_hz);
         let (hz, setup, hold) = if cfg!(feature = "board-f207") {
             (15_000_000, 12, 21)
+        } else if cfg!(feature = "board-g0b1") {
+            (16_000_000, 21, 40)
         } else {
             (21_000_000, 8, 15)
         };
@@ -330,6 +380,21 @@ mod tests {
         assert_eq!(links_core::spi::TRAILER, p.link.trailer_bytes as usize);
         assert_eq!(links_core::spi::RC_OVERLAPS, p.link.rc_overlaps);
         assert_eq!(links_board::CORE_CLOCK_HZ, p.core_clock_hz);
+    }
+
+    /// The G0B1's RC plan: the 80 KB SRAM region less three DMA banks, in whole KB, for the
+    /// scene; a film's first bank is a node's 40 KB bank (more than half), the second what
+    /// is left (`cargo test -p rc-fw --no-default-features --features board-g0b1`).
+    #[cfg(all(feature = "board-g0b1", not(feature = "relay-root")))]
+    #[test]
+    fn the_g0b1_plan_and_pins() {
+        use super::plan::{FILM_BANK, LINK_BANKS, SCENE, SRAM};
+        // (81,920 - 3 x 1,588) / 1,024 = 75.3 -> 75 KB.
+        assert_eq!((SRAM, LINK_BANKS, SCENE), (81_920, 4_764, 76_800));
+        assert_eq!((FILM_BANK, SCENE - FILM_BANK), (40_960, 35_840));
+        assert_eq!(super::pins::ACCEL_CS, None);
+        assert_eq!(super::pins::USB, ["PA11", "PA12"]);
+        assert_eq!(super::pins::SPI1, ["PB3", "PB4", "PB5"]);
     }
 
     /// The relay's table: no pin twice, every EXTI line once (the parent's chip-select sense
@@ -372,7 +437,7 @@ mod tests {
         all.extend(super::pins::SPI1);
         all.extend(super::pins::USB);
         all.extend(super::pins::MISO_SEL);
-        all.push(super::pins::ACCEL_CS);
+        all.extend(super::pins::ACCEL_CS);
         all.extend(super::pins::BACKUP);
         let n = all.len();
         all.sort();

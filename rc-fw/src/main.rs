@@ -9,7 +9,9 @@
 fn main() {
     eprintln!(
         "rc-fw is firmware for the STM32F407VG: \
-         cargo run --release --target thumbv7em-none-eabihf -p rc-fw"
+         cargo run --release --target thumbv7em-none-eabihf -p rc-fw \
+         (NUCLEO-F207ZG: --target thumbv7m-none-eabi --no-default-features --features board-f207; \
+         NUCLEO-G0B1RE: --target thumbv6m-none-eabi --no-default-features --features board-g0b1)"
     );
     std::process::exit(2);
 }
@@ -27,6 +29,9 @@ mod fw {
     use embassy_stm32::exti::{self, ExtiInput};
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
     use embassy_stm32::interrupt::{InterruptExt, Priority};
+    #[cfg(feature = "board-g0b1")]
+    use embassy_stm32::peripherals::{DMA1_CH1, DMA1_CH2, DMA1_CH4, DMA1_CH5, USART1, USB};
+    #[cfg(not(feature = "board-g0b1"))]
     use embassy_stm32::peripherals::{DMA1_CH5, DMA1_CH6, DMA2_CH0, DMA2_CH3, USART2, USB_OTG_FS};
     use embassy_stm32::spi::{self, Spi};
     use embassy_stm32::time::Hertz;
@@ -57,7 +62,11 @@ mod fw {
     use static_cell::{ConstStaticCell, StaticCell};
     use {defmt_rtt as _, panic_probe as _};
 
+    #[cfg(not(feature = "board-g0b1"))]
     type UsbDriver = usb::Driver<'static, USB_OTG_FS>;
+    /// The G0's USB device peripheral (not the F4's OTG core).
+    #[cfg(feature = "board-g0b1")]
+    type UsbDriver = usb::Driver<'static, USB>;
     /// The root logic's bus: the NCs on SPI1, or (feature `relay-root`) the nodes behind
     /// the relay RCs on SPI1.
     #[cfg(not(feature = "relay-root"))]
@@ -65,6 +74,7 @@ mod fw {
     #[cfg(feature = "relay-root")]
     type Link = RelayedBus<'static, MasterFront<'static, 'static>, Clock>;
 
+    #[cfg(not(feature = "board-g0b1"))]
     bind_interrupts!(struct Irqs {
         OTG_FS => usb::InterruptHandler<USB_OTG_FS>;
         DMA2_STREAM0 => dma::InterruptHandler<DMA2_CH0>;
@@ -80,6 +90,21 @@ mod fw {
         DMA1_STREAM5 => dma::InterruptHandler<DMA1_CH5>;
         DMA1_STREAM6 => dma::InterruptHandler<DMA1_CH6>;
     });
+    // The G0B1: USB (its interrupt shared with the unused UCPD), SPI1 on DMA1 channels 2
+    // (TX) and 1 (RX), the handshake lines' EXTI 0-2 and 10-14 (three interrupt lines on the
+    // G0), USART1 on DMA1 channels 4 (TX) and 5 (RX).
+    #[cfg(feature = "board-g0b1")]
+    bind_interrupts!(struct Irqs {
+        USB_UCPD1_2 => usb::InterruptHandler<USB>;
+        DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>;
+        DMA1_CHANNEL2_3 => dma::InterruptHandler<DMA1_CH2>;
+        EXTI0_1 => exti::InterruptHandler<interrupt::typelevel::EXTI0_1>;
+        EXTI2_3 => exti::InterruptHandler<interrupt::typelevel::EXTI2_3>;
+        EXTI4_15 => exti::InterruptHandler<interrupt::typelevel::EXTI4_15>;
+        USART1 => uart::InterruptHandler<USART1>;
+        DMA1_CH4_7_DMA2_CH1_5_DMAMUX1_OVR =>
+            dma::InterruptHandler<DMA1_CH4>, dma::InterruptHandler<DMA1_CH5>;
+    });
 
     /// DMA banks and the uploaded scene, in SRAM (`.sram`, see memory.x).
     struct Sram {
@@ -90,6 +115,8 @@ mod fw {
     }
 
     static USB_QUEUE: UsbPipe = Pipe::new();
+    /// The OTG core's receive buffer (the G0's USB peripheral has its own packet memory).
+    #[cfg(not(feature = "board-g0b1"))]
     static EP_OUT: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static CONFIG_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
     static BOS_DESC: ConstStaticCell<[u8; 256]> = ConstStaticCell::new([0; 256]);
@@ -102,16 +129,34 @@ mod fw {
     /// The bus link's two halves share this: the front (`serial_task`, thread mode) hands
     /// transfers over, the bus task clocks them.
     static BUS: MasterShared<'static> = MasterShared::new();
-    /// The bus task's executor: UART4's interrupt (unused on this board) at a priority
-    /// above thread mode, so each DMA completion resumes the clocking at once while the
-    /// root logic composes the next transfer (`links_core::spi::RC_OVERLAPS`).
+    /// The bus task's executor: UART4's interrupt (unused on this board; on the G0B1 the
+    /// line USART3-6 and LPUART1 share, none of them used) at a priority above thread mode,
+    /// so each DMA completion resumes the clocking at once while the root logic composes
+    /// the next transfer (`links_core::spi::RC_OVERLAPS`).
     static EXECUTOR_BUS: InterruptExecutor = InterruptExecutor::new();
 
+    #[cfg(not(feature = "board-g0b1"))]
     #[interrupt]
     unsafe fn UART4() {
         // SAFETY: the interrupt executor's documented use: called from its own interrupt.
         unsafe { EXECUTOR_BUS.on_interrupt() }
     }
+    #[cfg(feature = "board-g0b1")]
+    #[interrupt]
+    unsafe fn USART3_4_5_6_LPUART1() {
+        // SAFETY: the interrupt executor's documented use: called from its own interrupt.
+        unsafe { EXECUTOR_BUS.on_interrupt() }
+    }
+    #[cfg(not(feature = "board-g0b1"))]
+    use interrupt::UART4 as BUS_IRQ;
+    #[cfg(feature = "board-g0b1")]
+    use interrupt::USART3_4_5_6_LPUART1 as BUS_IRQ;
+    /// The bus executor's priority: above thread mode, below embassy's drivers (priority
+    /// 0): 6 of the F4's and F2's 16 levels, 2 of the G0's 4.
+    #[cfg(not(feature = "board-g0b1"))]
+    const BUS_PRIORITY: Priority = Priority::P6;
+    #[cfg(feature = "board-g0b1")]
+    const BUS_PRIORITY: Priority = Priority::P2;
 
     /// Clock every transfer the root logic hands over (`links_core::spi::MasterTask`).
     #[embassy_executor::task]
@@ -347,19 +392,30 @@ mod fw {
     }
 
     /// Wire the board from the pin table (`rc_fw::with_pins!`, named in `rc_fw::pins` for
-    /// the host tests): the USB driver and the bus port. The accelerometer's chip-select is
-    /// held high for good.
+    /// the host tests): the USB driver and the bus port. The accelerometer's chip-select
+    /// (where the table has one) is held high for good.
     macro_rules! wire {
-        ($p:ident, $usb_cfg:ident, $spi_cfg:ident;
+        ($p:ident, $spi_cfg:ident;
          spi1: [$sck:ident, $miso:ident, $mosi:ident], usb: [$dm:ident, $dp:ident],
-         accel_cs: $acc:ident, cs: [$($cs:ident),*], ready: [$($rdy:ident / $exti:ident),*],
-         miso_sel: [$($sel:ident),*]) => {{
-            let driver =
-                usb::Driver::new_fs($p.USB_OTG_FS, Irqs, $p.$dp, $p.$dm, EP_OUT.take(), $usb_cfg);
-            let accel_cs = Output::new($p.$acc, Level::High, Speed::Low);
-            core::mem::forget(accel_cs);
+         $(accel_cs: $acc:ident,)? cs: [$($cs:ident),*],
+         ready: [$($rdy:ident / $exti:ident),*], miso_sel: [$($sel:ident),*]) => {{
+            // The OTG core without VBUS sensing (the G0's USB device peripheral has none to
+            // turn off).
+            #[cfg(not(feature = "board-g0b1"))]
+            let driver = {
+                let mut usb_cfg = usb::Config::default();
+                usb_cfg.vbus_detection = false;
+                usb::Driver::new_fs($p.USB_OTG_FS, Irqs, $p.$dp, $p.$dm, EP_OUT.take(), usb_cfg)
+            };
+            #[cfg(feature = "board-g0b1")]
+            let driver = usb::Driver::new($p.USB, Irqs, $p.$dp, $p.$dm);
+            $(core::mem::forget(Output::new($p.$acc, Level::High, Speed::Low));)?
+            #[cfg(not(feature = "board-g0b1"))]
+            let (tx_dma, rx_dma) = ($p.DMA2_CH3, $p.DMA2_CH0);
+            #[cfg(feature = "board-g0b1")]
+            let (tx_dma, rx_dma) = ($p.DMA1_CH2, $p.DMA1_CH1);
             let spi = Spi::new(
-                $p.SPI1, $p.$sck, $p.$mosi, $p.$miso, $p.DMA2_CH3, $p.DMA2_CH0, Irqs, $spi_cfg,
+                $p.SPI1, $p.$sck, $p.$mosi, $p.$miso, tx_dma, rx_dma, Irqs, $spi_cfg,
             );
             let cs = [$(Output::new($p.$cs, Level::High, Speed::VeryHigh)),*];
             let ready = [$(ExtiInput::new($p.$rdy, $p.$exti, Pull::Down, Irqs)),*];
@@ -378,12 +434,10 @@ mod fw {
 
         // USB CDC (the Discovery's micro-USB, CN5) and the star: SPI1 master, one
         // chip-select and one handshake line per node, all wired from the pin table.
-        let mut usb_cfg = usb::Config::default();
-        usb_cfg.vbus_detection = false;
         let mut spi_cfg = spi::Config::default();
         spi_cfg.frequency = Hertz(rc_fw::link::SPI_HZ);
         spi_cfg.mode = spi::MODE_0;
-        let (driver, port) = rc_fw::with_pins!(wire, p, usb_cfg, spi_cfg);
+        let (driver, port) = rc_fw::with_pins!(wire, p, spi_cfg);
         // pid.codes test VID/PID (replace before distributing boards).
         let mut config = embassy_usb::Config::new(0x1209, 0x0001);
         config.manufacturer = Some("LINKS-1");
@@ -414,17 +468,23 @@ mod fw {
         ))
         .with_timeout(Clock, rc_fw::link::RELAY_TIMEOUT_US);
 
-        // The serial backup line: USART2 and its driver enable (rc_fw::pins::BACKUP).
-        #[cfg(not(feature = "board-f207"))]
+        // The serial backup line: its USART and driver enable (rc_fw::pins::BACKUP).
+        #[cfg(feature = "board-f407")]
         let (line_tx, line_rx, line_de) = (p.PA2, p.PA3, p.PA1);
         #[cfg(feature = "board-f207")]
         let (line_tx, line_rx, line_de) = (p.PD5, p.PD6, p.PD4);
+        #[cfg(feature = "board-g0b1")]
+        let (line_tx, line_rx, line_de) = (p.PC4, p.PC5, p.PA1);
+        #[cfg(not(feature = "board-g0b1"))]
+        let (line_uart, line_tx_dma, line_rx_dma) = (p.USART2, p.DMA1_CH6, p.DMA1_CH5);
+        #[cfg(feature = "board-g0b1")]
+        let (line_uart, line_tx_dma, line_rx_dma) = (p.USART1, p.DMA1_CH4, p.DMA1_CH5);
         let uart = unwrap!(Uart::new(
-            p.USART2,
+            line_uart,
             line_rx,
             line_tx,
-            p.DMA1_CH6,
-            p.DMA1_CH5,
+            line_tx_dma,
+            line_rx_dma,
             Irqs,
             links_board::rs485::config(),
         ));
@@ -433,8 +493,8 @@ mod fw {
             de: Output::new(line_de, Level::Low, Speed::VeryHigh),
         };
 
-        interrupt::UART4.set_priority(Priority::P6);
-        let bus_spawner = EXECUTOR_BUS.start(interrupt::UART4);
+        BUS_IRQ.set_priority(BUS_PRIORITY);
+        let bus_spawner = EXECUTOR_BUS.start(BUS_IRQ);
         bus_spawner.spawn(unwrap!(bus_task(port)));
         let line: &'static Line = LINE.init(Mutex::new(line));
         spawner.spawn(unwrap!(backup_task(line)));

@@ -89,8 +89,9 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
 
 /// Fixed-point nodes: the cluster's frame of the DM's Q16.16 image is bit-identical to the
 /// single-node fixed-point render for 1, 3, 8 and 16 nodes under the dynamic and the static
-/// policy, on the F207 (its nodes carry the Q16.16 kernel only) and on the F407 (both
-/// kernels; the image picks). Nodes that lack the image's kernel are refused before the run.
+/// policy, on the F207 and the G0B1 (their nodes carry the Q16.16 kernel only) and on the
+/// F407 (both kernels; the image picks). Nodes that lack the image's kernel are refused
+/// before the run.
 #[test]
 fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render() {
     use links_core::node::Kernels;
@@ -106,7 +107,7 @@ fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render(
     );
     let policies = [Policy::DECREASING, Policy::Static { shape: Split::Rect }];
     let mut times = Vec::new();
-    for board in [BoardProfile::F207, BoardProfile::F407] {
+    for board in [BoardProfile::F207, BoardProfile::F407, BoardProfile::G0B1] {
         for (nodes, policy) in [1u16, 3, 8, 16]
             .into_iter()
             .flat_map(|n| policies.map(|p| (n, p)))
@@ -127,8 +128,10 @@ fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render(
             }
         }
     }
-    // One F207 node (Cortex-M3, 120 MHz) takes longer than one F407 node (M4F, 168 MHz).
+    // One F207 node (Cortex-M3, 120 MHz) takes longer than one F407 node (M4F, 168 MHz),
+    // one G0B1 node (Cortex-M0+, 64 MHz, about twice the M3's instructions) longer still.
     assert!(times[0] > times[1], "{times:?}");
+    assert!(times[2] > 2.0 * times[0], "{times:?}");
     let f32_nodes = SimConfig {
         kernels: Kernels::F32,
         ..SimConfig::for_board(BoardProfile::F407)
@@ -1422,8 +1425,8 @@ fn the_timeline_accounts_for_every_node_transfer_and_pixel() {
 }
 
 /// `links render --nodes N --precision fixed` writes the host's fixed-point PNG byte for
-/// byte, on the F407 (asked) and the F207 (its default); f32 on f32-less F207 nodes and an
-/// f64 cluster are refused with one line each.
+/// byte, on the F407 (asked), the F207 and the G0B1 (their default); f32 on f32-less F207
+/// nodes and an f64 cluster are refused with one line each.
 #[test]
 fn the_cli_renders_fixed_point_on_the_cluster_as_the_host_does() {
     let dir = std::env::temp_dir().join(format!("links-fixed-nodes-{}", std::process::id()));
@@ -1443,9 +1446,11 @@ fn the_cli_renders_fixed_point_on_the_cluster_as_the_host_does() {
     render(&["--precision", "f32"], &at("host-f32.png")).unwrap();
     render(&["--nodes", "3", "--precision", "fixed"], &at("f407.png")).unwrap();
     render(&["--nodes", "8", "--board", "f207"], &at("f207.png")).unwrap();
+    render(&["--nodes", "4", "--board", "g0b1"], &at("g0b1.png")).unwrap();
     let host = read(&at("host.png"));
     assert!(read(&at("f407.png")) == host, "f407 nodes in Q16.16");
     assert!(read(&at("f207.png")) == host, "f207 nodes");
+    assert!(read(&at("g0b1.png")) == host, "g0b1 nodes");
     assert!(read(&at("host-f32.png")) != host);
     let e = render(
         &["--nodes", "2", "--board", "f207", "--precision", "f32"],

@@ -78,6 +78,43 @@ fn two_banks_of_every_bundled_scene_fit_the_nc_plan() {
     );
 }
 
+/// The G0B1's nodes are sent Q16.16 images (its profile's storage): every bundled still, in
+/// Q16.16 at its own resolution (as long as its f32 image), against its 40 + 32 KB banks.
+/// photo2 takes the even bank alone; every other scene double-banks.
+#[test]
+fn every_bundled_scene_in_q16_16_fits_the_g0b1_plan() {
+    use links_core::board::BoardProfile;
+    let board = BoardProfile::G0B1.node;
+    assert_eq!(BoardProfile::G0B1.storage, links_core::num::Storage::Q16_16);
+    let got: Vec<(String, usize, Fit)> = bundled()
+        .into_iter()
+        .map(|(name, f32_len)| {
+            let desc = load_scene(&scenes_dir().join(&name)).unwrap_or_else(|e| panic!("{e}"));
+            let img = compile(&desc, &CompileOptions::default()).expect("compiles");
+            let fixed = links_core::fixed_image::to_fixed(&img.bytes)
+                .unwrap_or_else(|e| panic!("{name} in Q16.16: {e}"))
+                .bytes;
+            // The same records, each number in 4 bytes either way.
+            assert_eq!(fixed.len(), f32_len, "{name}");
+            (name, fixed.len(), board.fit(fixed.len()))
+        })
+        .collect();
+    let fits: Vec<(&str, Fit)> = got.iter().map(|(n, _, f)| (n.as_str(), *f)).collect();
+    assert_eq!(
+        fits,
+        [
+            ("ellipsoids.ron", Fit::TwoBanks),
+            ("glass.ron", Fit::TwoBanks),
+            ("metaballs.ron", Fit::TwoBanks),
+            ("photo1.ron", Fit::TwoBanks),
+            ("photo2.ron", Fit::OneBank),
+            ("reflections.ron", Fit::TwoBanks),
+        ],
+        "{got:?} against the G0B1's banks {:?}",
+        board.scene_banks
+    );
+}
+
 /// The NC's plan is the board's data; the RC holds any scene a node's bank holds.
 #[test]
 fn the_nc_plan_is_the_boards_and_the_rc_holds_what_a_node_bank_holds() {

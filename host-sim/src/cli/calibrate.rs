@@ -17,7 +17,7 @@ pub fn run(csv: &Path, target: &str, backend: &str) -> Result<(), CliError> {
     samples.retain(|s| s.backend == backend);
     let committed_model = cost::committed_model(target, backend).ok_or_else(|| {
         CliError::Usage(format!(
-            "no committed model for {target} {backend} (targets: thumbv7em-none-eabihf, thumbv7m-none-eabi; backends: f32, q16.16)"
+            "no committed model for {target} {backend} (targets: thumbv7em-none-eabihf, thumbv7m-none-eabi, thumbv6m-none-eabi; backends: f32, q16.16)"
         ))
     })?;
     let fitted = cost::fit(

@@ -114,9 +114,10 @@ mod tests {
     fn unknown_boards_are_refused_with_the_known_ones() {
         assert_eq!(parse_node("F407"), Ok(NodeBoard::F407));
         assert_eq!(parse_node("f207"), Ok(NodeBoard::F207));
+        assert_eq!(parse_node("g0b1"), Ok(NodeBoard::G0B1));
         assert_eq!(
             parse_node("f429").unwrap_err().to_string(),
-            "unknown node board 'f429'; known: f407, f207"
+            "unknown node board 'f429'; known: f407, f207, g0b1"
         );
     }
 

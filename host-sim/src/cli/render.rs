@@ -60,17 +60,18 @@ pub struct ClusterArgs {
     /// The board profile the cluster is built of (cluster only): f407 (the firmware's:
     /// 21 MHz SPI, 8-byte header + 1-byte trailer, 8 + 15 us chip-select set-up and hold,
     /// an RC whose bus task clocks the wire while it composes), f207 (the FPU-less
-    /// NUCLEO-F207ZG: Cortex-M3 at 120 MHz, 15 MHz SPI, Q16.16 nodes) or ideal (42 MHz,
-    /// 4-byte header, 0.5 us per transfer, an RC that overlaps)
+    /// NUCLEO-F207ZG: Cortex-M3 at 120 MHz, 15 MHz SPI, Q16.16 nodes), g0b1 (NUCLEO-G0B1RE:
+    /// Cortex-M0+ at 64 MHz, 16 MHz SPI, Q16.16 nodes) or ideal (42 MHz, 4-byte header,
+    /// 0.5 us per transfer, an RC that overlaps)
     #[arg(long, default_value = "f407", value_parser = cli_cluster::parse_board_arg)]
     pub board: &'static BoardProfile,
-    /// The node computers' board (cluster only; known: f407, f207; default: the --board's):
-    /// a SceneImage larger than its scene bank is refused before the run
+    /// The node computers' board (cluster only; known: f407, f207, g0b1; default: the
+    /// --board's): a SceneImage larger than its scene bank is refused before the run
     #[arg(long, value_parser = node::parse_node)]
     pub node: Option<NodeBoard>,
     /// The kernels the nodes carry (cluster only): f32, fixed (Q16.16) or both; default: the
-    /// --board's firmware's (f407: both, f207: fixed). A scene in a storage no kernel reads
-    /// is refused before the run
+    /// --board's firmware's (f407: both, f207 and g0b1: fixed). A scene in a storage no kernel
+    /// reads is refused before the run
     #[arg(long, value_parser = parse_kernels)]
     pub node_kernels: Option<Kernels>,
     /// How the nodes are wired (cluster only): buildable (what the board can be built as:
@@ -140,7 +141,8 @@ impl ClusterArgs {
     }
 
     /// The number type the cluster renders in: `--precision` (f32 or fixed), else the
-    /// `--board`'s (f32 on the f407, fixed on the f207). An f64 render has no node.
+    /// `--board`'s (f32 on the f407, fixed on the f207 and the g0b1). An f64 render has no
+    /// node.
     pub fn precision(&self, asked: Option<PrecisionArg>) -> Result<Precision, CliError> {
         match asked {
             Some(PrecisionArg::F64) => Err(CliError::Usage(

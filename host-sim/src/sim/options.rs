@@ -42,7 +42,8 @@ impl FromStr for PolicyArg {
 /// them small).
 static BOARDS: [BoardProfile; BoardProfile::ALL.len()] = BoardProfile::ALL;
 
-/// `--board NAME`: a known board profile (`f407`, `f207`, `ideal`; ASCII case ignored).
+/// `--board NAME`: a known board profile (`f407`, `f207`, `g0b1`, `ideal`; ASCII case
+/// ignored).
 pub fn parse_board(s: &str) -> Result<BoardProfile, OptionError> {
     parse_board_arg(s).copied()
 }
@@ -530,9 +531,10 @@ mod tests {
     fn boards_parse_and_set_the_link() {
         assert_eq!(parse_board("F407"), Ok(BoardProfile::F407));
         assert_eq!(parse_board("f207"), Ok(BoardProfile::F207));
+        assert_eq!(parse_board("G0B1"), Ok(BoardProfile::G0B1));
         let e = parse_board("f429").unwrap_err().to_string();
         assert!(
-            e.contains("unknown board 'f429'") && e.contains("f407, f207, ideal"),
+            e.contains("unknown board 'f429'") && e.contains("f407, f207, g0b1, ideal"),
             "{e}"
         );
         let star = TopologyArg::Star;

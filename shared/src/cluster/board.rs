@@ -20,8 +20,8 @@ pub struct NodeBoard {
     /// DMA-reachable SRAM the plan gives the banks (memory.x's `SRAM` region, `.sram`).
     pub sram: usize,
     /// The RAM of `.data`, `.bss` and the stack (memory.x's `RAM` region): the CCM on the
-    /// F407, which only the CPU reaches; on the F207, which has no CCM, the low part of its
-    /// SRAM.
+    /// F407, which only the CPU reaches; on the F207 and the G0B1, which have no CCM, the low
+    /// part of their SRAM.
     pub ccm: usize,
     /// The link's DMA banks in SRAM: two TX, two RX, one scratch.
     pub link_banks: usize,
@@ -77,6 +77,15 @@ const F207_RAM: usize = 64 * 1024;
 const F207_SRAM: usize = 128 * 1024 - F207_RAM;
 const F207_EVEN_BANK: usize = 40 * 1024;
 
+/// The STM32G0B1RE's 144 KB of SRAM (one block at 0x2000_0000, all DMA-reachable, no CCM),
+/// split as on the F207: the low 64 KB for `.data`, `.bss` and the stack (the firmwares'
+/// statics take ~46 KB and the stack needs >= 16 KB, on the M0+ as on the M3), the high
+/// 80 KB for the link's DMA banks and the scene banks.
+const G0B1_RAM: usize = 64 * 1024;
+const G0B1_SRAM: usize = 144 * 1024 - G0B1_RAM;
+/// The G0B1's even frames' bank: the F207's (photo2 at 512x480 fits it).
+const G0B1_EVEN_BANK: usize = F207_EVEN_BANK;
+
 impl NodeBoard {
     /// The STM32F407VG node (STM32F4DISCOVERY), `nc-fw`'s board: two equal scene banks in
     /// SRAM, each half of what the link's DMA banks leave (in whole KB), so the next frame
@@ -109,8 +118,26 @@ impl NodeBoard {
         odd_bank_in: Memory::Sram,
     };
 
+    /// The STM32G0B1RE node (NUCLEO-G0B1RE, Cortex-M0+), `nc-fw --features board-g0b1`: the
+    /// F207's plan with 16 KB more SRAM, all given to the odd frames' bank. An even frames'
+    /// bank of 40 KB (photo2, 38,948 bytes at 512x480, renders as single frames) and an odd
+    /// frames' bank of what the link's DMA banks leave beside it, in whole KB (32 KB: photo1,
+    /// 18,292 bytes, and every other bundled still double-bank). An equal split (2 x 36 KB)
+    /// would refuse photo2; see docs/hardware.md.
+    pub const G0B1: NodeBoard = NodeBoard {
+        name: "g0b1",
+        sram: G0B1_SRAM,
+        ccm: G0B1_RAM,
+        link_banks: F407_LINK_BANKS,
+        scene_banks: [
+            G0B1_EVEN_BANK,
+            (G0B1_SRAM - F407_LINK_BANKS - G0B1_EVEN_BANK) / 1024 * 1024,
+        ],
+        odd_bank_in: Memory::Sram,
+    };
+
     /// Every board the host knows, by name.
-    pub const ALL: [NodeBoard; 2] = [Self::F407, Self::F207];
+    pub const ALL: [NodeBoard; 3] = [Self::F407, Self::F207, Self::G0B1];
 
     /// The board called `name` (ASCII case ignored), if known.
     pub fn named(name: &str) -> Option<NodeBoard> {
@@ -191,6 +218,26 @@ mod tests {
         );
         assert_eq!((b.fit(38_948), b.fit(40_961)), (Fit::OneBank, Fit::TooBig));
         assert_eq!(NodeBoard::named("F207"), Some(b));
+    }
+
+    /// Worked by hand: 81,920 - 5 x 1,588 - 40,960 = 33,020 -> 32 KB for the odd bank.
+    #[test]
+    fn the_g0b1_plan_leaves_64_kb_for_statics_and_stack_and_banks_the_rest() {
+        let b = NodeBoard::G0B1;
+        assert_eq!(b.sram + b.ccm, 144 * 1024);
+        assert_eq!(b.scene_banks, [40_960, 32_768]);
+        assert!(b.link_banks + b.scene_banks[0] + b.scene_banks[1] <= b.sram);
+        assert_eq!(
+            b.sram - b.link_banks - b.scene_banks[0] - b.scene_banks[1],
+            252
+        );
+        // photo1 and photo2 at 512x480 (docs/hardware.md).
+        assert_eq!(
+            (b.fit(18_292), b.fit(32_768), b.fit(32_769)),
+            (Fit::TwoBanks, Fit::TwoBanks, Fit::OneBank)
+        );
+        assert_eq!((b.fit(38_948), b.fit(40_961)), (Fit::OneBank, Fit::TooBig));
+        assert_eq!(NodeBoard::named("G0B1"), Some(b));
     }
 
     #[test]

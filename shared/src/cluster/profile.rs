@@ -5,6 +5,8 @@
 //!
 //! [`BoardProfile::F207`] is the FPU-less board (NUCLEO-F207ZG, Cortex-M3 at 120 MHz) whose
 //! nodes run the Q16.16 kernel: the host sends its nodes Q16.16 images ([`BoardProfile::storage`]).
+//! [`BoardProfile::G0B1`] is the smallest (NUCLEO-G0B1RE, Cortex-M0+ at 64 MHz, 144 KB of
+//! SRAM), Q16.16 only.
 //!
 //! [`BoardProfile::F407`] is what the firmware builds by default: `links_core::spi` takes its header
 //! and trailer sizes (and with them the DMA bank size) from it, `rc-fw` its SPI clock,
@@ -30,6 +32,9 @@ pub enum Core {
     CortexM4F,
     /// Cortex-M3 without an FPU (STM32F207), rendering in Q16.16 (or soft-float `f32`).
     CortexM3,
+    /// Cortex-M0+ (STM32G0B1: ARMv6-M, no FPU, no 32x32->64 multiply, no divide
+    /// instruction), rendering in Q16.16.
+    CortexM0Plus,
 }
 
 impl Core {
@@ -38,6 +43,7 @@ impl Core {
         match self {
             Core::CortexM4F => "Cortex-M4F",
             Core::CortexM3 => "Cortex-M3",
+            Core::CortexM0Plus => "Cortex-M0+",
         }
     }
 }
@@ -92,6 +98,20 @@ impl LinkProfile {
         bit_rate_hz: 15_000_000,
         cs_setup_ns: 12_000,
         cs_hold_ns: 21_000,
+        ..Self::F407
+    };
+
+    /// The G0B1 boards' link: the F407's protocol at the G0's speeds. SPI1 at 16 MHz (APB
+    /// 64 MHz / 4, the divider that holds on the F407 and the F207 for a full-duplex slave
+    /// behind the MISO multiplexer; half the G0's 32 MHz SPI maximum); chip-select set-up and
+    /// hold are the F407's 8 + 15 µs of software scaled by the clocks, 168 / 64 = 2.625:
+    /// 21 + 39.4 µs, rounded up to the RC timer's whole µs: 21 + 40 µs (an estimate until
+    /// measured on a board; the M0+'s Thumb-1 code takes more instructions than the M4's for
+    /// the same work, so if anything it is low).
+    pub const G0B1: LinkProfile = LinkProfile {
+        bit_rate_hz: 16_000_000,
+        cs_setup_ns: 21_000,
+        cs_hold_ns: 40_000,
         ..Self::F407
     };
 
@@ -154,6 +174,14 @@ impl LineProfile {
         ..Self::F407
     };
 
+    /// The G0B1 boards' line: USART1 at 1 Mbit/s (its kernel clock, PCLK 64 MHz, oversampled
+    /// by 16: a divider of exactly 64), the F407's 20 µs of software turnaround scaled by the
+    /// clocks (x 2.625).
+    pub const G0B1: LineProfile = LineProfile {
+        turnaround_ns: 52_500,
+        ..Self::F407
+    };
+
     /// Time on the line of a frame of `bytes` bytes, turnaround included (ns).
     pub const fn frame_ns(&self, bytes: usize) -> u64 {
         self.turnaround_ns as u64
@@ -188,6 +216,8 @@ pub struct BoardProfile {
 const F407_CORE_CLOCK_HZ: u32 = 168_000_000;
 /// The STM32F207's core clock: the ST-LINK's 8 MHz MCO (HSE bypass), PLL to 120 MHz.
 const F207_CORE_CLOCK_HZ: u32 = 120_000_000;
+/// The STM32G0B1's core clock: the 16 MHz HSI16, PLL to 64 MHz (the G0's maximum).
+const G0B1_CORE_CLOCK_HZ: u32 = 64_000_000;
 
 impl BoardProfile {
     /// What the firmware builds today: STM32F4DISCOVERY boards (STM32F407VG at 168 MHz)
@@ -217,6 +247,21 @@ impl BoardProfile {
         storage: Storage::Q16_16,
     };
 
+    /// NUCLEO-G0B1RE boards (STM32G0B1RE, Cortex-M0+ at 64 MHz, no FPU, 144 KB of SRAM) on
+    /// the [`LinkProfile::G0B1`] link, the node's memory plan [`NodeBoard::G0B1`]; the nodes
+    /// carry the Q16.16 kernel only (the kernel the M0+ runs best: soft-float `f32` takes 2.4
+    /// times its instructions there, docs/cortex-m-bench.md).
+    pub const G0B1: BoardProfile = BoardProfile {
+        name: "g0b1",
+        link: LinkProfile::G0B1,
+        backup: LineProfile::G0B1,
+        node: NodeBoard::G0B1,
+        core: Core::CortexM0Plus,
+        core_clock_hz: G0B1_CORE_CLOCK_HZ,
+        kernels: Kernels::Fixed,
+        storage: Storage::Q16_16,
+    };
+
     /// The simulator's idealised link ([`LinkProfile::IDEAL`]) on the F407's nodes (same
     /// core, clock and scene banks).
     pub const IDEAL: BoardProfile = BoardProfile {
@@ -231,7 +276,7 @@ impl BoardProfile {
     };
 
     /// Every profile the host knows, by name.
-    pub const ALL: [BoardProfile; 3] = [Self::F407, Self::F207, Self::IDEAL];
+    pub const ALL: [BoardProfile; 4] = [Self::F407, Self::F207, Self::G0B1, Self::IDEAL];
 
     /// The profile called `name` (ASCII case ignored), if known.
     pub fn named(name: &str) -> Option<BoardProfile> {
@@ -325,6 +370,30 @@ mod tests {
         // 262 bytes at 1 Mbit/s: 2,620 µs + 28 µs.
         assert_eq!(g.backup.frame_ns(crate::backup::MAX_FRAME), 2_648_000);
         assert_eq!(g.node, NodeBoard::F207);
+    }
+
+    /// The G0B1: the F407's protocol (so the same DMA bank) at its own speeds, a Cortex-M0+
+    /// at 64 MHz sent Q16.16 images.
+    #[test]
+    fn the_g0b1_profile_holds_the_documented_numbers() {
+        let (f, g) = (BoardProfile::F407, BoardProfile::G0B1);
+        assert_eq!(g.dma_bank_bytes(), f.dma_bank_bytes());
+        assert_eq!(
+            (
+                g.link.bit_rate_hz,
+                g.link.handshake_ns(),
+                g.link.nodes_per_bus
+            ),
+            (16_000_000, 61_000, 8)
+        );
+        assert_eq!(g.link.rc_overlaps, f.link.rc_overlaps);
+        assert_eq!((g.core, g.core_clock_hz), (Core::CortexM0Plus, 64_000_000));
+        assert_eq!((g.kernels, g.storage), (Kernels::Fixed, Storage::Q16_16));
+        // 262 bytes at 1 Mbit/s: 2,620 µs + 52.5 µs.
+        assert_eq!(g.backup.frame_ns(crate::backup::MAX_FRAME), 2_672_500);
+        assert_eq!(g.node, NodeBoard::G0B1);
+        assert_eq!(BoardProfile::named("G0B1"), Some(g));
+        assert_eq!(g.core.name(), "Cortex-M0+");
     }
 
     /// The backup line's timing, worked by hand: a 262-byte frame is 2,620 bits at 1 Mbit/s

@@ -118,8 +118,10 @@ impl RcCost {
         let cost = match profile.core {
             // The RC's work is integer code (framing, CRCs, copies): the M3 runs the M4F's
             // Thumb-2 instructions, so the M4F's counts (an estimate until measured), at
-            // the board's clock.
-            Core::CortexM4F | Core::CortexM3 => Self::CORTEX_M4F,
+            // the board's clock. The M0+'s Thumb-1 takes more instructions for the same
+            // code (no wide immediates, fewer addressing modes): the M4F's counts are a
+            // lower bound there, unmeasured.
+            Core::CortexM4F | Core::CortexM3 | Core::CortexM0Plus => Self::CORTEX_M4F,
         };
         RcCost {
             clock_hz: profile.core_clock_hz as f64,
