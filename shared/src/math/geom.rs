@@ -84,7 +84,7 @@ impl<T: Real> Vec3<T> {
     pub fn abs(self) -> Self {
         Self::new(self.x.abs(), self.y.abs(), self.z.abs())
     }
-    #[inline(always)]
+    #[inline]
     pub fn mul_elem(self, o: Self) -> Self {
         Self::new(self.x * o.x, self.y * o.y, self.z * o.z)
     }
@@ -148,21 +148,29 @@ impl<T: Real> Index<usize> for Vec3<T> {
 
 impl<T: Real> Add for Vec3<T> {
     type Output = Self;
-    #[inline(always)]
+    #[inline]
     fn add(self, o: Self) -> Self {
         Self::new(self.x + o.x, self.y + o.y, self.z + o.z)
     }
 }
 impl<T: Real> Sub for Vec3<T> {
     type Output = Self;
-    #[inline(always)]
+    // Always inlined where a checked Q16.16 subtract is a few instructions (the M3, M4, the
+    // host): out of line, the M3's Q16.16 photo1 frame paid 4% for the calls (for 40 KB of
+    // flash). ARMv6-M (no 32-bit atomics: see `fixed::wide::HALVES`) keeps the compiler's
+    // choice: inlined, Q16.16 no longer fits the G0B1's flash.
+    #[cfg_attr(all(target_arch = "arm", not(target_has_atomic = "32")), inline)]
+    #[cfg_attr(
+        not(all(target_arch = "arm", not(target_has_atomic = "32"))),
+        inline(always)
+    )]
     fn sub(self, o: Self) -> Self {
         Self::new(self.x - o.x, self.y - o.y, self.z - o.z)
     }
 }
 impl<T: Real> Mul<T> for Vec3<T> {
     type Output = Self;
-    #[inline(always)]
+    #[inline]
     fn mul(self, s: T) -> Self {
         Self::new(self.x * s, self.y * s, self.z * s)
     }
@@ -192,12 +200,12 @@ impl<T: Real> Mat3<T> {
             ],
         }
     }
-    #[inline(always)]
+    #[inline]
     pub fn mul_vec(&self, v: Vec3<T>) -> Vec3<T> {
         Vec3::new(self.r[0].dot(v), self.r[1].dot(v), self.r[2].dot(v))
     }
     /// `Mᵀ v`: how normals leave a local space whose inverse transform is `M`.
-    #[inline(always)]
+    #[inline]
     pub fn mul_transpose_vec(&self, v: Vec3<T>) -> Vec3<T> {
         self.r[0] * v.x + self.r[1] * v.y + self.r[2] * v.z
     }
