@@ -40,10 +40,18 @@ pub use batch::{
     MAX_RELAY_NODES, MAX_ROUTED, RECORD, TAG_BATCH, TAG_FORWARD,
 };
 pub use node::{run_relay, RelayBuffers, RelayReport};
-pub use root::{RelayedBuffers, RelayedBus, RelayedCounters};
+pub use root::{RelayedBuffers, RelayedBus, RelayedCounters, MAX_RELAYS};
 
 use crate::cluster::link::{LinkError, NodeId};
 use core::fmt;
+
+/// How long the root of a relay tree lets a node exchange through a relay wait for the
+/// node's frame before it gives the exchange up ([`RelayedBus::with_timeout`], µs): the
+/// firmware's (`rc_fw::link::RELAY_TIMEOUT_US`) and the simulator's. A live relay answers
+/// within a few exchanges on each bus (each well under a millisecond); the root logic's own
+/// node time-out (`RootConfig::DEFAULT_TIMEOUT_US`) then retires the nodes of a relay that
+/// stopped.
+pub const RELAY_TIMEOUT_US: u64 = 20_000;
 
 /// What went wrong on a relay link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -9,7 +9,7 @@ use crate::cluster::wire::MAX_MESSAGE;
 use embassy_futures::select::{select, Either};
 
 /// Most relays on one link.
-const MAX_RELAYS: usize = 32;
+pub const MAX_RELAYS: usize = 32;
 
 /// What the root's end of the relay link saw.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
