@@ -2,7 +2,7 @@
 //! scheduling policy, node deaths and link faults, and the one-line fault summary. Thin glue
 //! over [`crate::sim::cluster`]; every number is virtual time.
 
-use crate::sim::cluster::relay::Topology;
+use crate::sim::cluster::relay::{RelayCode, Topology};
 use crate::sim::cluster::spi_bus::{LinkModel, StuckReady};
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
@@ -86,6 +86,28 @@ pub fn parse_link(s: &str) -> Result<LinkModel, OptionError> {
     }
 }
 
+/// `--relay NAME`: the relay tree's links run by the simulator's model (`model`) or by the
+/// firmware's relay code (`firmware`).
+pub fn parse_relay(s: &str) -> Result<RelayCode, OptionError> {
+    match s {
+        "model" => Ok(RelayCode::Model),
+        "firmware" => Ok(RelayCode::Firmware),
+        _ => Err(OptionError::UnknownRelay(s.into())),
+    }
+}
+
+/// `--kill-relay` values (RELAY@SECONDS, FIRST-LAST@SECONDS) for a tree of `relays` relays.
+pub fn relay_deaths(values: &[String], relays: u16) -> Result<Vec<NodeDeath>, OptionError> {
+    node_times(values, relays).map_err(|e| match e {
+        OptionError::NoSuchNode { text, node, nodes } => OptionError::NoSuchRelay {
+            text,
+            relay: node,
+            relays: nodes,
+        },
+        e => e,
+    })
+}
+
 /// A `--topology` value: `buildable` (what the board can be wired as: a relay tree when
 /// one bus cannot hold the nodes), `star` (every node on the RC's `--buses` buses) or `relay`
 /// (a relay tree whatever the count).
@@ -135,7 +157,7 @@ pub fn topology_text(cfg: &SimConfig) -> String {
         None => format!("star, {} bus(es)", cfg.buses),
         Some(Err(e)) => e.to_string(),
         Some(Ok(t)) => format!(
-            "relay tree: {} relays x {} nodes, {} level(s){}",
+            "relay tree: {} relays x {} nodes, {} level(s){}{}",
             t.leaves,
             cfg.profile.link.nodes_per_bus,
             t.levels(),
@@ -144,6 +166,10 @@ pub fn topology_text(cfg: &SimConfig) -> String {
                 (0, r) => format!(" (the root on {r} buses)"),
                 (m, 1) => format!(" ({m} mid relays)"),
                 (m, r) => format!(" ({m} mid relays, the root on {r} buses)"),
+            },
+            match cfg.relay {
+                RelayCode::Model => "",
+                RelayCode::Firmware => ", the firmware's relay code",
             }
         ),
     }
@@ -156,8 +182,18 @@ pub fn tree_summary(r: &SimReport) -> String {
         return String::new();
     };
     let root_link = t.root_link_busy_s();
+    let code = match &r.relayed {
+        None => String::new(),
+        Some(f) => format!(
+            " ({} exchanges on it for {} node frames, {} of them only gathering; {} relay time-outs)",
+            f.root.link_exchanges,
+            t.links.first().map_or(0, |l| l.frames_up),
+            f.root.gathering,
+            f.root.timeouts
+        ),
+    };
     format!(
-        " per relay; root link busy {:.1}%, root busy {:.1}%",
+        " per relay; root link busy {:.1}%{code}, root busy {:.1}%",
         100.0 * root_link / r.time_s,
         100.0 * t.root_busy_s / r.time_s
     )
@@ -243,6 +279,14 @@ pub enum OptionError {
     UnknownTopology(String),
     /// `--link` with no such link.
     UnknownLink(String),
+    /// `--relay` with no such relay code.
+    UnknownRelay(String),
+    /// `--kill-relay` of a relay the tree does not have.
+    NoSuchRelay {
+        text: String,
+        relay: u16,
+        relays: u16,
+    },
     /// `--board NAME` with no such profile.
     UnknownBoard(String),
     /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
@@ -281,6 +325,22 @@ impl fmt::Display for OptionError {
             OptionError::UnknownLink(s) => {
                 write!(f, "unknown link '{s}' (expected firmware or ideal)")
             }
+            OptionError::UnknownRelay(s) => {
+                write!(f, "unknown relay code '{s}' (expected model or firmware)")
+            }
+            OptionError::NoSuchRelay { text, relay, relays: 0 } => write!(
+                f,
+                "--kill-relay '{text}': relay {relay} does not exist (no relay tree)"
+            ),
+            OptionError::NoSuchRelay {
+                text,
+                relay,
+                relays,
+            } => write!(
+                f,
+                "--kill-relay '{text}': relay {relay} does not exist ({relays} relays: 0 to {})",
+                relays - 1
+            ),
             OptionError::UnknownBoard(s) => {
                 let known: Vec<&str> = BoardProfile::ALL.iter().map(|b| b.name).collect();
                 write!(f, "unknown board '{s}' (known: {})", known.join(", "))
