@@ -185,11 +185,15 @@ pub fn tree_summary(r: &SimReport) -> String {
     let code = match &r.relayed {
         None => String::new(),
         Some(f) => format!(
-            " ({} exchanges on it for {} node frames, {} of them only gathering; {} relay time-outs)",
+            " ({} exchanges on it for {} node frames, {} of them only gathering; {} relay time-outs{})",
             f.root.link_exchanges,
             t.links.first().map_or(0, |l| l.frames_up),
             f.root.gathering,
-            f.root.timeouts
+            f.root.timeouts,
+            match (f.link.corrupted(), f.link.dropped_broadcast) {
+                (0, 0) => String::new(),
+                (c, d) => format!("; {c} transfers corrupted, {d} broadcast copies lost on it"),
+            }
         ),
     };
     format!(
@@ -630,6 +634,39 @@ mod tests {
         assert_eq!(topology_note(&i), "");
         let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
         assert_eq!(eight.overloaded_bus(), None);
+    }
+
+    #[test]
+    fn relay_codes_and_dead_relays_parse() {
+        assert_eq!(parse_relay("model"), Ok(RelayCode::Model));
+        assert_eq!(parse_relay("firmware"), Ok(RelayCode::Firmware));
+        let e = parse_relay("fast").unwrap_err().to_string();
+        assert!(e.contains("unknown relay code 'fast'"), "{e}");
+        let d = relay_deaths(&["1@0.5".into(), "2-3@1".into()], 8).unwrap();
+        assert_eq!(
+            d.iter().map(|d| (d.node, d.at_s)).collect::<Vec<_>>(),
+            [(1, 0.5), (2, 1.0), (3, 1.0)]
+        );
+        let e = relay_deaths(&["8@0".into()], 8).unwrap_err().to_string();
+        assert!(
+            e.contains("relay 8 does not exist (8 relays: 0 to 7)"),
+            "{e}"
+        );
+        let e = relay_deaths(&["0@0".into()], 0).unwrap_err().to_string();
+        assert!(e.contains("no relay tree"), "{e}");
+        let mut f = config(
+            BoardProfile::F407,
+            64,
+            1,
+            None,
+            Policy::DECREASING,
+            TopologyArg::Buildable,
+        );
+        f.relay = RelayCode::Firmware;
+        assert_eq!(
+            topology_text(&f),
+            "relay tree: 8 relays x 8 nodes, 1 level(s), the firmware's relay code"
+        );
     }
 
     #[test]

@@ -28,7 +28,7 @@
 
 use super::exec::Ps;
 use super::rccost::RcCost;
-use super::star::BusTiming;
+use super::star::{BusCounters, BusTiming};
 use links_core::board::BoardProfile;
 use links_core::relay::{RelayReport, RelayedCounters};
 use links_core::root::RcWork;
@@ -99,6 +99,9 @@ pub struct FirmwareRelays {
     /// had not when the simulation stopped (a relay that stopped answering, or one that
     /// missed the `Stop`).
     pub relays: Vec<Option<RelayReport>>,
+    /// The root's link to its relays: transfers, bytes, busy time, what the configured bit
+    /// errors and losses did on it.
+    pub link: BusCounters,
 }
 
 /// Why a relay tree cannot be built.

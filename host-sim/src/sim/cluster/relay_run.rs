@@ -201,6 +201,7 @@ impl RelayLink {
         Ok(FirmwareRelays {
             root: *self.relayed.borrow(),
             relays,
+            link: self.star.borrow().counters()[0],
         })
     }
 }

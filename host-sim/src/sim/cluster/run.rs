@@ -911,6 +911,7 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
                 topology: Topology::Star,
                 keep_frames: false,
                 deaths: Vec::new(),
+                relay_deaths: Vec::new(),
                 spi_dead: Vec::new(),
                 stuck: Vec::new(),
                 backup_line: false,
