@@ -717,6 +717,11 @@ impl RootBus for FirmwareBus<'_, '_> {
         self.link.ready()
     }
 
+    fn line(&self, node: NodeId) -> bool {
+        // The link's, which sees every line (a relay reports each waiting node).
+        self.link.line(node)
+    }
+
     async fn wait_ready(&mut self) -> NodeId {
         self.link.wait_ready().await
     }
