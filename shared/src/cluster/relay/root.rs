@@ -356,15 +356,22 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
             Op::Exchange(node) => {
                 // Gather from ready relays (round the link) until the node's frame is up,
                 // with the request to every exchange with its relay; give up at the
-                // deadline (a relay that stopped answering).
+                // deadline (a relay that stopped answering). The node's relay goes first
+                // whenever its line is up: the round would come back to it last (the
+                // link's scan starts after the relay last exchanged with), and only its
+                // exchanges bring the frame that ends this one.
                 let deadline = self.clock.now_us().saturating_add(self.timeout_us);
+                let (link_first, _) = self.link.nodes();
+                let own = self.place(node).map(|(r, _)| link_first.wrapping_add(r));
                 while self.answer.is_none() {
                     // (Checked before waiting too: other relays may be ready all the time.)
                     let late = self.timeout_us > 0 && self.clock.now_us() >= deadline;
-                    let relay = if self.timeout_us == 0 {
-                        Some(self.link.wait_ready().await)
-                    } else if late {
+                    let relay = if late {
                         None
+                    } else if let Some(own) = own.filter(|&r| self.link.line(r)) {
+                        Some(own)
+                    } else if self.timeout_us == 0 {
+                        Some(self.link.wait_ready().await)
                     } else {
                         match select(self.link.wait_ready(), self.clock.at_us(deadline)).await {
                             Either::First(relay) => Some(relay),
