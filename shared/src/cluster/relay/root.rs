@@ -334,6 +334,18 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
         self.started = Some((op, len));
         self.answer = None;
         self.idle ^= 1;
+        // Put the request on the link now if its relay's line is up and the link is free:
+        // the root logic decodes the last frame and composes the next reply while it
+        // crosses (else `finish` sends it).
+        if let (Op::Exchange(node), None) = (op, self.dangling) {
+            let (link_first, _) = self.link.nodes();
+            if let Some((r, _)) = self.place(node) {
+                if self.link.line(link_first.wrapping_add(r)) {
+                    // A failure leaves it to `finish`, which sends it again.
+                    let _ = self.start_gather(r, Some((node, len)));
+                }
+            }
+        }
         Ok(())
     }
 
