@@ -138,15 +138,39 @@ fn breakdown(t: &Timeline, time_s: f64, exchanges: usize) {
         gather_busy as f64 * 1e-9,
         bcast as f64 * 1e-9
     );
+    let mut sorted = cycles.clone();
+    sorted.sort_unstable();
+    let pct = |p: usize| sorted.get(sorted.len() * p / 100).map_or(0.0, |&c| us(c));
     println!(
-        "  {} node exchanges matched of {exchanges}; mean cycle {cycle:.1} us (x {} = {:.1} ms):",
+        "  {} node exchanges matched of {exchanges}; mean cycle {cycle:.1} us (x {} = {:.1} ms; 10th percentile {:.1} us, median {:.1} us, 90th {:.1} us):",
         rows.len(),
         rows.len(),
-        cycle * rows.len() as f64 * 1e-3
+        cycle * rows.len() as f64 * 1e-3,
+        pct(10),
+        pct(50),
+        pct(90)
     );
     // A transfer is over for the slave when its chip-select rises, the hold before the
     // interval's end.
     let hold = BoardProfile::F407.link.cs_hold_ns as f64 * 1e-3;
+    // The cycles by tenth of the frame: the node exchanges ending in it, their mean cycle.
+    let end = (time_s * 1e12) as Ps;
+    let tenths: Vec<String> = (0..10)
+        .map(|k| {
+            let (a, b) = (end * k / 10, end * (k + 1) / 10);
+            let c: Vec<Ps> = rows
+                .windows(2)
+                .filter(|w| w[1][4] > a && w[1][4] <= b)
+                .map(|w| w[1][4] - w[0][4])
+                .collect();
+            let m = c.iter().map(|&x| us(x)).sum::<f64>() / c.len().max(1) as f64;
+            format!("{} x {m:.0}", c.len())
+        })
+        .collect();
+    println!(
+        "    by tenth of the frame (node exchanges x mean cycle, us): {}",
+        tenths.join(", ")
+    );
     let req_len = mean(&|r| r[5]);
     let relay_react = mean(&|r| r[1]) - (mean(&|r| r[0]) - hold);
     let leaf = mean(&|r| r[2] - r[1]);
@@ -154,7 +178,7 @@ fn breakdown(t: &Timeline, time_s: f64, exchanges: usize) {
     let up_len = mean(&|r| r[6]);
     let to_req = cycle - req_len - relay_react - (leaf - hold) - wait_up - up_len;
     println!(
-        "    from the last frame's arrival to the request's exchange ending: {:.1} us (request exchange {req_len:.1} us; gathering with other relays {before_req:.1} us; the rest the root's CPU and choosing)",
+        "    from the last frame's arrival to the request's exchange ending: {:.1} us (request exchange {req_len:.1} us; gathering with other relays {before_req:.1} us; the rest the root's CPU, and waiting while no node waits to be asked)",
         to_req + req_len
     );
     println!("    request at the relay (the chip-select rising) to the node's chip-select falling: {relay_react:.1} us");
