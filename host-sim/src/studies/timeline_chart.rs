@@ -263,16 +263,25 @@ pub fn timeline_svg(t: &Timeline, r: &SimReport, title: &str) -> String {
         escape(title)
     );
     let busy: f64 = r.node_compute_s.iter().sum();
+    let time = r.time_s.max(1e-18);
+    // Under the firmware's relay code the RC row is the root's CPU, beside its link.
+    let rc = match (&r.relayed, &r.tree) {
+        (Some(_), Some(tree)) => format!(
+            "root CPU busy {:.1}%, root link busy {:.1}%",
+            100.0 * tree.root_busy_s / time,
+            100.0 * tree.root_link_busy_s() / time
+        ),
+        _ => format!("RC busy {:.1}%", 100.0 * r.rc_busy_s / time),
+    };
     let _ = writeln!(
         body,
-        r#"<text x="{LEFT}" y="38" font-size="12">{} nodes, {}x{}, frame {:.3} ms virtual; nodes computing {:.1}% of node-time, bus busy {:.1}%, RC busy {:.1}%{}</text>"#,
+        r#"<text x="{LEFT}" y="38" font-size="12">{} nodes, {}x{}, frame {:.3} ms virtual; nodes computing {:.1}% of node-time, bus busy {:.1}%, {rc}{}</text>"#,
         r.nodes,
         r.width,
         r.height,
         r.time_s * 1e3,
-        100.0 * busy / (r.nodes as f64 * r.time_s).max(1e-18),
+        100.0 * busy / (r.nodes as f64 * time),
         100.0 * r.bus_utilisation(),
-        100.0 * r.rc_busy_s / r.time_s.max(1e-18),
         if t.complete() {
             String::new()
         } else {
