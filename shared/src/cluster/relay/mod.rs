@@ -27,7 +27,12 @@
 //! either link can make the relay panic; no heap: the relay's buffers are the caller's.
 //!
 //! Limits of this version: [`RelayedBus`] has one node exchange in flight per root bus (a
-//! frame crosses the parent's link twice per exchange, request down and frame up). A relay
+//! frame crosses the parent's link twice per exchange, request down and frame up). The
+//! request goes on the link from `start` when its relay's line is up (so the root logic's
+//! work overlaps it); until the frame is up the asked node's relay is exchanged with
+//! whenever its line is up, other ready relays otherwise (refreshing their `waiting`
+//! maps). The simulator runs this code (`links render --relay firmware`) and measures the
+//! cost of the one exchange in flight (`docs/cluster.md`). A relay
 //! that stops answering costs the root a time-out per exchange ([`RelayedBus::with_timeout`];
 //! without one, `finish` waits for ever).
 
