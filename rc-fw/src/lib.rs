@@ -44,11 +44,10 @@ pub mod link {
         NODES
     };
     /// As the root of a relay tree: how long a node exchange through a relay may wait for
-    /// the node's frame before the root gives it up (`RelayedBus::with_timeout`). A live
-    /// relay answers within a few exchanges on each bus (each well under a millisecond); the
-    /// root logic's own node time-out (`RootConfig::DEFAULT_TIMEOUT_US`) then retires the
-    /// nodes of a relay that stopped.
-    pub const RELAY_TIMEOUT_US: u64 = 20_000;
+    /// the node's frame before the root gives it up (`RelayedBus::with_timeout`; the value
+    /// is `links_core::relay::RELAY_TIMEOUT_US`, which the simulator's firmware relay tree
+    /// uses too).
+    pub const RELAY_TIMEOUT_US: u64 = links_core::relay::RELAY_TIMEOUT_US;
     // The timer counts whole microseconds: the profile's times must be whole too.
     const _: () =
         assert!(LINK.cs_setup_ns.is_multiple_of(1000) && LINK.cs_hold_ns.is_multiple_of(1000));

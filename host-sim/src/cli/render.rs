@@ -87,6 +87,18 @@ pub struct ClusterArgs {
     /// board's (firmware on f407, ideal on ideal)
     #[arg(long, value_parser = cli_cluster::parse_link)]
     pub link: Option<crate::cluster::spi_bus::LinkModel>,
+    /// Which code runs a relay tree's links above the leaf buses (cluster only): model (the
+    /// simulator's model: node frames forwarded and batched, relays answering from the one
+    /// job table as if it were local) or firmware (the firmware's relay code,
+    /// links_core::relay: the root's RelayedBus and each relay's run_relay over emulated
+    /// SPI links; one level of relays, 64 nodes at most on the f407, one root bus, the
+    /// firmware link)
+    #[arg(long, default_value = "model", value_parser = cli_cluster::parse_relay)]
+    pub relay: crate::cluster::relay::RelayCode,
+    /// A relay that stops answering: RELAY@SECONDS or FIRST-LAST@SECONDS of virtual time
+    /// (repeatable; --relay firmware only)
+    #[arg(long = "kill-relay", value_name = "RELAY@SECONDS")]
+    pub kill_relays: Vec<String>,
     /// SPI buses from the root computer (cluster only): a star's node buses, or under a
     /// relay tree the root's buses to its children (the F407 has SPI1/2/3)
     #[arg(long, default_value_t = 1)]
@@ -190,6 +202,9 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
     if let Some(link) = c.link {
         cfg.link = link;
     }
+    cfg.relay = c.relay;
+    let relays = cfg.tree().and_then(Result::ok).map_or(0, |t| t.leaves);
+    cfg.relay_deaths = cli_cluster::relay_deaths(&c.kill_relays, relays)?;
     cfg.dm_s_per_frame = c.dm_ms * 1e-3;
     cfg.node_timeout_s = timeout_ms * 1e-3;
     cfg.rc_double_buffer = cfg.rc_double_buffer && !c.rc_single_buffer;

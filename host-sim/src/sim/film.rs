@@ -155,6 +155,7 @@ pub fn simulate_film(
         topology: Topology::Star,
         keep_frames: false,
         deaths: Vec::new(),
+        relay_deaths: Vec::new(),
         timeline: None,
         ..cfg
     };

@@ -2,7 +2,7 @@
 //! scheduling policy, node deaths and link faults, and the one-line fault summary. Thin glue
 //! over [`crate::sim::cluster`]; every number is virtual time.
 
-use crate::sim::cluster::relay::Topology;
+use crate::sim::cluster::relay::{RelayCode, Topology};
 use crate::sim::cluster::spi_bus::{LinkModel, StuckReady};
 use crate::sim::cluster::star::{NodeDeath, Noise};
 use crate::sim::cluster::{render_cluster, ClusterRender, SimConfig, SimReport};
@@ -87,6 +87,28 @@ pub fn parse_link(s: &str) -> Result<LinkModel, OptionError> {
     }
 }
 
+/// `--relay NAME`: the relay tree's links run by the simulator's model (`model`) or by the
+/// firmware's relay code (`firmware`).
+pub fn parse_relay(s: &str) -> Result<RelayCode, OptionError> {
+    match s {
+        "model" => Ok(RelayCode::Model),
+        "firmware" => Ok(RelayCode::Firmware),
+        _ => Err(OptionError::UnknownRelay(s.into())),
+    }
+}
+
+/// `--kill-relay` values (RELAY@SECONDS, FIRST-LAST@SECONDS) for a tree of `relays` relays.
+pub fn relay_deaths(values: &[String], relays: u16) -> Result<Vec<NodeDeath>, OptionError> {
+    node_times(values, relays).map_err(|e| match e {
+        OptionError::NoSuchNode { text, node, nodes } => OptionError::NoSuchRelay {
+            text,
+            relay: node,
+            relays: nodes,
+        },
+        e => e,
+    })
+}
+
 /// A `--topology` value: `buildable` (what the board can be wired as: a relay tree when
 /// one bus cannot hold the nodes), `star` (every node on the RC's `--buses` buses) or `relay`
 /// (a relay tree whatever the count).
@@ -136,7 +158,7 @@ pub fn topology_text(cfg: &SimConfig) -> String {
         None => format!("star, {} bus(es)", cfg.buses),
         Some(Err(e)) => e.to_string(),
         Some(Ok(t)) => format!(
-            "relay tree: {} relays x {} nodes, {} level(s){}",
+            "relay tree: {} relays x {} nodes, {} level(s){}{}",
             t.leaves,
             cfg.profile.link.nodes_per_bus,
             t.levels(),
@@ -145,6 +167,10 @@ pub fn topology_text(cfg: &SimConfig) -> String {
                 (0, r) => format!(" (the root on {r} buses)"),
                 (m, 1) => format!(" ({m} mid relays)"),
                 (m, r) => format!(" ({m} mid relays, the root on {r} buses)"),
+            },
+            match cfg.relay {
+                RelayCode::Model => "",
+                RelayCode::Firmware => ", the firmware's relay code",
             }
         ),
     }
@@ -157,8 +183,22 @@ pub fn tree_summary(r: &SimReport) -> String {
         return String::new();
     };
     let root_link = t.root_link_busy_s();
+    let code = match &r.relayed {
+        None => String::new(),
+        Some(f) => format!(
+            " ({} exchanges on it for {} node frames, {} of them only gathering; {} relay time-outs{})",
+            f.root.link_exchanges,
+            t.links.first().map_or(0, |l| l.frames_up),
+            f.root.gathering,
+            f.root.timeouts,
+            match (f.link.corrupted(), f.link.dropped_broadcast) {
+                (0, 0) => String::new(),
+                (c, d) => format!("; {c} transfers corrupted, {d} broadcast copies lost on it"),
+            }
+        ),
+    };
     format!(
-        " per relay; root link busy {:.1}%, root busy {:.1}%",
+        " per relay; root link busy {:.1}%{code}, root busy {:.1}%",
         100.0 * root_link / r.time_s,
         100.0 * t.root_busy_s / r.time_s
     )
@@ -244,6 +284,14 @@ pub enum OptionError {
     UnknownTopology(String),
     /// `--link` with no such link.
     UnknownLink(String),
+    /// `--relay` with no such relay code.
+    UnknownRelay(String),
+    /// `--kill-relay` of a relay the tree does not have.
+    NoSuchRelay {
+        text: String,
+        relay: u16,
+        relays: u16,
+    },
     /// `--board NAME` with no such profile.
     UnknownBoard(String),
     /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
@@ -282,6 +330,22 @@ impl fmt::Display for OptionError {
             OptionError::UnknownLink(s) => {
                 write!(f, "unknown link '{s}' (expected firmware or ideal)")
             }
+            OptionError::UnknownRelay(s) => {
+                write!(f, "unknown relay code '{s}' (expected model or firmware)")
+            }
+            OptionError::NoSuchRelay { text, relay, relays: 0 } => write!(
+                f,
+                "--kill-relay '{text}': relay {relay} does not exist (no relay tree)"
+            ),
+            OptionError::NoSuchRelay {
+                text,
+                relay,
+                relays,
+            } => write!(
+                f,
+                "--kill-relay '{text}': relay {relay} does not exist ({relays} relays: 0 to {})",
+                relays - 1
+            ),
             OptionError::UnknownBoard(s) => {
                 let known: Vec<&str> = BoardProfile::ALL.iter().map(|b| b.name).collect();
                 write!(f, "unknown board '{s}' (known: {})", known.join(", "))
@@ -572,6 +636,39 @@ mod tests {
         assert_eq!(topology_note(&i), "");
         let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
         assert_eq!(eight.overloaded_bus(), None);
+    }
+
+    #[test]
+    fn relay_codes_and_dead_relays_parse() {
+        assert_eq!(parse_relay("model"), Ok(RelayCode::Model));
+        assert_eq!(parse_relay("firmware"), Ok(RelayCode::Firmware));
+        let e = parse_relay("fast").unwrap_err().to_string();
+        assert!(e.contains("unknown relay code 'fast'"), "{e}");
+        let d = relay_deaths(&["1@0.5".into(), "2-3@1".into()], 8).unwrap();
+        assert_eq!(
+            d.iter().map(|d| (d.node, d.at_s)).collect::<Vec<_>>(),
+            [(1, 0.5), (2, 1.0), (3, 1.0)]
+        );
+        let e = relay_deaths(&["8@0".into()], 8).unwrap_err().to_string();
+        assert!(
+            e.contains("relay 8 does not exist (8 relays: 0 to 7)"),
+            "{e}"
+        );
+        let e = relay_deaths(&["0@0".into()], 0).unwrap_err().to_string();
+        assert!(e.contains("no relay tree"), "{e}");
+        let mut f = config(
+            BoardProfile::F407,
+            64,
+            1,
+            None,
+            Policy::DECREASING,
+            TopologyArg::Buildable,
+        );
+        f.relay = RelayCode::Firmware;
+        assert_eq!(
+            topology_text(&f),
+            "relay tree: 8 relays x 8 nodes, 1 level(s), the firmware's relay code"
+        );
     }
 
     #[test]

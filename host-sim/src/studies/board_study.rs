@@ -5,7 +5,7 @@
 //! limits is worth (the RC's overlap, against the serial inline link; no chip-select set-up
 //! and hold; one bus per 8 nodes as the board is wired; the last two with the overlap).
 
-use crate::sim::cluster::relay::Topology;
+use crate::sim::cluster::relay::{RelayCode, Topology};
 use crate::sim::cluster::spi_bus::LinkModel;
 use crate::sim::cluster::{RunCache, SimConfig, SimError, SimReport};
 use crate::sim::options::{board_text, topology_text};
@@ -204,9 +204,10 @@ fn lifts_table(
 
 /// The F407's ways to `nodes` nodes (docs/hardware.md, "Reaching 64 and 256 nodes"): one
 /// RC driving its three SPI buses, one bus of buffered segments (the same bit rate), a
-/// tree of relay RCs (also with the root's children spread over its three SPI buses: the
-/// lift tried for the root's link), and for comparison one RC with 8 buses (no F407 has
-/// them).
+/// tree of relay RCs (the simulator's model; up to 64 nodes also the firmware's relay code
+/// on the firmware link; the model also with the root's children spread over its three
+/// SPI buses: the lift tried for the root's link), and for comparison one RC with 8 buses
+/// (no F407 has them).
 fn topology_table(
     image: &[u8],
     nodes: u16,
@@ -222,7 +223,7 @@ fn topology_table(
         link: with_link(&base, link),
         ..base.clone()
     };
-    let variants = [
+    let mut variants = vec![
         ("(a) one RC, SPI1/2/3 (3 buses)", star(3)),
         ("(b) one bus of buffered segments", star(1)),
         (
@@ -257,6 +258,23 @@ fn topology_table(
         ),
         ("one RC with 8 buses (not an F407)", star(8)),
     ];
+    // The firmware's relay code (links_core::relay) drives one level of relays, one root
+    // bus, on the firmware link: 64 nodes at most.
+    let firmware = SimConfig {
+        topology: Topology::RelayTree {
+            fanout: 8,
+            batch: true,
+        },
+        relay: RelayCode::Firmware,
+        link: LinkModel::Firmware,
+        ..star(1)
+    };
+    if firmware
+        .tree()
+        .is_some_and(|t| t.is_ok_and(|t| t.levels() == 1))
+    {
+        variants.insert(4, ("(c) relay tree, the firmware's relay code", firmware));
+    }
     let mut t = table_head([
         "topology",
         "nodes per bus",

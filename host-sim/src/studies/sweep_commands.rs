@@ -292,6 +292,7 @@ pub(crate) fn single_and_steady(
     let one_cfg = SimConfig {
         nodes: 1,
         topology: crate::sim::cluster::relay::Topology::Star,
+        relay_deaths: Vec::new(),
         ..cfg.clone()
     };
     let one = simulate_frame(image, &one_cfg)?.time_s;

@@ -1,6 +1,8 @@
-//! The picture of one cluster frame (`links render --nodes N --timeline t.svg`): a row per
+//! The picture of one cluster frame (`links render --nodes N --timeline t.svg`): with the
+//! firmware's relay code a row for the root's link to its relays (exchanges blue), a row per
 //! bus (its transfers, coloured by the node exchanged with; broadcasts orange), a row for
-//! the RC's CPU, a row per node (computing in the node's colour, waiting grey, its exchanges
+//! the RC's CPU (the root's, under the firmware's relay code; else the sum of the leaf
+//! relays' under a relay tree), a row per node (computing in the node's colour, waiting grey, its exchanges
 //! on the wire as a black strip along the row's foot), a time axis in ms of virtual time, and
 //! a map of the frame coloured by the node that rendered each pixel.
 //!
@@ -23,6 +25,8 @@ const WAITING: &str = "#e4e4e4";
 const BROADCAST: &str = "#f28e2b";
 const RC_WORK: &str = "#7b4fa0";
 const WIRE: &str = "#111111";
+/// An exchange on the root's link to its relays (the firmware's relay code).
+const ROOT_LINK: &str = "#2b5fa8";
 
 /// Node `i`'s colour: hues a golden angle apart, so neighbours differ.
 pub fn node_colour(i: u16) -> String {
@@ -129,14 +133,17 @@ fn label(out: &mut String, y: f64, h: f64, text: &str, size: f64) {
 }
 
 /// The legend: one swatch per kind of interval.
-fn legend(out: &mut String, y: f64) {
-    let items = [
+fn legend(out: &mut String, t: &Timeline, y: f64) {
+    let mut items = vec![
         (node_colour(0), "computing (the node's colour)"),
         (WAITING.to_string(), "waiting"),
         (WIRE.to_string(), "the node's exchange on the wire"),
         (BROADCAST.to_string(), "broadcast"),
         (RC_WORK.to_string(), "RC CPU busy"),
     ];
+    if !t.root_link.is_empty() {
+        items.push((ROOT_LINK.to_string(), "root-relay exchange"));
+    }
     let mut x = LEFT;
     for (fill, text) in items {
         let _ = writeln!(
@@ -150,8 +157,21 @@ fn legend(out: &mut String, y: f64) {
     }
 }
 
-/// The bus rows and the RC row; returns the y below them.
+/// The bus rows and the RC row (a root link to relays first, if logged); returns the y
+/// below them.
 fn bus_rows(out: &mut String, t: &Timeline, axis: &Axis, mut y: f64) -> f64 {
+    if !t.root_link.is_empty() {
+        label(out, y, BUS_ROW, "root link", 10.0);
+        for tr in &t.root_link {
+            let fill = if tr.node.is_some() {
+                ROOT_LINK
+            } else {
+                BROADCAST
+            };
+            axis.rect(out, &tr.at, y, BUS_ROW, fill);
+        }
+        y += BUS_ROW + 2.0;
+    }
     for (b, row) in t.bus.iter().enumerate() {
         label(out, y, BUS_ROW, &format!("bus {b}"), 10.0);
         for tr in row {
@@ -243,23 +263,32 @@ pub fn timeline_svg(t: &Timeline, r: &SimReport, title: &str) -> String {
         escape(title)
     );
     let busy: f64 = r.node_compute_s.iter().sum();
+    let time = r.time_s.max(1e-18);
+    // Under the firmware's relay code the RC row is the root's CPU, beside its link.
+    let rc = match (&r.relayed, &r.tree) {
+        (Some(_), Some(tree)) => format!(
+            "root CPU busy {:.1}%, root link busy {:.1}%",
+            100.0 * tree.root_busy_s / time,
+            100.0 * tree.root_link_busy_s() / time
+        ),
+        _ => format!("RC busy {:.1}%", 100.0 * r.rc_busy_s / time),
+    };
     let _ = writeln!(
         body,
-        r#"<text x="{LEFT}" y="38" font-size="12">{} nodes, {}x{}, frame {:.3} ms virtual; nodes computing {:.1}% of node-time, bus busy {:.1}%, RC busy {:.1}%{}</text>"#,
+        r#"<text x="{LEFT}" y="38" font-size="12">{} nodes, {}x{}, frame {:.3} ms virtual; nodes computing {:.1}% of node-time, bus busy {:.1}%, {rc}{}</text>"#,
         r.nodes,
         r.width,
         r.height,
         r.time_s * 1e3,
-        100.0 * busy / (r.nodes as f64 * r.time_s).max(1e-18),
+        100.0 * busy / (r.nodes as f64 * time),
         100.0 * r.bus_utilisation(),
-        100.0 * r.rc_busy_s / r.time_s.max(1e-18),
         if t.complete() {
             String::new()
         } else {
             format!(" (log full: {} intervals not drawn)", t.dropped())
         }
     );
-    legend(&mut body, 58.0);
+    legend(&mut body, t, 58.0);
     let top = 70.0;
     let y = bus_rows(&mut body, t, &axis, top);
     let bottom = node_rows(&mut body, t, &axis, y);

@@ -31,6 +31,7 @@ pub mod exec;
 pub mod framemem;
 pub mod rccost;
 pub mod relay;
+mod relay_run;
 mod run;
 pub mod spi_bus;
 pub mod star;
@@ -55,7 +56,7 @@ use links_core::root::{RootConfig, RootError, RootReport};
 use links_core::sched::Policy;
 use links_core::wire::{self, Job};
 use rccost::RcCost;
-use relay::{Topology, TreeReport, TreeShape};
+use relay::{FirmwareRelays, RelayCode, Topology, TreeReport, TreeShape};
 use spi_bus::{FirmwareLinkCounters, LinkModel, StuckReady};
 use star::{BroadcastDrop, BusCounters, BusTiming, Faults, NodeDeath, Noise};
 use std::collections::HashMap;
@@ -89,6 +90,15 @@ pub struct SimConfig {
     /// How the nodes are wired to the root. [`SimConfig::for_board`]: a star of `buses`
     /// buses; [`SimConfig::buildable`]: what the board can be built as.
     pub topology: Topology,
+    /// Which code runs a relay tree's links above the leaf buses: the model
+    /// ([`RelayCode::Model`], the default) or the firmware's relay code
+    /// ([`RelayCode::Firmware`]: one level, one root bus, the firmware link). Ignored by a
+    /// star.
+    pub relay: RelayCode,
+    /// Relays that stop answering (the firmware's relay code only): `node` is the relay's
+    /// number (0 = the nodes 0.. of the first leaf bus); from `at_s` on its link to the
+    /// root never re-arms, as a relay that lost power.
+    pub relay_deaths: Vec<NodeDeath>,
     pub policy: Policy,
     pub timing: BusTiming,
     /// Which link the buses run: the firmware's `links_core::spi` over the emulated SPI
@@ -180,6 +190,8 @@ impl SimConfig {
             nodes: 64,
             buses: 1,
             topology: Topology::Star,
+            relay: RelayCode::Model,
+            relay_deaths: Vec::new(),
             policy: Policy::DECREASING,
             timing: BusTiming::of(&profile.link),
             link: LinkModel::for_link(&profile.link),
@@ -281,6 +293,9 @@ pub struct SimReport {
     /// The relay tree's links and root, if the topology is one. `rc_busy_s` is then the
     /// leaf relays' CPU time summed.
     pub tree: Option<TreeReport>,
+    /// What the firmware's relay code did, if it ran ([`RelayCode::Firmware`]; `tree` then
+    /// has the root link's traffic and the root's CPU).
+    pub relayed: Option<FirmwareRelays>,
     /// What the serial backup line did, if it ran.
     pub backup: Option<LineCounters>,
     /// What the firmware link's two ends counted (NAKs, retransmits, refused headers), if

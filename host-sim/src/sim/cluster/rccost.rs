@@ -174,3 +174,75 @@ impl RootClock for RcClock {
         Delay::new(&self.clock, end).await;
     }
 }
+
+/// Whose relay-link work a [`LinkCpu`] charges.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkRole {
+    /// A relay on its own bus (`links_core::relay::run_relay`).
+    Relay,
+    /// The root on its link to the relays (`links_core::relay::RelayedBus`).
+    Root,
+}
+
+/// The CPU work the firmware's relay code does around each transfer, which no
+/// [`RootClock`] reports (the relay code has no clock; the root's `run_bus` reports its own
+/// composing and decoding through [`RcClock`]), charged with [`RcCost`]'s constants on an
+/// RC's CPU (`cpu_free`, shared with that RC's [`RcClock`] at the root) when the emulated
+/// link starts or ends a transfer ([`super::spi_bus::FirmwareBus`]):
+///
+/// - every transfer: `per_transfer` (the bookkeeping estimate: choosing, arming the DMA);
+/// - a relay: the parent's frame copied out of its RX bank and into the bus's TX bank
+///   (2 copies of the request or broadcast), the node's frame copied out of the RX bank,
+///   into the batch and into the parent's TX bank (3 copies), and the `wire::decode` of
+///   every broadcast it forwards (it checks for `Stop`: CRC and postcard, `decode_*`);
+/// - the root: the request or broadcast copied into the link's TX bank (1 copy), what a
+///   relay sent copied out of the RX bank, into the answer and out to `run_bus` (3 copies).
+///
+/// Not charged: parsing batch and record headers, scanning the `waiting` bitmaps.
+#[derive(Clone)]
+pub struct LinkCpu {
+    pub clock: SharedClock,
+    pub cost: RcCost,
+    pub role: LinkRole,
+    /// When this RC's CPU finishes the work given it so far.
+    pub cpu_free: Rc<Cell<Ps>>,
+    /// Its total busy time.
+    pub busy: Rc<Cell<Ps>>,
+}
+
+impl LinkCpu {
+    /// Instructions before a transfer of `len` bytes starts.
+    pub fn before_instructions(&self, len: usize) -> f64 {
+        let copies = match self.role {
+            LinkRole::Relay => 2.0,
+            LinkRole::Root => 1.0,
+        };
+        self.cost.per_transfer + copies * self.cost.copy_per_byte * len as f64
+    }
+
+    /// Instructions after a transfer ends: a broadcast of `len` bytes, or an exchange that
+    /// brought `got` bytes.
+    pub fn after_instructions(&self, broadcast: bool, len: usize, got: usize) -> f64 {
+        match (self.role, broadcast) {
+            (LinkRole::Relay, true) => {
+                self.cost.decode_fixed + self.cost.decode_per_byte * len as f64
+            }
+            (_, true) => 0.0,
+            (_, false) => 3.0 * self.cost.copy_per_byte * got as f64,
+        }
+    }
+
+    /// Charge `instructions` to the CPU from now (behind its earlier work); when it is done.
+    pub fn charge(&self, instructions: f64) -> Ps {
+        let cycles = instructions * self.cost.cycles_per_instruction;
+        let d = (cycles * 1e12 / self.cost.clock_hz).ceil() as Ps;
+        let now = self.clock.borrow().now;
+        let start = now.max(self.cpu_free.get());
+        if d == 0 {
+            return start;
+        }
+        self.cpu_free.set(start + d);
+        self.busy.set(self.busy.get() + d);
+        start + d
+    }
+}

@@ -28,8 +28,9 @@
 
 use super::exec::Ps;
 use super::rccost::RcCost;
-use super::star::BusTiming;
+use super::star::{BusCounters, BusTiming};
 use links_core::board::BoardProfile;
+use links_core::relay::{RelayReport, RelayedCounters};
 use links_core::root::RcWork;
 use links_core::wire::{self, Down};
 use std::collections::{HashMap, VecDeque};
@@ -61,6 +62,46 @@ impl Topology {
             }
         }
     }
+}
+
+/// Which code runs a relay tree's links above the leaf buses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RelayCode {
+    /// The model of this module ([`Relays`]): every node frame forwarded up to the root as
+    /// the relays take it, batched, the relays answering their nodes from the one job table
+    /// as if it were local.
+    #[default]
+    Model,
+    /// The firmware's relay code in the loop (`links_core::relay`, the simulator's
+    /// `run::firmware_relays`): the root's `run_bus` over `RelayedBus` on an emulated SPI
+    /// bus to its relays, each relay `run_relay` between a slave link on that bus and the
+    /// split master of its own bus. One level of relays (as `rc-fw --features relay-root`
+    /// drives), one root bus, the firmware link, the same node count behind every relay.
+    Firmware,
+}
+
+impl RelayCode {
+    pub fn name(self) -> &'static str {
+        match self {
+            RelayCode::Model => "model",
+            RelayCode::Firmware => "firmware",
+        }
+    }
+}
+
+/// What the firmware's relay code did in a run ([`RelayCode::Firmware`]).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FirmwareRelays {
+    /// The root's `RelayedBus`: exchanges on its link (of which only gathering: no request
+    /// in them), node exchanges given up at the relay time-out, bad batches, stray frames.
+    pub root: RelayedCounters,
+    /// Each relay's report, once its `run_relay` ended (on the root's `Stop`); `None`: it
+    /// had not when the simulation stopped (a relay that stopped answering, or one that
+    /// missed the `Stop`).
+    pub relays: Vec<Option<RelayReport>>,
+    /// The root's link to its relays: transfers, bytes, busy time, what the configured bit
+    /// errors and losses did on it.
+    pub link: BusCounters,
 }
 
 /// Why a relay tree cannot be built.

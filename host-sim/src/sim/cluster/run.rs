@@ -6,8 +6,9 @@ use super::backup::{BackupSimError, Work};
 use super::backup_run::{run_line, LineCounters, LineSetup};
 use super::exec::{self, Delay, ExecError, Ps, SharedClock, Task};
 use super::framemem::{self, FrameMemory, ViaRoot};
-use super::rccost::RcClock;
-use super::relay::{Relays, Topology};
+use super::rccost::{LinkCpu, RcClock};
+use super::relay::{RelayCode, Relays, Topology};
+use super::relay_run::{self, firmware_tree, relay_tasks, RelayLink};
 use super::spi_bus::{
     master_task, FirmwareBus, FirmwareLinkCounters, LinkModel, NodeOnLink, Overlapped, SharedWire,
     SpiSlave, Wire, WireTiming,
@@ -152,7 +153,7 @@ impl WorkClock for SimWork {
     }
 }
 
-enum Sink<'a> {
+pub(super) enum Sink<'a> {
     None,
     Memory(ViaRoot<'a>),
 }
@@ -225,14 +226,21 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     if let Some(log) = &log {
         star.borrow_mut().set_timeline(log.clone());
     }
+    let relay_link =
+        firmware_tree(cfg).map(|(relays, per)| RelayLink::new(&clock, cfg, relays, per));
+    if let (Some(link), Some(log)) = (&relay_link, &log) {
+        link.star.borrow_mut().set_root_link_timeline(log.clone());
+    }
     let sink = RefCell::new(match cfg.collect {
         Collect::Snoop => Sink::None,
         Collect::ViaRoot => Sink::Memory(ViaRoot(&fm)),
     });
     let busy = Rc::new(RefCell::new(vec![0 as Ps; cfg.nodes as usize]));
     let mut node_reports: Vec<NodeReport> = vec![NodeReport::default(); cfg.nodes as usize];
+    // One `run_bus` per bus, or the root's one over its relays.
+    let root_buses = if relay_link.is_some() { 1 } else { buses };
     let bus_results: RefCell<Vec<Option<Result<RootReport, RootError>>>> =
-        RefCell::new(vec![None; buses]);
+        RefCell::new(vec![None; root_buses]);
     let mut banks: Vec<[Vec<u8>; 2]> = (0..cfg.nodes)
         .map(|_| [vec![0u8; bank_len], vec![0u8; bank_len]])
         .collect();
@@ -240,13 +248,23 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     let line_counters = RefCell::new(LineCounters::default());
     let line_result: RefCell<Option<Result<(), BackupSimError>>> = RefCell::new(None);
     let rc_busy = Rc::new(Cell::new(0 as Ps));
-    let mut tasks = bus_tasks(
-        cfg,
-        &clock,
-        (&star, &wire, &counters),
-        (&rc_busy, &log),
-        (&root, &sink, &bus_results, &dm),
-    );
+    let mut tasks = match (&relay_link, &wire) {
+        (Some(link), Some(wire)) => relay_tasks(
+            cfg,
+            &clock,
+            (wire, &counters),
+            link,
+            (&rc_busy, &log),
+            (&root, &sink, &bus_results, &dm),
+        ),
+        _ => bus_tasks(
+            cfg,
+            &clock,
+            (&star, &wire, &counters),
+            (&rc_busy, &log),
+            (&root, &sink, &bus_results, &dm),
+        ),
+    };
     let line_on = cfg.backup_line || !cfg.spi_dead.is_empty();
     if line_on {
         let setup = line_setup(scenes, cfg, &clock, &root, &fm, &line_counters)?;
@@ -272,7 +290,14 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         }
     };
     let taken = || star.borrow().relays().map_or(0, |r| r.taken_up_to());
-    let res = run_frames(&clock, &mut tasks, (&root, &bus_results), taken, keep);
+    let relays_done = || relay_link.as_ref().is_none_or(RelayLink::ended);
+    let res = run_frames(
+        &clock,
+        &mut tasks,
+        (&root, &bus_results),
+        (taken, relays_done),
+        keep,
+    );
     drop(tasks);
     let done_at = res.map_err(|cause| {
         SimError::Unfinished(Box::new(unfinished(cause, &root.borrow(), cfg, frames)))
@@ -293,12 +318,35 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     }
     let root_report = root.borrow().report();
     let bus = star.borrow().counters();
-    let tree = star.borrow().relays().map(|r| r.report());
+    let mut tree = star.borrow().relays().map(|r| r.report());
+    let mut relayed = None;
+    let mut link_counters = (cfg.link == LinkModel::Firmware).then(|| counters.sum());
+    if let Some(l) = &relay_link {
+        let frames_up = bus.iter().map(|b| b.exchanges).sum();
+        tree = cfg
+            .tree()
+            .and_then(Result::ok)
+            .map(|shape| l.report(shape, frames_up));
+        relayed = Some(l.firmware_relays()?);
+        link_counters = Some(FirmwareLinkCounters::of(
+            &[
+                &counters.master.borrow()[..],
+                &l.counters.master.borrow()[..],
+            ]
+            .concat(),
+            &[
+                &counters.slaves.borrow()[..],
+                &l.counters.slaves.borrow()[..],
+            ]
+            .concat(),
+        ));
+    }
     let time_ps = done_at.last().copied().unwrap_or(0);
     drop(star);
     drop(wire);
+    drop(relay_link);
     let timeline = log.map(|l| l.borrow().clone());
-    let link = (cfg.link == LinkModel::Firmware).then(|| counters.sum());
+    let link = link_counters;
     Ok(SimReport {
         profile: cfg.profile,
         nodes: cfg.nodes,
@@ -320,6 +368,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         tree,
         backup: line_on.then(|| line_counters.take()),
         link,
+        relayed,
     })
 }
 
@@ -410,6 +459,7 @@ fn check_config<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<(u16, S
     }
     cfg.noise.check().map_err(SimError::Config)?;
     check_link(cfg)?;
+    relay_run::check(cfg)?;
     let frames =
         u16::try_from(scenes.len()).map_err(|_| SimError::Config("too many frames".into()))?;
     if !cfg.dm_frame_s.is_empty() && cfg.dm_frame_s.len() != scenes.len() {
@@ -493,8 +543,10 @@ fn build_star(clock: &SharedClock, cfg: &SimConfig, fm: &Rc<RefCell<FrameMemory>
     let buses = cfg.node_buses();
     let star = Star::new(clock, cfg.nodes, buses, cfg.timing, cfg.faults, snoop);
     if let (Some(Ok(shape)), Topology::RelayTree { batch, .. }) = (cfg.tree(), cfg.topology) {
-        let relays = Relays::new(shape, batch, cfg.timing, cfg.rc_cost);
-        star.borrow_mut().set_relays(relays);
+        if cfg.relay == RelayCode::Model {
+            let relays = Relays::new(shape, batch, cfg.timing, cfg.rc_cost);
+            star.borrow_mut().set_relays(relays);
+        }
     }
     for d in cfg.deaths.iter().chain(&cfg.spi_dead) {
         star.borrow_mut()
@@ -508,7 +560,7 @@ fn build_star(clock: &SharedClock, cfg: &SimConfig, fm: &Rc<RefCell<FrameMemory>
 }
 
 /// What the RC's bus tasks share: its state, the pixel sink, each bus's result, the DM.
-type RootShared<'a, S> = (
+pub(super) type RootShared<'a, S> = (
     &'a RefCell<RootState>,
     &'a RefCell<Sink<'a>>,
     &'a RefCell<Vec<Option<Result<RootReport, RootError>>>>,
@@ -550,28 +602,18 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
             }),
             Some(wire) => {
                 let (wire, report) = (wire.clone(), counters.master.clone());
-                let overlaps = cfg.rc_double_buffer;
+                let split = cfg.rc_double_buffer;
                 Box::pin(async move {
-                    let mut banks = Box::new([[0u8; BANK]; 3]);
-                    if !overlaps {
-                        let mut bus = FirmwareBus::new(&wire, b, &mut banks, None, report);
-                        let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
+                    let end = MasterEnd {
+                        split,
+                        report,
+                        cpu: None,
+                    };
+                    let rc_clock = &rc_clock;
+                    on_master_bus(&wire, b, end, async move |mut bus| {
+                        let r = run_bus(b, &mut bus, rc_clock, root, dm, sink).await;
                         bus_results.borrow_mut()[b] = Some(r);
-                        return;
-                    }
-                    // The board's split link: the bus logic and the clocking task.
-                    let shared = MasterShared::new();
-                    let task = Box::pin(master_task(wire.clone(), b, &shared));
-                    let mut bus = FirmwareBus::new(&wire, b, &mut banks, Some(&shared), report);
-                    let logic = Box::pin(async {
-                        let r = run_bus(b, &mut bus, &rc_clock, root, dm, sink).await;
-                        bus_results.borrow_mut()[b] = Some(r);
-                    });
-                    Overlapped {
-                        shared: &shared,
-                        logic,
-                        task,
-                    }
+                    })
                     .await
                 })
             }
@@ -581,15 +623,82 @@ fn bus_tasks<'a, S: AsRef<[u8]>>(
     tasks
 }
 
+/// How the RC's end of a firmware-link bus is run ([`on_master_bus`]).
+pub(super) struct MasterEnd {
+    /// The board's split link (`MasterFront` + `MasterTask`, where the RC overlaps), else
+    /// the inline `MasterLink`.
+    pub(super) split: bool,
+    /// Where the link's counters are kept (one slot per bus of the wire).
+    pub(super) report: Rc<RefCell<Vec<MasterCounters>>>,
+    /// The relay code's CPU work around each transfer, if charged.
+    pub(super) cpu: Option<LinkCpu>,
+}
+
+/// `logic` as the master of bus `b` of `wire` (the RC's link code over the emulated SPI
+/// master, on two TX banks and one RX bank): with the split link, `logic` and the
+/// link's `MasterTask` polled as one simulated task ([`Overlapped`]), as the RC and a
+/// relay run their buses.
+pub(super) async fn on_master_bus<R>(
+    wire: &SharedWire,
+    b: usize,
+    end: MasterEnd,
+    logic: impl for<'s, 'k> AsyncFnOnce(FirmwareBus<'s, 'k>) -> R,
+) -> R {
+    let mut banks = Box::new([[0u8; BANK]; 3]);
+    if !end.split {
+        let bus = FirmwareBus::new(wire, b, &mut banks, None, end.report).with_cpu(end.cpu);
+        return logic(bus).await;
+    }
+    let shared = MasterShared::new();
+    let task = Box::pin(master_task(wire.clone(), b, &shared));
+    let bus = FirmwareBus::new(wire, b, &mut banks, Some(&shared), end.report).with_cpu(end.cpu);
+    Overlapped {
+        shared: &shared,
+        logic: Box::pin(logic(bus)),
+        task,
+    }
+    .await
+}
+
+/// `logic` as the slave `i` of `wire` (a node's link, or a relay's towards the root):
+/// `SlaveTask::run` over the emulated SPI slave on `banks` (two TX, two RX, scratch)
+/// beside `logic`, polled as one simulated task ([`NodeOnLink`]); the link's counters go to
+/// `slots[i]` when it ends.
+pub(super) async fn on_slave_link<'b, R>(
+    wire: &SharedWire,
+    i: u16,
+    slots: Rc<RefCell<Vec<SlaveCounters>>>,
+    banks: &'b mut [Bank; 5],
+    logic: impl for<'s> AsyncFnOnce(&'s SlaveShared<'b>) -> R,
+) -> R {
+    let mut port = SpiSlave::new(wire, i);
+    let [t0, t1, r0, r1, scratch] = banks;
+    let (shared, task) = SlaveShared::new(SlaveBanks {
+        tx: [t0, t1],
+        rx: [r0, r1],
+        scratch,
+    });
+    let _out = SlaveCountersOut {
+        shared: &shared,
+        slots,
+        node: i as usize,
+    };
+    NodeOnLink {
+        link: Box::pin(task.run(&mut port, &shared)),
+        logic: Box::pin(logic(&shared)),
+    }
+    .await
+}
+
 /// What the firmware link's ends counted, kept outside the tasks (a node's link task and
 /// the RC's link live inside theirs).
-struct LinkReport {
-    master: Rc<RefCell<Vec<MasterCounters>>>,
-    slaves: Rc<RefCell<Vec<SlaveCounters>>>,
+pub(super) struct LinkReport {
+    pub(super) master: Rc<RefCell<Vec<MasterCounters>>>,
+    pub(super) slaves: Rc<RefCell<Vec<SlaveCounters>>>,
 }
 
 impl LinkReport {
-    fn new(buses: usize, nodes: u16) -> Self {
+    pub(super) fn new(buses: usize, nodes: u16) -> Self {
         Self {
             master: Rc::new(RefCell::new(vec![MasterCounters::default(); buses])),
             slaves: Rc::new(RefCell::new(vec![SlaveCounters::default(); nodes as usize])),
@@ -658,32 +767,19 @@ fn node_tasks<'a>(
                 })
             }
             Some(wire) => {
-                let mut port = SpiSlave::new(wire, i as u16);
-                let slots = counters.slaves.clone();
+                let (wire, slots) = (wire.clone(), counters.slaves.clone());
                 Box::pin(async move {
                     let mut banks: Box<[Bank; 5]> = Box::new([[0u8; BANK]; 5]);
-                    let [t0, t1, r0, r1, scratch] = &mut *banks;
-                    let (shared, task) = SlaveShared::new(SlaveBanks {
-                        tx: [t0, t1],
-                        rx: [r0, r1],
-                        scratch,
-                    });
-                    let _out = SlaveCountersOut {
-                        shared: &shared,
-                        slots,
-                        node: i,
-                    };
-                    let mut handle = shared.handle();
-                    // The node's link writes broadcast scene chunks straight into the bank
-                    // it is not rendering from, as nc-fw's does.
-                    let mut scene = scene;
-                    let parts = (&mut handle, &shared, &mut work, &mut renderer);
-                    let logic = run_node_landing(node_cfg, parts, &mut scene, report);
-                    let _ = NodeOnLink {
-                        link: Box::pin(task.run(&mut port, &shared)),
-                        logic: Box::pin(logic),
-                    }
-                    .await;
+                    on_slave_link(&wire, i as u16, slots, &mut banks, async move |shared| {
+                        let mut handle = shared.handle();
+                        // The node's link writes broadcast scene chunks straight into the
+                        // bank it is not rendering from, as nc-fw's does.
+                        let mut scene = scene;
+                        let parts = (&mut handle, shared, &mut work, &mut renderer);
+                        // A link error ends the node; the report keeps what it did.
+                        let _ = run_node_landing(node_cfg, parts, &mut scene, report).await;
+                    })
+                    .await
                 })
             }
         };
@@ -698,25 +794,29 @@ type Watched<'a> = (
     &'a RefCell<Vec<Option<Result<RootReport, RootError>>>>,
 );
 
-/// Run the tasks in virtual time until every bus has finished: the time each frame completed
-/// (`keep` is called with the frame as it does), or, under a relay tree, the later time the
-/// root had taken every node frame forwarded until then (`taken`). Stops after 100 000 s of
-/// virtual time, or when no new result arrives over 200 000 executor passes.
+/// Run the tasks in virtual time until every bus has finished (and, under the firmware's
+/// relay code, every relay has passed the root's `Stop` on, `relays_done`): the time each
+/// frame completed (`keep` is called with the frame as it does), or, under the modelled
+/// relay tree, the later time the root had taken every node frame forwarded until then
+/// (`taken`). Stops after 100 000 s of virtual time, or when no new result arrives over
+/// 200 000 executor passes; a stall once every bus has finished is the end (a relay that
+/// never heard the `Stop`).
 fn run_frames(
     clock: &SharedClock,
     tasks: &mut [Option<Task<'_>>],
     (root, bus_results): Watched<'_>,
-    taken: impl Fn() -> Ps,
+    (taken, relays_done): (impl Fn() -> Ps, impl Fn() -> bool),
     mut keep: impl FnMut(u16),
 ) -> Result<Vec<Ps>, ExecError> {
     let mut done_at: Vec<Ps> = Vec::new();
     let (mut last_accepted, mut idle_passes) = (0u64, 0u32);
     let limit: Ps = 100_000 * 1_000_000_000_000; // 100 000 s of virtual time
-    exec::run(
+    let buses_done = || bus_results.borrow().iter().all(|r| r.is_some());
+    let res = exec::run(
         clock,
         tasks,
         limit,
-        || bus_results.borrow().iter().all(|r| r.is_some()),
+        || buses_done() && relays_done(),
         |now| {
             let complete = root.borrow().frames_complete() as usize;
             while done_at.len() < complete {
@@ -733,8 +833,11 @@ fn run_frames(
             }
             idle_passes < 200_000
         },
-    )?;
-    Ok(done_at)
+    );
+    match res {
+        Err(ExecError::Deadlock { .. }) if buses_done() => Ok(done_at),
+        r => r.map(|_| done_at),
+    }
 }
 
 /// What the RC still waits for when a simulation stops unfinished.
@@ -808,6 +911,7 @@ pub fn render_cluster(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, Si
                 topology: Topology::Star,
                 keep_frames: false,
                 deaths: Vec::new(),
+                relay_deaths: Vec::new(),
                 spi_dead: Vec::new(),
                 stuck: Vec::new(),
                 backup_line: false,

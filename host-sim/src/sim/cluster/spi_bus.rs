@@ -21,6 +21,7 @@
 //! buses' node ranges, counters, the noise generator, the collector and the timeline.
 
 use super::exec::{Delay, PollFn, Ps, SharedClock};
+use super::rccost::{LinkCpu, LinkRole};
 use super::star::SharedStar;
 use links_core::board::LinkProfile;
 use links_core::link::{LinkError, NodeId, RootBus, Transfer};
@@ -656,6 +657,8 @@ pub struct FirmwareBus<'s, 'b> {
     started: Option<(Transfer, Ps, usize)>,
     /// Where the link's counters are kept for the report.
     report: Rc<RefCell<Vec<MasterCounters>>>,
+    /// The relay code's CPU work around each transfer (firmware relay tree), if charged.
+    cpu: Option<LinkCpu>,
 }
 
 impl<'s, 'b> FirmwareBus<'s, 'b> {
@@ -693,7 +696,15 @@ impl<'s, 'b> FirmwareBus<'s, 'b> {
             bus,
             started: None,
             report,
+            cpu: None,
         }
+    }
+
+    /// Charge `cpu` with the relay code's work around each transfer: the wire does not
+    /// clock a transfer before the work that precedes it is done, and the work after an
+    /// exchange or broadcast delays the next one (a relay's also the return of `finish`).
+    pub fn with_cpu(self, cpu: Option<LinkCpu>) -> Self {
+        Self { cpu, ..self }
     }
 }
 
@@ -704,6 +715,11 @@ impl RootBus for FirmwareBus<'_, '_> {
 
     fn ready(&self) -> Option<NodeId> {
         self.link.ready()
+    }
+
+    fn line(&self, node: NodeId) -> bool {
+        // The link's, which sees every line (a relay reports each waiting node).
+        self.link.line(node)
     }
 
     async fn wait_ready(&mut self) -> NodeId {
@@ -724,6 +740,9 @@ impl RootBus for FirmwareBus<'_, '_> {
                 at = r.broadcast_ready(self.bus, &frame, now);
             }
         }
+        if let Some(cpu) = &self.cpu {
+            at = at.max(cpu.charge(cpu.before_instructions(len)));
+        }
         // The wire does not clock it before then, whichever master half clocks it.
         self.wire.borrow_mut().buses[self.bus].not_before = at;
         self.link.start(transfer, len)?;
@@ -732,14 +751,40 @@ impl RootBus for FirmwareBus<'_, '_> {
     }
 
     async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
-        let Some((transfer, at, down)) = self.started.take() else {
+        // `started` is taken only once the link's `finish` is done: a caller may drop this
+        // future while it waits (`RelayedBus` races its link against time-outs) and call
+        // again for the same transfer.
+        let Some((transfer, at, down)) = self.started else {
             return self.link.finish(rx).await;
         };
         if at > self.clock.borrow().now {
-            // A relay's scene piece goes out once it has reached this leaf relay.
+            // A relay's scene piece goes out once it has reached this leaf relay (and any
+            // transfer once the relay code's CPU work before it is done).
             Delay::new(&self.clock, at).await;
         }
-        let got = self.link.finish(rx).await?;
+        let got = self.link.finish(rx).await;
+        self.started = None;
+        let got = got?;
+        let broadcast = transfer == Transfer::Broadcast;
+        let after = self.cpu.as_ref().map(|cpu| {
+            let end = cpu.charge(cpu.after_instructions(broadcast, down, got));
+            (end, cpu.role == LinkRole::Relay)
+        });
+        self.account(transfer, down, rx, got);
+        if let Some((end, true)) = after {
+            // The relay logic goes on once it has copied (or checked) what came.
+            if end > self.clock.borrow().now {
+                Delay::new(&self.clock, end).await;
+            }
+        }
+        Ok(got)
+    }
+}
+
+impl FirmwareBus<'_, '_> {
+    /// What the bus did in a transfer that ended now: the counters, the collector's snoop,
+    /// a relay model's forwarded frame.
+    fn account(&mut self, transfer: Transfer, down: usize, rx: &[u8], got: usize) {
         let now = self.clock.borrow().now;
         let mut s = self.star.borrow_mut();
         if let Some(c) = s.counters_mut(self.bus) {
@@ -767,7 +812,6 @@ impl RootBus for FirmwareBus<'_, '_> {
         if let Some(slot) = self.report.borrow_mut().get_mut(self.bus) {
             *slot = self.link.counters();
         }
-        Ok(got)
     }
 }
 

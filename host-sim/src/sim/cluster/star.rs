@@ -321,6 +321,9 @@ pub struct Star {
     timeline: Option<SharedTimeline>,
     /// The relay tree above the buses (bus `b` is leaf relay `b`'s), if the topology is one.
     relays: Option<Relays>,
+    /// This star is the root's link to its relays (the firmware's relay code): its
+    /// transfers go to the timeline's root-link row.
+    root_link: bool,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -369,6 +372,7 @@ impl Star {
             noise: NoiseGen::new(Noise::default()),
             timeline: None,
             relays: None,
+            root_link: false,
         }))
     }
 
@@ -380,6 +384,13 @@ impl Star {
     /// Log every transfer from now on into `log`.
     pub fn set_timeline(&mut self, log: SharedTimeline) {
         self.timeline = Some(log);
+    }
+
+    /// Log every transfer from now on into `log`'s root-link row: this star's one bus is
+    /// the root's link to its relays (its "nodes").
+    pub fn set_root_link_timeline(&mut self, log: SharedTimeline) {
+        self.timeline = Some(log);
+        self.root_link = true;
     }
 
     /// Put a relay tree above the buses: bus `b` is leaf relay `b`'s.
@@ -636,8 +647,10 @@ impl Star {
 
     /// Log a transfer on the timeline, if one is recorded.
     pub fn log_transfer(&self, bus: usize, node: Option<NodeId>, start: Ps, end: Ps) {
-        if let Some(log) = &self.timeline {
-            log.borrow_mut().transfer(bus, node, start, end);
+        match &self.timeline {
+            Some(log) if self.root_link => log.borrow_mut().root_transfer(node, start, end),
+            Some(log) => log.borrow_mut().transfer(bus, node, start, end),
+            None => {}
         }
     }
 }

@@ -52,6 +52,9 @@ pub struct Timeline {
     pub exchanges: Vec<Vec<Interval>>,
     /// Per bus: its transfers.
     pub bus: Vec<Vec<BusTransfer>>,
+    /// The root's link to its relays (the firmware's relay code in the loop): its
+    /// transfers, `node` the relay exchanged with.
+    pub root_link: Vec<BusTransfer>,
     /// The RC's CPU (one for all buses): composing, checking and decoding frames.
     pub rc: Vec<Interval>,
     /// Frame 0's size and, per pixel (row-major), the node that rendered it ([`NO_NODE`]:
@@ -112,6 +115,7 @@ impl Timeline {
             compute: vec![Vec::new(); nodes as usize],
             exchanges: vec![Vec::new(); nodes as usize],
             bus: vec![Vec::new(); buses],
+            root_link: Vec::new(),
             rc: Vec::new(),
             width,
             height,
@@ -158,6 +162,16 @@ impl Timeline {
                 row.push(at);
             }
         }
+    }
+
+    /// The root's link to its relays carried a transfer from `start` to `end`: an exchange
+    /// with relay `relay`, or a broadcast.
+    pub fn root_transfer(&mut self, relay: Option<NodeId>, start: Ps, end: Ps) {
+        let at = Interval { start, end };
+        if at.is_empty() || !self.budget.take() {
+            return;
+        }
+        self.root_link.push(BusTransfer { at, node: relay });
     }
 
     /// Node `node` rendered `len` pixels of frame 0's row `y` from column `x`.

@@ -27,7 +27,12 @@
 //! either link can make the relay panic; no heap: the relay's buffers are the caller's.
 //!
 //! Limits of this version: [`RelayedBus`] has one node exchange in flight per root bus (a
-//! frame crosses the parent's link twice per exchange, request down and frame up). A relay
+//! frame crosses the parent's link twice per exchange, request down and frame up). The
+//! request goes on the link from `start` when its relay's line is up (so the root logic's
+//! work overlaps it); until the frame is up the asked node's relay is exchanged with
+//! whenever its line is up, other ready relays otherwise (refreshing their `waiting`
+//! maps). The simulator runs this code (`links render --relay firmware`) and measures the
+//! cost of the one exchange in flight (`docs/cluster.md`). A relay
 //! that stops answering costs the root a time-out per exchange ([`RelayedBus::with_timeout`];
 //! without one, `finish` waits for ever).
 
@@ -40,10 +45,18 @@ pub use batch::{
     MAX_RELAY_NODES, MAX_ROUTED, RECORD, TAG_BATCH, TAG_FORWARD,
 };
 pub use node::{run_relay, RelayBuffers, RelayReport};
-pub use root::{RelayedBuffers, RelayedBus, RelayedCounters};
+pub use root::{RelayedBuffers, RelayedBus, RelayedCounters, MAX_RELAYS};
 
 use crate::cluster::link::{LinkError, NodeId};
 use core::fmt;
+
+/// How long the root of a relay tree lets a node exchange through a relay wait for the
+/// node's frame before it gives the exchange up ([`RelayedBus::with_timeout`], µs): the
+/// firmware's (`rc_fw::link::RELAY_TIMEOUT_US`) and the simulator's. A live relay answers
+/// within a few exchanges on each bus (each well under a millisecond); the root logic's own
+/// node time-out (`RootConfig::DEFAULT_TIMEOUT_US`) then retires the nodes of a relay that
+/// stopped.
+pub const RELAY_TIMEOUT_US: u64 = 20_000;
 
 /// What went wrong on a relay link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

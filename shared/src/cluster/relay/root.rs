@@ -9,7 +9,7 @@ use crate::cluster::wire::MAX_MESSAGE;
 use embassy_futures::select::{select, Either};
 
 /// Most relays on one link.
-const MAX_RELAYS: usize = 32;
+pub const MAX_RELAYS: usize = 32;
 
 /// What the root's end of the relay link saw.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -334,6 +334,18 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
         self.started = Some((op, len));
         self.answer = None;
         self.idle ^= 1;
+        // Put the request on the link now if its relay's line is up and the link is free:
+        // the root logic decodes the last frame and composes the next reply while it
+        // crosses (else `finish` sends it).
+        if let (Op::Exchange(node), None) = (op, self.dangling) {
+            let (link_first, _) = self.link.nodes();
+            if let Some((r, _)) = self.place(node) {
+                if self.link.line(link_first.wrapping_add(r)) {
+                    // A failure leaves it to `finish`, which sends it again.
+                    let _ = self.start_gather(r, Some((node, len)));
+                }
+            }
+        }
         Ok(())
     }
 
@@ -356,15 +368,22 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
             Op::Exchange(node) => {
                 // Gather from ready relays (round the link) until the node's frame is up,
                 // with the request to every exchange with its relay; give up at the
-                // deadline (a relay that stopped answering).
+                // deadline (a relay that stopped answering). The node's relay goes first
+                // whenever its line is up: the round would come back to it last (the
+                // link's scan starts after the relay last exchanged with), and only its
+                // exchanges bring the frame that ends this one.
                 let deadline = self.clock.now_us().saturating_add(self.timeout_us);
+                let (link_first, _) = self.link.nodes();
+                let own = self.place(node).map(|(r, _)| link_first.wrapping_add(r));
                 while self.answer.is_none() {
                     // (Checked before waiting too: other relays may be ready all the time.)
                     let late = self.timeout_us > 0 && self.clock.now_us() >= deadline;
-                    let relay = if self.timeout_us == 0 {
-                        Some(self.link.wait_ready().await)
-                    } else if late {
+                    let relay = if late {
                         None
+                    } else if let Some(own) = own.filter(|&r| self.link.line(r)) {
+                        Some(own)
+                    } else if self.timeout_us == 0 {
+                        Some(self.link.wait_ready().await)
                     } else {
                         match select(self.link.wait_ready(), self.clock.at_us(deadline)).await {
                             Either::First(relay) => Some(relay),

@@ -1,0 +1,230 @@
+//! The cluster simulation with the firmware's relay code in the loop (`--relay firmware`,
+//! `SimConfig::relay`): the root's `run_bus` over `links_core::relay::RelayedBus` on an
+//! emulated SPI link to its relays, each relay's `run_relay` between a slave link on it and
+//! the split master of its own bus, the nodes on the relays' buses, all on the firmware
+//! link in virtual time. Frames bit-identical to the single-node render; a relay that stops
+//! answering and bit errors on the root's link cost time, never the frame; what the firmware
+//! root cannot drive is refused with the reason.
+
+use links_core::board::BoardProfile;
+use links_core::sched::{Policy, Split};
+use links_host::cluster::relay::{RelayCode, Topology};
+use links_host::cluster::spi_bus::LinkModel;
+use links_host::cluster::star::{NodeDeath, Noise};
+use links_host::cluster::{simulate, simulate_frame, SimConfig, SimReport};
+use links_tests::{bundled_image as image, host_reference as reference};
+
+fn run(img: &[u8], cfg: SimConfig) -> SimReport {
+    let cfg = SimConfig {
+        keep_frames: true,
+        ..cfg
+    };
+    simulate_frame(img, &cfg).unwrap_or_else(|e| panic!("{cfg:?}: {e}"))
+}
+
+/// `nodes` nodes on the F407 as built (a relay tree past 8), the firmware's relay code.
+fn firmware(nodes: u16) -> SimConfig {
+    SimConfig {
+        relay: RelayCode::Firmware,
+        ..SimConfig::buildable(BoardProfile::F407, nodes)
+    }
+}
+
+/// What every clean run through the firmware's relays shows.
+fn check_clean(what: &str, r: &SimReport, relays: usize) {
+    let f = r.relayed.as_ref().expect("the firmware's relay code ran");
+    assert_eq!(f.relays.len(), relays, "{what}");
+    assert!(
+        f.relays.iter().all(Option::is_some),
+        "{what}: every relay passed the Stop on"
+    );
+    let routed: u32 = f.relays.iter().flatten().map(|r| r.routed).sum();
+    // Every exchange the root made with a node was clocked by a relay on its bus.
+    assert_eq!(routed, r.root.exchanges, "{what}");
+    let leaf: u64 = r.bus.iter().map(|b| b.exchanges).sum();
+    assert_eq!(leaf, r.root.exchanges as u64, "{what}");
+    for rep in f.relays.iter().flatten() {
+        // Every root broadcast reached each relay's bus once, and the final Stop.
+        assert_eq!(rep.forwarded, r.root.broadcasts + 1, "{what}");
+        assert_eq!(rep.bad_frames, 0, "{what}");
+    }
+    assert_eq!((f.root.timeouts, f.root.bad_batches), (0, 0), "{what}");
+    assert_eq!(r.root.bad_messages, 0, "{what}");
+    let link = r.link.expect("the firmware link ran");
+    assert!(!link.any(), "{what}: {link:?}");
+    // One node exchange in flight: its request goes down in one exchange on the root's
+    // link and the node's frame comes up in a later one.
+    assert!(
+        f.root.link_exchanges >= 2 * r.root.exchanges,
+        "{what}: {:?}",
+        f.root
+    );
+    let tree = r.tree.as_ref().expect("the root link's report");
+    assert_eq!(
+        tree.links[0].exchanges, f.root.link_exchanges as u64,
+        "{what}"
+    );
+    assert_eq!(tree.links[0].exchanges, f.link.exchanges, "{what}");
+    assert!(tree.root_busy_s > 0.0 && r.rc_busy_s > 0.0, "{what}");
+}
+
+#[test]
+fn the_firmware_relay_code_renders_the_single_node_frame() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let policies = [Policy::DECREASING, Policy::Static { shape: Split::Rect }];
+    for (nodes, relays) in [(16u16, 2usize), (24, 3), (64, 8)] {
+        for policy in policies {
+            let r = run(
+                &img,
+                SimConfig {
+                    policy,
+                    ..firmware(nodes)
+                },
+            );
+            let what = format!("{nodes} nodes, {policy:?}");
+            assert!(r.frames[0] == want, "{what}");
+            assert_eq!(r.root.pixels, 64 * 60, "{what}");
+            check_clean(&what, &r, relays);
+        }
+    }
+}
+
+#[test]
+fn a_repeated_still_through_the_firmware_relays_is_exact_every_frame() {
+    let img = image("photo1.ron", 48, 45);
+    let want = reference(&img);
+    let cfg = SimConfig {
+        keep_frames: true,
+        ..firmware(16)
+    };
+    let r = simulate(&[&img, &img, &img], &cfg).expect("runs");
+    assert_eq!(r.frames.len(), 3);
+    assert!(r.frames.iter().all(|f| *f == want));
+    check_clean("3 frames", &r, 2);
+    assert!(r.frame_done_s.windows(2).all(|w| w[0] < w[1]));
+}
+
+#[test]
+fn bit_errors_on_the_root_link_cost_retries_never_the_frame() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    for (up, down) in [(3e-5, 0.0), (0.0, 3e-5)] {
+        let r = run(
+            &img,
+            SimConfig {
+                noise: Noise {
+                    ber_up: up,
+                    ber_down: down,
+                    drop_broadcast: 0.0,
+                    seed: 11,
+                },
+                ..firmware(16)
+            },
+        );
+        let what = format!("bit errors up {up}, down {down}");
+        assert!(r.frames[0] == want, "{what}");
+        let f = r.relayed.expect("the firmware's relay code ran");
+        assert!(
+            f.link.corrupted_up + f.link.corrupted_down > 0,
+            "{what}: errors hit the root's link: {:?}",
+            f.link
+        );
+        let link = r.link.expect("the firmware link ran");
+        assert!(link.any(), "{what}: the links saw them: {link:?}");
+    }
+}
+
+/// Relay 1 of 2 stops answering at one of several moments of a 64x60 frame (before its
+/// nodes hold work, while they do, near the end): the frame is always the single-node
+/// render. Among the moments, the root gives a node exchange up at the relay time-out, and
+/// its node time-out retires the dead relay's nodes, whose work goes to relay 0's.
+#[test]
+fn a_relay_that_stops_answering_costs_its_nodes_not_the_frame() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    let (mut relay_timeouts, mut declared_dead) = (0, 0);
+    for ms in [5.0, 10.0, 12.0, 15.0, 20.0, 25.0, 30.0] {
+        let r = run(
+            &img,
+            SimConfig {
+                relay_deaths: vec![NodeDeath {
+                    node: 1,
+                    at_s: ms * 1e-3,
+                }],
+                node_timeout_s: 0.05,
+                ..firmware(16)
+            },
+        );
+        assert!(r.frames[0] == want, "relay 1 dead at {ms} ms");
+        let f = r.relayed.expect("the firmware's relay code ran");
+        assert!(
+            f.relays[0].is_some() && f.relays[1].is_none(),
+            "{ms} ms: {:?}",
+            f.relays
+        );
+        relay_timeouts += f.root.timeouts;
+        declared_dead += r.root.timeouts;
+        if r.root.timeouts > 0 {
+            let behind_dead: u64 = r.node_reports[8..].iter().map(|n| n.pixels).sum();
+            let behind_live: u64 = r.node_reports[..8].iter().map(|n| n.pixels).sum();
+            assert!(
+                behind_live > behind_dead,
+                "{ms} ms: {behind_live} vs {behind_dead}"
+            );
+        }
+    }
+    assert!(
+        relay_timeouts > 0,
+        "a node exchange given up at the relay time-out"
+    );
+    assert!(
+        declared_dead > 0,
+        "nodes behind the dead relay declared dead"
+    );
+}
+
+#[test]
+fn what_the_firmware_root_cannot_drive_is_refused_with_the_reason() {
+    let img = image("photo1.ron", 16, 15);
+    let err = |cfg: SimConfig| simulate_frame(&img, &cfg).unwrap_err().to_string();
+    // Two levels: the firmware's root drives one.
+    let e = err(firmware(72));
+    assert!(e.contains("one level") && e.contains("64 nodes"), "{e}");
+    let e = err(firmware(256));
+    assert!(e.contains("two levels"), "{e}");
+    // The root's children on three buses, the idealised link, uneven relays.
+    let e = err(SimConfig {
+        buses: 3,
+        ..firmware(64)
+    });
+    assert!(e.contains("one SPI bus"), "{e}");
+    let e = err(SimConfig {
+        link: LinkModel::Ideal,
+        ..firmware(16)
+    });
+    assert!(e.contains("firmware link"), "{e}");
+    let e = err(firmware(20));
+    assert!(e.contains("same number of nodes"), "{e}");
+    // A dead relay needs relays run by the firmware's code.
+    let dead = vec![NodeDeath { node: 0, at_s: 0.0 }];
+    let e = err(SimConfig {
+        relay_deaths: dead.clone(),
+        relay: RelayCode::Model,
+        ..firmware(16)
+    });
+    assert!(e.contains("--relay firmware"), "{e}");
+    let e = err(SimConfig {
+        relay_deaths: vec![NodeDeath { node: 2, at_s: 0.0 }],
+        ..firmware(16)
+    });
+    assert!(e.contains("relay 2"), "{e}");
+    // A star has no relays: the option changes nothing there.
+    let star = run(&img, firmware(8));
+    assert!(star.relayed.is_none() && star.tree.is_none());
+    assert_eq!(
+        firmware(8).topology,
+        Topology::Star,
+        "8 nodes are one bus on the F407"
+    );
+}
