@@ -169,7 +169,7 @@ pub fn topology_text(cfg: &SimConfig) -> String {
                 (m, r) => format!(" ({m} mid relays, the root on {r} buses)"),
             },
             match cfg.relay {
-                RelayCode::Model => "",
+                RelayCode::Model => ", modelled relays (--relay firmware runs their code)",
                 RelayCode::Firmware => ", the firmware's relay code",
             }
         ),
@@ -682,12 +682,12 @@ mod tests {
         assert_eq!(topology_note(&f), "");
         assert_eq!(
             topology_text(&f),
-            "relay tree: 8 relays x 8 nodes, 1 level(s)"
+            "relay tree: 8 relays x 8 nodes, 1 level(s), modelled relays (--relay firmware runs their code)"
         );
         let f = config(BoardProfile::F407, 256, 1, None, Policy::DECREASING, b);
         assert_eq!(
             topology_text(&f),
-            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays)"
+            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays), modelled relays (--relay firmware runs their code)"
         );
         let f = config(BoardProfile::F407, 8, 1, None, Policy::DECREASING, b);
         assert_eq!(topology_text(&f), "star, 1 bus(es)");
