@@ -1089,7 +1089,10 @@ mod tests {
         let l2: f64 = u.iter().map(|c| c.to_f64() * c.to_f64()).sum();
         assert!((l2.sqrt() - 1.0).abs() < 1.5 / 65536.0, "{l2}");
         // What it replaces was that far off.
-        let l = Fx::dot3([fx(-12.4), fx(11.6), fx(32.0)], [fx(-12.4), fx(11.6), fx(32.0)]);
+        let l = Fx::dot3(
+            [fx(-12.4), fx(11.6), fx(32.0)],
+            [fx(-12.4), fx(11.6), fx(32.0)],
+        );
         let r = l.sqrt().recip();
         let old: f64 = [fx(-12.4), fx(11.6), fx(32.0)]
             .iter()

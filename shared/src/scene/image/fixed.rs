@@ -602,7 +602,11 @@ mod tests {
             let coarse = Fx::from_f64(dxf * j);
             let far = (x0q + Fx::from_f64(n as f64 - 0.5) * coarse).to_f64();
             let want = (x0f + (n as f64 - 0.5) * dxf) * j;
-            assert!((far - want).abs() / step > 20.0, "{n}: {}", (far - want).abs() / step);
+            assert!(
+                (far - want).abs() / step > 20.0,
+                "{n}: {}",
+                (far - want).abs() / step
+            );
         }
     }
 
