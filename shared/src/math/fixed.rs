@@ -486,6 +486,44 @@ impl Real for Fx {
         }
     }
 
+    /// `v / |v|` from the integers: the components shifted (exactly, or by at most one bit
+    /// from the top of the range) so the largest magnitude is in [2^22, 2^23), their exact
+    /// sum of squares (below 2^48), its rounded square root `L` (23 to 24 significant bits),
+    /// a 32-bit reciprocal `R = floor(2^54 / L)` (one 64-bit division) and each quotient
+    /// `w * R / 2^38` rounded once. Each component is then within half a step of the exact
+    /// `v_i / |v|` plus 2^-6 step (2^-7 each from the shift's and the root's rounding),
+    /// whatever `|v|` is: a vector of length 34 keeps its unit vector's length to 1.5e-5
+    /// (the reciprocal 1 / 34 in Q16.16 is off by 2.6e-4 of itself, and so was the length).
+    fn normalize3(v: [Fx; 3]) -> Option<[Fx; 3]> {
+        if v.iter().any(|c| c.special()) {
+            return None;
+        }
+        let m = v.iter().map(|c| c.0.unsigned_abs()).max().unwrap_or(0);
+        if m == 0 {
+            return None;
+        }
+        // Top bit of m at 22: shift left by up to 22, or right by up to 9 (rounded; the
+        // direction changes by at most 2^-23 relative).
+        let top = 31 - m.leading_zeros() as i32;
+        let w = v.map(|c| {
+            let r = c.0 as i64;
+            if top <= 22 {
+                r << (22 - top)
+            } else {
+                let sh = top - 22;
+                (r + (1 << (sh - 1))) >> sh
+            }
+        });
+        let sum: u64 = w.iter().map(|&x| (x * x) as u64).sum();
+        let l = wide::isqrt_rounded(sum) as u64; // in [2^22, 2^24)
+        let r = (1u64 << 54) / l.max(1); // below 2^32
+        Some(w.map(|x| {
+            let mag = (x.unsigned_abs() * r + (1 << 37)) >> 38; // at most 2^16 + 1
+            let mag = mag.min(ONE_RAW as u64) as i32;
+            Fx(if x < 0 { -mag } else { mag })
+        }))
+    }
+
     #[inline]
     fn unit_scale(m: Fx) -> Fx {
         if m.0 <= 0 || m.special() {
@@ -1128,6 +1166,67 @@ mod tests {
             Fx::dot3([fx(2.0), fx(-3.0), fx(0.5)], [fx(1.0), fx(1.0), fx(4.0)]).to_f64(),
             1.0
         );
+    }
+
+    /// Unit vectors from vectors of every length the format holds: each component within
+    /// half a step (plus 2^-6 step) of the exact `v_i / |v|`, so the length within 1.5
+    /// steps of 1 (`v * (1 / |v|)` is off by as much as the reciprocal's rounding, half a
+    /// step of `1 / |v|`: up to 17 steps for a primary direction of length 34).
+    #[test]
+    fn normalize3_rounds_each_component_once() {
+        let mut seed = 0x5eed_u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            seed >> 33
+        };
+        let mut worst = 0f64;
+        for k in 0..200_000 {
+            // Magnitudes from one step up to the end of the range.
+            let bits = (k % 31) as u32;
+            let v: [Fx; 3] = core::array::from_fn(|_| {
+                let r = (next() as u32 >> (31 - bits)) as i32;
+                Fx::from_raw(if next() & 1 == 0 { r } else { -r })
+            });
+            let Some(u) = Fx::normalize3(v) else {
+                assert!(v.iter().all(|c| c.raw() == 0), "{v:?}");
+                continue;
+            };
+            let f: [f64; 3] = v.map(|c| c.raw() as f64);
+            let len = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+            for i in 0..3 {
+                let exact = f[i] / len * 65536.0;
+                let err = (u[i].raw() as f64 - exact).abs();
+                worst = worst.max(err);
+                assert!(err <= 0.5 + 1.0 / 64.0, "{v:?}: {:?} vs {exact}", u[i]);
+            }
+        }
+        assert!(worst > 0.49, "{worst}");
+        // A primary direction of length 34 (the case that motivated it).
+        let u = Fx::normalize3([fx(-12.4), fx(11.6), fx(32.0)]).unwrap();
+        let l2: f64 = u.iter().map(|c| c.to_f64() * c.to_f64()).sum();
+        assert!((l2.sqrt() - 1.0).abs() < 1.5 / 65536.0, "{l2}");
+        // What it replaces was that far off.
+        let l = Fx::dot3(
+            [fx(-12.4), fx(11.6), fx(32.0)],
+            [fx(-12.4), fx(11.6), fx(32.0)],
+        );
+        let r = l.sqrt().recip();
+        let old: f64 = [fx(-12.4), fx(11.6), fx(32.0)]
+            .iter()
+            .map(|&c| (c * r).to_f64().powi(2))
+            .sum();
+        assert!((old.sqrt() - 1.0).abs() > 3.0 / 65536.0, "{old}");
+        // No direction: zero, or a special value anywhere.
+        assert!(Fx::normalize3([Fx::ZERO; 3]).is_none());
+        assert!(Fx::normalize3([Fx::ONE, Fx::NAN, Fx::ZERO]).is_none());
+        assert!(Fx::normalize3([Fx::ONE, Fx::ZERO, Fx::INFINITY]).is_none());
+        // Exact where the direction is an axis, at any length.
+        for r in [1, 3, 1 << 16, i32::MAX - 1] {
+            let u = Fx::normalize3([Fx::ZERO, Fx::from_raw(-r), Fx::ZERO]).unwrap();
+            assert_eq!(u.map(Fx::raw), [0, -ONE_RAW, 0]);
+        }
     }
 
     #[test]

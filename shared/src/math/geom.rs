@@ -61,19 +61,7 @@ impl<T: Real> Vec3<T> {
     /// Unit vector, or `None` when the length is zero or not finite.
     #[inline]
     pub fn try_normalize(self) -> Option<Self> {
-        // Fixed point: scale a short vector up first (exactly, by a power of two) so its
-        // length keeps its significant bits.
-        let v = if T::ABSOLUTE_ROUNDING {
-            self * T::unit_scale(self.max_abs())
-        } else {
-            self
-        };
-        let l = v.length();
-        if l > T::ZERO && l.is_finite() {
-            Some(v * l.recip())
-        } else {
-            None
-        }
+        T::normalize3([self.x, self.y, self.z]).map(|[x, y, z]| Self::new(x, y, z))
     }
     /// Unit vector; a zero vector stays zero (callers guarantee non-degenerate input).
     #[inline]

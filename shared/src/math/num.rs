@@ -96,6 +96,23 @@ pub trait Real:
     fn unit_scale(_m: Self) -> Self {
         Self::ONE
     }
+    /// `v / |v|`, or `None` when the length is zero or not finite.
+    ///
+    /// Floats: `v * (1 / |v|)`. Fixed point overrides it: rounding is absolute there, so a
+    /// reciprocal of a length far from 1 keeps few significant bits, and the unit vector's
+    /// length would be off by up to 2^-16 / (1 / |v|) (2.6e-4 for a primary direction of
+    /// length 34); [`crate::fixed::Fx`] computes the length and the quotients from the
+    /// integers, each component rounded once.
+    #[inline]
+    fn normalize3(v: [Self; 3]) -> Option<[Self; 3]> {
+        let l = Self::dot3(v, v).sqrt();
+        if l > Self::ZERO && l.is_finite() {
+            let r = l.recip();
+            Some([v[0] * r, v[1] * r, v[2] * r])
+        } else {
+            None
+        }
+    }
     /// A scalar as stored in a SceneImage of format [`Real::STORAGE`].
     #[inline(always)]
     fn from_stored(bits: u32) -> Self {

@@ -1,7 +1,9 @@
 //! Boxes (LINKS-1 primitive 4): the cube [-1, 1]³ under an affine map, so axis-aligned and
 //! rotated/scaled boxes share one test. `q = M (p - c)`, `L = M⁻¹`.
 
-use super::ellipsoid::{abs_mat_vec, storage_error, LocalSurface};
+use super::ellipsoid::{
+    abs_mat_vec, local_origin, local_origin_error, storage_error, LocalSurface,
+};
 use crate::geom::{Ray, Vec3};
 use crate::num::Real;
 
@@ -17,7 +19,11 @@ pub struct BoxHit<T> {
 impl<T: Real> BoxShape<T> {
     /// First crossing in (0, t_max).
     pub fn intersect(&self, ray: &Ray<T>, t_max: T) -> Option<BoxHit<T>> {
-        let o = self.m.mul_vec(ray.origin - self.center);
+        // Fixed point starts from the ray's point nearest the centre (see `local_origin`):
+        // from the eye the unit-frame origin is some 20 half-sizes away, and a slab root
+        // (±1 - o) / d then carried the reciprocal's rounding 20-fold.
+        let (tc, o) = local_origin(&self.m, self.center, ray);
+        let o_err = local_origin_error(&self.m);
         let d = self.m.mul_vec(ray.dir);
         let mut t0 = -T::MAX;
         let mut t1 = T::MAX;
@@ -37,12 +43,26 @@ impl<T: Real> BoxShape<T> {
                 let inv = di.recip();
                 let mut tn = (-T::ONE - oi) * inv;
                 let mut tf = (T::ONE - oi) * inv;
+                if T::ABSOLUTE_ROUNDING {
+                    tn = tc + tn;
+                    tf = tc + tf;
+                }
                 let (mut fnear, mut ffar) = (axis as u8, axis as u8 | 4);
                 if tn > tf {
                     core::mem::swap(&mut tn, &mut tf);
                     core::mem::swap(&mut fnear, &mut ffar);
                 }
-                let err = T::err_gamma(4) * (oi.abs() + T::ONE) * inv.abs();
+                let err = if T::ABSOLUTE_ROUNDING {
+                    // Absolute rounding: the origin's error (o_err) and the reciprocal's
+                    // (half a step, and d's own half step grown by inv^2) times
+                    // |±1 - o| <= |o| + 1, the product's half step; the sum with tc is
+                    // exact.
+                    let span = oi.abs() + T::ONE;
+                    (o_err + span * inv.abs() * T::epsilon()) * inv.abs()
+                        + (span + T::ONE) * T::epsilon()
+                } else {
+                    T::err_gamma(4) * (oi.abs() + T::ONE) * inv.abs()
+                };
                 if tn > t0 {
                     t0 = tn;
                     f0 = fnear;
@@ -71,9 +91,15 @@ impl<T: Real> BoxShape<T> {
     /// Hit point snapped onto its face, error bound, outward normal, local point.
     /// `storage_eps`: see [`super::ellipsoid::Ellipsoid::surface`].
     pub fn surface(&self, ray: &Ray<T>, hit: &BoxHit<T>, storage_eps: T) -> LocalSurface<T> {
-        let o = self.m.mul_vec(ray.origin - self.center);
+        // From the same nearby point as `intersect` (fixed point; the origin for floats).
+        let (tc, o) = local_origin(&self.m, self.center, ray);
         let d = self.m.mul_vec(ray.dir);
-        let mut q = o + d * hit.t;
+        let t = if T::ABSOLUTE_ROUNDING {
+            hit.t - tc
+        } else {
+            hit.t
+        };
+        let mut q = o + d * t;
         let axis = (hit.face & 3) as usize;
         let side = if hit.face & 4 != 0 { T::ONE } else { -T::ONE };
         let clamp = |v: T| v.max(-T::ONE).min(T::ONE);
@@ -94,8 +120,15 @@ impl<T: Real> BoxShape<T> {
             }
         }
         let p = self.center + self.l.mul_vec(q);
-        let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
-            + storage_error(&self.m, &self.l, q, storage_eps);
+        let p_error = if T::ABSOLUTE_ROUNDING {
+            // Fixed point: q lies exactly on the face, L q rounds by half a step, the sum
+            // with the centre is exact (the relative bound below grows with |centre|:
+            // glass.ron's box, 33 steps above the floor, sent rays through it).
+            Vec3::splat(T::epsilon()) + storage_error(&self.m, &self.l, q, storage_eps)
+        } else {
+            (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
+                + storage_error(&self.m, &self.l, q, storage_eps)
+        };
         let n = self.m.mul_transpose_vec(n_local).normalize();
         LocalSurface {
             p,
@@ -181,6 +214,97 @@ mod tests {
         };
         let r = Ray::new(Vec3::new(-8.0f32, 0.0, 9.0), Vec3::new(1.0f32, 0.0, 6e-8));
         assert!(bf.intersect(&r, f32::MAX).is_some());
+    }
+
+    /// glass.ron's glass box as the fixed-point renderer sees it (scaled by 1/2: half-size
+    /// 1, turned 30 degrees about y, 10 units from the eye), hit from the eye: the Q16.16
+    /// hit point and error bound against f64 on the same stored numbers. The bound was
+    /// 6 steps times |centre| + |L q| and more: the box stands 33 steps above glass.ron's
+    /// floor, and rays leaving its bottom were pushed through the floor.
+    #[test]
+    fn q16_16_box_hits_are_within_steps_of_f64() {
+        use crate::num::Fx;
+        let fx = |v: Vec3<f64>| Vec3::new(Fx::from_f64(v.x), Fx::from_f64(v.y), Fx::from_f64(v.z));
+        let back = |v: Vec3<Fx>| Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64());
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        let rot = Mat3 {
+            r: [
+                Vec3::new(c, 0.0, s),
+                Vec3::new(0.0, 1.0, 0.0),
+                Vec3::new(-s, 0.0, c),
+            ],
+        };
+        let half = [1.0, 0.9995, 1.0];
+        // m = diag(1/half) R^T (view -> unit), l = R diag(half).
+        let m = Mat3 {
+            r: [0, 1, 2]
+                .map(|i| Vec3::new(rot.r[0][i], rot.r[1][i], rot.r[2][i]) * (1.0 / half[i])),
+        };
+        let l = Mat3 {
+            r: rot
+                .r
+                .map(|row| Vec3::new(row.x * half[0], row.y * half[1], row.z * half[2])),
+        };
+        let bfx = BoxShape {
+            center: fx(Vec3::new(1.75, 1.0005, 10.5)),
+            m: Mat3 { r: m.r.map(fx) },
+            l: Mat3 { r: l.r.map(fx) },
+        };
+        let exact = BoxShape {
+            center: back(bfx.center),
+            m: Mat3 {
+                r: bfx.m.r.map(back),
+            },
+            l: Mat3 {
+                r: bfx.l.r.map(back),
+            },
+        };
+        let step = 1.0 / 65536.0;
+        let (mut worst_p, mut worst_bound, mut hits) = (0f64, 0f64, 0);
+        let mut least_old = f64::MAX;
+        for i in 0..60 {
+            for j in 0..60 {
+                let aim = Vec3::new(
+                    1.75 + (i as f64 - 29.5) * 0.05,
+                    1.0 + (j as f64 - 29.5) * 0.05,
+                    10.5,
+                );
+                let rfx = Ray::new(Vec3::zero(), fx(aim).normalize());
+                let r64 = Ray::new(Vec3::zero(), back(rfx.dir));
+                let (Some(h), Some(h64)) = (
+                    bfx.intersect(&rfx, Fx::MAX),
+                    exact.intersect(&r64, f64::MAX),
+                ) else {
+                    continue;
+                };
+                if h.face != h64.face {
+                    continue; // an edge, within rounding
+                }
+                hits += 1;
+                let sfx = bfx.surface(&rfx, &h, Fx::from_raw(1));
+                let s64 = exact.surface(&r64, &h64, 0.0);
+                let p = back(sfx.p);
+                let off_face = s64.n.dot(p - s64.p).abs();
+                let bound = s64.n.abs().dot(back(sfx.p_error));
+                assert!(off_face <= bound, "{aim:?}: {off_face} > bound {bound}");
+                worst_p = worst_p.max((p - s64.p).length() / step);
+                worst_bound = worst_bound.max(bound / step);
+                // The relative bound it replaces (what floats use, with eps = 2^-16).
+                let q = s64.local.abs();
+                let lq = abs_mat_vec(&exact.l, q);
+                let old = (exact.center.abs() + lq) * (6.0 * step)
+                    + abs_mat_vec(&exact.l, abs_mat_vec(&exact.m, lq)) * (3.0 * step);
+                least_old = least_old.min(s64.n.abs().dot(old) / step);
+            }
+        }
+        assert!(hits > 2000, "{hits}");
+        // Measured: the hit point within 4.9 steps (t to a step or two from the nearby
+        // point, q's rounding, times |L| ~ 1); the bound at most 12.3 steps along the
+        // normal (a step for L q, and the stored entries' half steps, summed as if they
+        // all added up), where the relative bound was at least 80.
+        assert!(worst_p < 6.0, "hit point {worst_p} steps");
+        assert!(worst_bound < 14.0, "bound {worst_bound} steps");
+        assert!(least_old > 40.0, "old bound {least_old} steps");
     }
 
     #[test]

@@ -22,6 +22,11 @@ pub enum EllipsoidPart {
 pub struct EllipsoidHit<T> {
     pub t: T,
     pub part: EllipsoidPart,
+    /// Fixed point, on the shell: the hit's parameter along the unit-frame unit direction
+    /// from [`local_origin`]'s point, so [`Ellipsoid::surface`] rebuilds the unit-frame
+    /// point from the root itself (through `t` it carried t's rounding times |M d|, four
+    /// times over for glass.ron's lens). Zero otherwise (floats rebuild it from `t`).
+    pub s: T,
 }
 
 /// A surface point with its error bound, geometric normal and local (unit-frame) point.
@@ -33,15 +38,62 @@ pub struct LocalSurface<T> {
     pub local: Vec3<T>,
 }
 
+/// Where fixed point solves a ray against a quadric (ellipsoid or box) from: the ray's
+/// point `origin + dir * tc` nearest the shape's centre in view space (for a unit `dir`;
+/// a longer or shorter one takes the quotient), and the unit-frame origin `M (that point -
+/// centre)`. Rounding is absolute in fixed point: from the ray's own origin the unit-frame
+/// point `M (origin - centre)` is as large as the distance to the shape in radii (26 for
+/// glass.ron's lens seen from the eye), and every parameter of it is then off by that
+/// times the relative error of a quantity near 1 (a unit direction's length is known to
+/// 2^-17, so 2e-4 of a radius along the ray, the lens's normals off by 3e-3 rad). From
+/// the nearby point the unit-frame values stay near 1. `tc` is 0 for floats (which
+/// round relatively and keep the ray's origin), so their results are unchanged.
+#[inline]
+pub(crate) fn local_origin<T: Real>(m: &Mat3<T>, center: Vec3<T>, ray: &Ray<T>) -> (T, Vec3<T>) {
+    if !T::ABSOLUTE_ROUNDING {
+        return (T::ZERO, m.mul_vec(ray.origin - center));
+    }
+    let along = (center - ray.origin).dot(ray.dir);
+    let a = ray.dir.length_sq();
+    let tc = if (a - T::ONE).abs() <= T::err_gamma(4) {
+        along
+    } else {
+        along / a
+    };
+    // A ray that passes too far from the centre to hold the point overflows to a
+    // non-finite value, which every comparison below treats as a miss.
+    (tc, m.mul_vec(ray.origin + ray.dir * tc - center))
+}
+
+/// The bound on the rounding of [`local_origin`]'s unit-frame point in fixed point: the
+/// view-space point is rounded by half a step per coordinate, which `m` stretches by at
+/// most its largest absolute row sum, and the product rounds once more. Zero for floats,
+/// whose bounds already cover `M (origin - centre)`.
+#[inline]
+pub(crate) fn local_origin_error<T: Real>(m: &Mat3<T>) -> T {
+    if !T::ABSOLUTE_ROUNDING {
+        return T::ZERO;
+    }
+    let one = Vec3::splat(T::ONE);
+    let rows = m.r[0]
+        .abs()
+        .dot(one)
+        .max(m.r[1].abs().dot(one))
+        .max(m.r[2].abs().dot(one));
+    (rows + T::ONE) * T::epsilon()
+}
+
 impl<T: Real> Ellipsoid<T> {
     /// First crossing in (0, t_max).
     pub fn intersect(&self, ray: &Ray<T>, t_max: T) -> Option<EllipsoidHit<T>> {
-        let o_view = self.m.mul_vec(ray.origin - self.center);
+        let (tc, o_view) = local_origin(&self.m, self.center, ray);
         let d_view = self.m.mul_vec(ray.dir);
         // Fixed point: solve along the unit direction from the ray's closest approach to the
         // centre, so every unit-frame quantity stays near 1: |o|² overflows Q16.16 once the
         // eye is 181 radii away, and a = |d|² of a large ellipsoid keeps too few bits for a
-        // grazing ray's discriminant. t is mapped back to the ray's parameter below.
+        // grazing ray's discriminant. t is mapped back to the ray's parameter below (from
+        // `local_origin`'s point, which is already near the centre, the shift is short, so
+        // the unit direction's own rounding, 2^-17 of its length, moves t by little).
         let (o, d, a, shift, speed) = if T::ABSOLUTE_ROUNDING {
             let dn = d_view.normalize();
             let s = -o_view.dot(dn);
@@ -75,11 +127,15 @@ impl<T: Real> Ellipsoid<T> {
         // Rounding bound of a root: the origin's distance to the surface is known to about
         // gamma(7)(|o|² + 1) in unit-frame units; dividing by the speed |d| gives t.
         let mut t_err = T::err_gamma(7) * (o.length_sq() + T::ONE) / a.sqrt();
+        let (mut s0, mut s1) = (T::ZERO, T::ZERO);
         if T::ABSOLUTE_ROUNDING {
-            t0 = (t0 + shift) / speed;
-            t1 = (t1 + shift) / speed;
-            t_err = (t_err + T::err_gamma(4) * shift.abs()) / speed;
+            (s0, s1) = (t0 + shift, t1 + shift);
+            t0 = tc + s0 / speed;
+            t1 = tc + s1 / speed;
+            t_err = (t_err + T::err_gamma(4) * shift.abs() + local_origin_error(&self.m)) / speed
+                + T::epsilon();
         }
+        // The cut plane below is tested at unit-frame points o + d (t - tc).
         let (o, d) = (o_view, d_view);
         let valid = |t: T| t > t_err && t < t_max;
 
@@ -89,29 +145,36 @@ impl<T: Real> Ellipsoid<T> {
                     Some(EllipsoidHit {
                         t: t0,
                         part: EllipsoidPart::Shell,
+                        s: s0,
                     })
                 } else if valid(t1) {
                     Some(EllipsoidHit {
                         t: t1,
                         part: EllipsoidPart::Shell,
+                        s: s1,
                     })
                 } else {
                     None
                 }
             }
             Some(cut) => {
-                let kept = |t: T| cut.n.dot(o + d * t) <= cut.d;
+                let kept = |t: T| {
+                    let local = if T::ABSOLUTE_ROUNDING { t - tc } else { t };
+                    cut.n.dot(o + d * local) <= cut.d
+                };
                 if !cut.capped {
                     if valid(t0) && kept(t0) {
                         return Some(EllipsoidHit {
                             t: t0,
                             part: EllipsoidPart::Shell,
+                            s: s0,
                         });
                     }
                     if valid(t1) && kept(t1) {
                         return Some(EllipsoidHit {
                             t: t1,
                             part: EllipsoidPart::Shell,
+                            s: s1,
                         });
                     }
                     return None;
@@ -119,30 +182,36 @@ impl<T: Real> Ellipsoid<T> {
                 // Capped: the solid is [t0, t1] ∩ {t : n·(o + t d) <= d}.
                 let nd = cut.n.dot(d);
                 let no = cut.n.dot(o);
-                let (mut lo, mut lo_part) = (t0, EllipsoidPart::Shell);
-                let (mut hi, mut hi_part) = (t1, EllipsoidPart::Shell);
+                let (mut lo, mut lo_part, mut lo_s) = (t0, EllipsoidPart::Shell, s0);
+                let (mut hi, mut hi_part, mut hi_s) = (t1, EllipsoidPart::Shell, s1);
                 if nd == T::ZERO {
                     if no > cut.d {
                         return None;
                     }
                 } else {
-                    let tp = (cut.d - no) / nd;
+                    let mut tp = (cut.d - no) / nd;
+                    if T::ABSOLUTE_ROUNDING {
+                        tp = tc + tp;
+                    }
                     if nd > T::ZERO {
                         if tp < hi {
-                            hi = tp;
-                            hi_part = EllipsoidPart::Cap;
+                            (hi, hi_part, hi_s) = (tp, EllipsoidPart::Cap, T::ZERO);
                         }
                     } else if tp > lo {
-                        lo = tp;
-                        lo_part = EllipsoidPart::Cap;
+                        (lo, lo_part, lo_s) = (tp, EllipsoidPart::Cap, T::ZERO);
                     }
                 }
                 if lo > hi {
                     return None;
                 }
                 // The plane root's error bound, in the same unit-frame terms.
-                let tp_err =
-                    T::err_gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon());
+                let tp_err = if T::ABSOLUTE_ROUNDING {
+                    (T::err_gamma(5) * (no.abs() + cut.d.abs()) + local_origin_error(&self.m))
+                        / nd.abs().max(T::epsilon())
+                        + T::epsilon()
+                } else {
+                    T::err_gamma(5) * (no.abs() + cut.d.abs()) / nd.abs().max(T::epsilon())
+                };
                 let valid_part = |t: T, part: EllipsoidPart| {
                     let e = if part == EllipsoidPart::Cap {
                         tp_err.max(t_err)
@@ -155,11 +224,13 @@ impl<T: Real> Ellipsoid<T> {
                     Some(EllipsoidHit {
                         t: lo,
                         part: lo_part,
+                        s: lo_s,
                     })
                 } else if valid_part(hi, hi_part) {
                     Some(EllipsoidHit {
                         t: hi,
                         part: hi_part,
+                        s: hi_s,
                     })
                 } else {
                     None
@@ -173,9 +244,19 @@ impl<T: Real> Ellipsoid<T> {
     /// are each rounded from exact inverses, so `m · l` is the identity only to a few of
     /// those units, and the error bound must include it (see [`storage_error`]).
     pub fn surface(&self, ray: &Ray<T>, hit: &EllipsoidHit<T>, storage_eps: T) -> LocalSurface<T> {
-        let o = self.m.mul_vec(ray.origin - self.center);
+        // From the same nearby point as `intersect` (fixed point; the origin for floats).
+        let (tc, o) = local_origin(&self.m, self.center, ray);
         let d = self.m.mul_vec(ray.dir);
-        let mut q = o + d * hit.t;
+        let t = if T::ABSOLUTE_ROUNDING {
+            hit.t - tc
+        } else {
+            hit.t
+        };
+        let mut q = if T::ABSOLUTE_ROUNDING && hit.part == EllipsoidPart::Shell {
+            o + d.normalize() * hit.s
+        } else {
+            o + d * t
+        };
         let n_local = match (hit.part, self.cut) {
             (EllipsoidPart::Cap, Some(cut)) => {
                 // Project onto the plane exactly: q -= n (n·q - d).
@@ -184,14 +265,30 @@ impl<T: Real> Ellipsoid<T> {
             }
             _ => {
                 // Re-project onto the unit sphere.
-                q = q * q.length().recip();
+                q = if T::ABSOLUTE_ROUNDING {
+                    q.normalize()
+                } else {
+                    q * q.length().recip()
+                };
                 q
             }
         };
         let lq = self.l.mul_vec(q);
         let p = self.center + lq;
-        let p_error = (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
-            + storage_error(&self.m, &self.l, q, storage_eps);
+        let p_error = if T::ABSOLUTE_ROUNDING {
+            // Fixed point: sums are exact and a product rounds by half a step whatever its
+            // size, so nothing here grows with |centre| (the relative bound below is 190
+            // steps for a centre 32 units away, and spawned rays were pushed off by that).
+            // On the shell q is a unit vector rounded per component (its length within a
+            // step of 1); on the cap it is off the plane by the rounding of the projection,
+            // a step and a half; L stretches either, and L q rounds once more.
+            let q_err = abs_mat_vec(&self.l, q.abs() + Vec3::splat(T::ONE));
+            (q_err + Vec3::splat(T::ONE)) * T::err_gamma(2)
+                + storage_error(&self.m, &self.l, q, storage_eps)
+        } else {
+            (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
+                + storage_error(&self.m, &self.l, q, storage_eps)
+        };
         let n = self.m.mul_transpose_vec(n_local).normalize();
         LocalSurface {
             p,
@@ -205,9 +302,34 @@ impl<T: Real> Ellipsoid<T> {
 /// Bound on how far `c + l q` can lie off the surface that `m` defines, when `m` and `l` are
 /// separately rounded inverses: `m l = I + E` with `|E| <= 2 eps |m||l|`, so the point is
 /// off by `l E q` in view units, bounded by `2 eps |l||m||l||q|` (first order, padded to 3).
+///
+/// Fixed point (`eps` unused): the DM's f32 matrices are such inverses with eps = 2^-24,
+/// then each entry is rounded to Q16.16 by up to half a step absolutely, which is far
+/// more than 2^-24 relative for entries near 1: `E` gains `ΔM L + M ΔL` with `|ΔM|` at
+/// most half a step where `M` has a nonzero entry (a zero is stored exactly) and likewise
+/// `ΔL`, so `|L E q|` gains `step/2 (|L| Z(M) |L||q| + |L||M| Z(L) |q|)`, `Z(X)` the
+/// matrix of ones where `X` is nonzero.
 pub(crate) fn storage_error<T: Real>(m: &Mat3<T>, l: &Mat3<T>, q: Vec3<T>, eps: T) -> Vec3<T> {
     let lq = abs_mat_vec(l, q.abs());
-    abs_mat_vec(l, abs_mat_vec(m, lq)) * (T::from_i32(3) * eps)
+    let lml = abs_mat_vec(l, abs_mat_vec(m, lq));
+    if !T::ABSOLUTE_ROUNDING {
+        return lml * (T::from_i32(3) * eps);
+    }
+    // 3 * 2^-24 = (3/256) steps; the half steps of the entries counted as whole ones, and
+    // one more for the rounding of the bound itself.
+    let f32_part = lml * T::from_f32(3.0 / 256.0);
+    let entries = abs_mat_vec(l, nonzero_mat_vec(m, lq))
+        + abs_mat_vec(l, abs_mat_vec(m, nonzero_mat_vec(l, q.abs())));
+    (f32_part + entries + Vec3::splat(T::ONE)) * T::epsilon()
+}
+
+/// `Z(M) v`, `Z(M)` having a one where `M` has a nonzero entry (`v >= 0`).
+fn nonzero_mat_vec<T: Real>(m: &Mat3<T>, v: Vec3<T>) -> Vec3<T> {
+    let row = |r: &Vec3<T>| {
+        let pick = |a: T, b: T| if a == T::ZERO { T::ZERO } else { b };
+        pick(r.x, v.x) + pick(r.y, v.y) + pick(r.z, v.z)
+    };
+    Vec3::new(row(&m.r[0]), row(&m.r[1]), row(&m.r[2]))
 }
 
 /// `|L| v` with `|L|` the element-wise absolute matrix: bounds `L v`'s rounding error.
@@ -297,6 +419,93 @@ mod tests {
         let h = open.intersect(&r, f64::MAX).unwrap();
         assert_eq!(h.part, EllipsoidPart::Shell);
         assert!((h.t - 6.0).abs() < 1e-12);
+    }
+
+    /// glass.ron's lens as the fixed-point renderer sees it (scaled by 1/2: radii 0.7, 0.7,
+    /// 0.25, 8 units from the eye), hit from the eye: the Q16.16 hit point, normal and
+    /// error bound against f64 on the same stored numbers, for rays meeting it at up to
+    /// 70 degrees. From the eye itself the unit-frame origin is 32 units out: before
+    /// `local_origin` the worst pixels of glass.ron had the lens's hit point 36 steps off
+    /// and its normal 3.6e-3 rad; the relative error bound was 6 steps times |centre| +
+    /// |L q|, over 50 steps here.
+    #[test]
+    fn q16_16_lens_hits_are_within_steps_of_f64() {
+        use crate::num::Fx;
+        let fx = |v: Vec3<f64>| Vec3::new(Fx::from_f64(v.x), Fx::from_f64(v.y), Fx::from_f64(v.z));
+        let back = |v: Vec3<Fx>| Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64());
+        let mat = |m: Mat3<f64>| Mat3 { r: m.r.map(fx) };
+        let e64 = Ellipsoid {
+            center: Vec3::new(0.1, -1.3, 7.9),
+            m: diag(1.0 / 0.7, 1.0 / 0.7, 4.0),
+            l: diag(0.7, 0.7, 0.25),
+            cut: None,
+        };
+        let efx = Ellipsoid {
+            center: fx(e64.center),
+            m: mat(e64.m),
+            l: mat(e64.l),
+            cut: None,
+        };
+        // f64 on exactly the numbers the Q16.16 ellipsoid holds.
+        let exact = Ellipsoid {
+            center: back(efx.center),
+            m: Mat3 {
+                r: efx.m.r.map(back),
+            },
+            l: Mat3 {
+                r: efx.l.r.map(back),
+            },
+            cut: None,
+        };
+        let step = 1.0 / 65536.0;
+        let (mut worst_p, mut worst_n, mut worst_bound, mut hits) = (0f64, 0f64, 0f64, 0);
+        for i in 0..60 {
+            for j in 0..60 {
+                let aim = Vec3::new(
+                    0.1 + (i as f64 - 29.5) * 0.024,
+                    -1.3 + (j as f64 - 29.5) * 0.024,
+                    7.9,
+                );
+                let rfx = Ray::new(Vec3::zero(), fx(aim).normalize());
+                let r64 = Ray::new(Vec3::zero(), back(rfx.dir));
+                let (Some(h), Some(h64)) = (
+                    efx.intersect(&rfx, Fx::MAX),
+                    exact.intersect(&r64, f64::MAX),
+                ) else {
+                    continue;
+                };
+                let s = efx.surface(&rfx, &h, Fx::from_raw(1));
+                let s64 = exact.surface(&r64, &h64, 0.0);
+                // Nearer the rim the unit-frame chord is short and its root ill-conditioned
+                // (a step of |v| moves it by 1/chord steps), in every format; checked for
+                // rays meeting the surface at up to 70 degrees.
+                if s64.n.dot(r64.dir).abs() < 0.35 {
+                    continue;
+                }
+                hits += 1;
+                let p = back(s.p);
+                // Distance from the surface along the normal, and the offset that the bound
+                // gives along it (offset_ray_origin).
+                let off_surface = s64.n.dot(p - s64.p).abs();
+                let bound = s64.n.abs().dot(back(s.p_error));
+                assert!(
+                    off_surface <= bound,
+                    "{aim:?}: {off_surface} > bound {bound}"
+                );
+                worst_p = worst_p.max((p - s64.p).length() / step);
+                worst_n = worst_n.max((back(s.n) - s64.n).length());
+                worst_bound = worst_bound.max(bound / step);
+            }
+        }
+        assert!(hits > 1500, "{hits}");
+        // Measured: the hit point within 3.1 steps (0.5 step of the direction and of t,
+        // and the root's rounding, which the unit frame's short chord near the rim
+        // magnifies); the normal within 4.1e-4 rad: the lens's radius of curvature near
+        // its rim is 0.09, so a step along the surface (1.5e-5) turns it by 1.7e-4. The
+        // bound: 10.4 steps (2 steps times |L|(|q| + 1) + 1, and the stored entries).
+        assert!(worst_p < 4.0, "hit point {worst_p} steps");
+        assert!(worst_n < 5e-4, "normal {worst_n}");
+        assert!(worst_bound < 12.0, "bound {worst_bound} steps");
     }
 
     #[test]

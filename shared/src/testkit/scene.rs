@@ -45,6 +45,17 @@ impl SceneBuilder {
         }
     }
 
+    /// A camera pixel step (dx, dy) as this image stores it: a Q16.16 image holds it
+    /// 2^[`camera::STEP_BITS`] times finer.
+    pub fn stored_step(&self, x: f32) -> u32 {
+        match self.storage {
+            Storage::F32 => x.to_bits(),
+            Storage::Q16_16 => {
+                ((x as f64 * 65536.0 * (1u32 << camera::STEP_BITS) as f64).round() as i32) as u32
+            }
+        }
+    }
+
     fn stored_all(&self, xs: &[f32]) -> Vec<u32> {
         xs.iter().map(|&x| self.stored(x)).collect()
     }
@@ -60,6 +71,7 @@ impl SceneBuilder {
             .map(|&x| self.stored(x))
             .collect();
         let zero = self.stored(0.0);
+        let steps = [self.stored_step(window[2]), self.stored_step(window[3])];
         self.w
             .push(Section::Camera)
             .1
@@ -67,8 +79,8 @@ impl SceneBuilder {
             .u(camera::HEIGHT, height)
             .u(camera::X0, v[0])
             .u(camera::Y0, v[1])
-            .u(camera::DX, v[2])
-            .u(camera::DY, v[3])
+            .u(camera::DX, steps[0])
+            .u(camera::DY, steps[1])
             .u(camera::BACKGROUND, zero)
             .u(camera::BACKGROUND + 4, zero)
             .u(camera::BACKGROUND + 8, zero)

@@ -58,8 +58,8 @@ impl<T: Real> PlaneCache<T> {
     pub fn max_l1(camera: &crate::image::Camera<T>) -> T {
         let w = T::from_i32(camera.width.min(i32::MAX as u32) as i32);
         let h = T::from_i32(camera.height.min(i32::MAX as u32) as i32);
-        let x = camera.x0.abs().max((camera.x0 + w * camera.dx).abs());
-        let y = camera.y0.abs().max((camera.y0 - h * camera.dy).abs());
+        let x = camera.x0.abs().max((camera.x0 + camera.across(w)).abs());
+        let y = camera.y0.abs().max((camera.y0 - camera.down(h)).abs());
         (x + y + camera.dz.abs()) * T::TWO
     }
 

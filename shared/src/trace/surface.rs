@@ -111,7 +111,13 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 let (g, group) = blob_group(*s, shape.index);
                 let p = ray.at(hit.t);
                 let n = (-group.gradient(p)).normalize();
-                let p_error = ray.dir.abs() * t_error + p.abs() * T::err_gamma(4);
+                // Fixed point: the sum in `at` is exact and each product rounds by half a
+                // step, so no term grows with |p| (4 steps times |p| was up to 128).
+                let p_error = if T::ABSOLUTE_ROUNDING {
+                    ray.dir.abs() * t_error + Vec3::splat(T::epsilon())
+                } else {
+                    ray.dir.abs() * t_error + p.abs() * T::err_gamma(4)
+                };
                 Surface {
                     p,
                     p_error,

@@ -228,8 +228,8 @@ impl<'a, T: Real, S: BorrowMut<TracerState<T>>> Tracer<'a, T, S> {
     #[inline]
     fn eye_direction(&self, x: u32, y: u32, ox: T, oy: T) -> Vec3<T> {
         let f = &self.camera;
-        let dx = f.x0 + (T::from_i32(x as i32) + ox) * f.dx;
-        let dy = f.y0 - (T::from_i32(y as i32) + oy) * f.dy;
+        let dx = f.x0 + f.across(T::from_i32(x as i32) + ox);
+        let dy = f.y0 - f.down(T::from_i32(y as i32) + oy);
         Vec3::new(dx, dy, f.dz)
     }
 

@@ -91,8 +91,15 @@ const MAX_WORDS: usize = 32;
 /// What a word is multiplied by when the scene's lengths are scaled by `scale` and the
 /// camera's directions by `dir_scale` (`None` for an integer, copied): lengths (and box
 /// corners, rounded outward) by 2^k, inverse lengths by 2^-k, a light colour by 2^2k when
-/// the light falls off with distance squared, primary-direction components by 2^j.
-fn factor(kind: Word, falloff_light: bool, scale: f64, dir_scale: f64) -> Option<f64> {
+/// the light falls off with distance squared, primary-direction components by 2^j, their
+/// pixel steps by 2^j times `step_scale` (2^[`camera::STEP_BITS`] in a Q16.16 image).
+fn factor(
+    kind: Word,
+    falloff_light: bool,
+    scale: f64,
+    dir_scale: f64,
+    step_scale: f64,
+) -> Option<f64> {
     match kind {
         U => None,
         P => Some(1.0),
@@ -101,6 +108,7 @@ fn factor(kind: Word, falloff_light: bool, scale: f64, dir_scale: f64) -> Option
         C if falloff_light => Some(scale * scale),
         C => Some(1.0),
         D => Some(dir_scale),
+        S => Some(dir_scale * step_scale),
     }
 }
 
@@ -301,7 +309,7 @@ pub fn rescale_f32(image: &[u8], k: i8) -> Result<Vec<u8>, FixedError> {
     for (s, _, range, words) in records(&view) {
         let falloff = is_falloff_light(image, s, range.clone())?;
         for (kind, word) in words.iter().zip(record_words_mut(&mut out, s, range)?) {
-            if let Some(f) = factor(*kind, falloff, scale, 1.0) {
+            if let Some(f) = factor(*kind, falloff, scale, 1.0, 1.0) {
                 let x = f32_of(word) * f;
                 word.copy_from_slice(&(x as f32).to_le_bytes());
             }
@@ -435,7 +443,8 @@ fn convert(
         }
         let rec = record_words_mut(&mut out, s, range)?;
         for (w, ((kind, word), &v)) in words.iter().zip(rec).zip(f32s.iter()).enumerate() {
-            let Some(f) = factor(*kind, falloff_light, scale, dir_scale) else {
+            let step_scale = (1u32 << crate::image::camera::STEP_BITS) as f64;
+            let Some(f) = factor(*kind, falloff_light, scale, dir_scale, step_scale) else {
                 continue;
             };
             let x = v * f;
@@ -551,6 +560,54 @@ mod tests {
                 record: 0
             }))
         );
+    }
+
+    /// The primary directions of a 512-pixel row in the Q16.16 image: within a step and a
+    /// half of the f32 image's, computed exactly, at every column (with dx stored as plain
+    /// Q16.16, up to half a step per pixel: 128 steps at the far column).
+    #[test]
+    fn pixel_steps_keep_every_column_within_a_step_and_a_half() {
+        use crate::num::{Fx, Real};
+        use crate::testkit::scene::SceneBuilder;
+        let (w, h) = (512u32, 480u32);
+        let (x0, y0) = (-0.388_234_9f32, 0.363_970_2f32);
+        let (dx, dy) = (-2.0 * x0 / w as f32, 2.0 * y0 / h as f32);
+        let mut b = SceneBuilder::new(Storage::F32);
+        b.camera(w, h, [x0, y0, dx, dy], 0.2)
+            .grey_material()
+            .triangle([-1.0, -1.0, 2.0, 1.0, -1.0, 2.0, 0.0, 1.0, 2.0])
+            .node([-1.0, -1.0, 1.0], [1.0, 1.0, 3.0], 1, 0);
+        let img = b.finish();
+        let fixed = to_fixed(&img).expect("fits");
+        let exact = SceneView::new(&img).unwrap().camera::<f64>();
+        let cam = SceneView::new(&fixed.bytes).unwrap().camera::<Fx>();
+        // The direction scale: dz is 1 in the f32 image.
+        let j = cam.dz.to_f64();
+        assert_eq!(j, 32.0);
+        let step = 1.0 / 65536.0;
+        for (n, x0f, dxf, x0q, down) in [
+            (w, exact.x0, exact.dx, cam.x0, false),
+            (h, -exact.y0, exact.dy, -cam.y0, true),
+        ] {
+            let across = |s: Fx| if down { cam.down(s) } else { cam.across(s) };
+            let mut worst = 0f64;
+            for x in 0..n {
+                let s = x as f64 + 0.5;
+                let want = (x0f + s * dxf) * j;
+                let got = (x0q + across(Fx::from_f64(s))).to_f64();
+                worst = worst.max((got - want).abs() / step);
+            }
+            assert!(worst <= 1.5, "{worst} steps");
+            // Plain Q16.16 dx: the far column's error grows with the column.
+            let coarse = Fx::from_f64(dxf * j);
+            let far = (x0q + Fx::from_f64(n as f64 - 0.5) * coarse).to_f64();
+            let want = (x0f + (n as f64 - 0.5) * dxf) * j;
+            assert!(
+                (far - want).abs() / step > 20.0,
+                "{n}: {}",
+                (far - want).abs() / step
+            );
+        }
     }
 
     #[test]

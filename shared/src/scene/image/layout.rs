@@ -186,8 +186,11 @@ pub enum Word {
     I,
     /// A light colour (pre-multiplied when the light falls off with distance squared).
     C,
-    /// A component of the primary directions (x0, y0, dx, dy, dz).
+    /// A component of the primary directions (x0, y0, dz).
     D,
+    /// A pixel step of the primary directions (dx, dy): scaled as [`Word::D`], and in a
+    /// Q16.16 image by 2^[`camera::STEP_BITS`] more.
+    S,
     /// The node grid's step: a power-of-two length that must stay exact.
     G,
 }
@@ -212,6 +215,13 @@ pub mod camera {
     /// [`NO_SHADOWS`]; bits [`AA_SHIFT`].. hold the anti-aliasing grid side N minus one
     /// (0 = one sample per pixel, up to [`MAX_AA`] - 1: N x N sub-pixel samples).
     pub const FLAGS: usize = 52;
+    /// Extra fraction bits of dx and dy in a Q16.16 image: they hold 2^STEP_BITS times the
+    /// scaled step. A step of 0.1 stored as plain Q16.16 is off by up to half a step
+    /// (7.6e-6), which the far column of a 256-pixel row multiplies by 256: its ray turned
+    /// by up to 6e-5 rad, 2% of a pixel, enough to move tile edges seen through glass.
+    /// A row is at most 64 wide after the direction scale (|x0| and |x0 + width dx| are
+    /// both at most 32), so `(x + ½) dx` stays below 2^14 in the finer units.
+    pub const STEP_BITS: u32 = 8;
     /// dz f: the z of every primary direction (1 in f32 images; the fixed-point rewrite
     /// scales x0, y0, dx, dy and dz by one power of two so a pixel step keeps its precision).
     pub const DZ: usize = 56;
@@ -233,7 +243,7 @@ pub mod camera {
     pub const KNOWN_FLAGS: u32 = NON_REFRACTIVE | NO_SHADOWS | AA_MASK;
     #[rustfmt::skip]
     pub const WORDS: [Word; SIZE / 4] = [
-        U, U, D, D, D, D, P, P, P, P, P, P, U, U, D, Lo, Lo, Lo, G, G, G, U,
+        U, U, D, D, S, S, P, P, P, P, P, P, U, U, D, Lo, Lo, Lo, G, G, G, U,
     ];
 }
 

@@ -13,7 +13,7 @@
 
 use crate::geom::{Aabb, Vec3};
 use crate::math::solid::{BoxShape, Ellipsoid, Kernel, Triangle};
-use crate::num::Storage;
+use crate::num::{Real, Storage};
 use core::fmt;
 
 #[cfg(any(test, feature = "std"))]
@@ -139,6 +139,29 @@ pub struct Camera<T> {
     /// Anti-aliasing grid side N (1..=[`camera::MAX_AA`]): each pixel is the mean of N x N
     /// primary rays through the centres of an N x N grid of sub-pixels.
     pub aa: u32,
+}
+
+impl<T: Real> Camera<T> {
+    /// `s dx`, the x offset of the screen point `s` pixels right of x0's.
+    #[inline(always)]
+    pub fn across(&self, s: T) -> T {
+        Self::unstep(s * self.dx)
+    }
+    /// `s dy`, the y offset of the screen point `s` pixels below y0's.
+    #[inline(always)]
+    pub fn down(&self, s: T) -> T {
+        Self::unstep(s * self.dy)
+    }
+    /// A Q16.16 image stores dx and dy 2^[`camera::STEP_BITS`] times finer
+    /// ([`crate::image::fixed`]): the product is scaled back, rounded once more.
+    #[inline(always)]
+    fn unstep(v: T) -> T {
+        if matches!(T::STORAGE, Storage::Q16_16) {
+            v * T::from_f32(1.0 / (1u32 << camera::STEP_BITS) as f32)
+        } else {
+            v
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

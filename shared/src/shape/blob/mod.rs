@@ -48,10 +48,20 @@
 //!
 //! `tol = max(sqrt(eps)/2 · d_min, 64 eps · scale)`, `d_min` the smallest radius among the
 //! balls the ray crosses and `scale` the largest distance from the ray origin to where it
-//! leaves one: 1.2e-4 d for f32, 5.3e-9 d for f64. Half the significant digits is what a
-//! grazing contact can resolve at all: near a tangency `F - T` is quadratic in the distance,
-//! so the rounding noise of `F` (`~eps`) blurs the contact over `~sqrt(eps) d`. The second
-//! term keeps `tol` above the resolution of `t` itself for origins far from the blob.
+//! leaves one: 1.2e-4 d for f32, 5.3e-9 d for f64, 2e-3 d for Q16.16. Half the
+//! significant digits is what a grazing contact can resolve at all: near a tangency
+//! `F - T` is quadratic in the distance, so the rounding noise of `F` (`~eps`) blurs the
+//! contact over `~sqrt(eps) d`. The second term keeps `tol` above the resolution of `t`
+//! itself for origins far from the blob.
+//!
+//! Fixed point (`Real::ABSOLUTE_ROUNDING`) resolves `t` to a step whatever its size, so
+//! there `scale` is 1 and the refinement's resolution is 4 steps (a float's is
+//! `8 eps (scale + |t_min|)`); the field's rounding bound is absolute too (see `sample`),
+//! and a bracket wider than `tol` is narrowed even where `|F - T|` is within that bound
+//! (small balls keep few levels of `q = r²`). The tests run every case in Q16.16 as well,
+//! with tolerances derived from its resolution (`tests.rs`); features thinner than the
+//! format resolves (a neck whose field exceeds `T` by less than its rounding bound, about
+//! 20 steps) are outside the guarantee, as sub-`tol` ones are for floats.
 //!
 //! Cost: a transversal hit takes ~8 passes over the balls (f32) / ~9 (f64); a miss ~3. Each
 //! near-tangency costs `O(log(d / tol))` passes (measured: ~20 in f32, 35-55 in f64 for an
@@ -413,7 +423,23 @@ impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
             // gamma(4) r², i.e. r by <= gamma(10)|oc| + gamma(2) d, with |oc| <= |tc| + d.
             // That moves f by at most |f'| <= lip times as much; the kernel adds
             // gamma(8)|b|.
-            out.err += lip * g10 * (sp.tc.abs() + k.d + k.d) + g8 * k.b.abs();
+            //
+            // Fixed point rounds absolutely, so none of that grows with |oc| (the relative
+            // model made it 160 steps times lip for a ball 10 units away): oc is exact, tc
+            // and the perpendicular oc - u tc are off by half a step per coordinate, so q
+            // by at most (2.74 r + 1) steps, which moves f by |df/dq| <= min(lip / 2r,
+            // curv / 2) times as much: at most (1.4 lip + curv / 2) steps; the square
+            // root's half step moves it by lip / 2 more. The kernel's own rounding, with
+            // the reciprocals 1/d and 1/d² rounded once each, is at most
+            // |b| (1 + d + d²/4) steps and 2 more (measured: 2.3 steps for d = 3, b = 1;
+            // 28.5 for d = 10, b = 1.5; 2.6 for d = 0.3, b = 0.5). The sums are exact.
+            out.err += if T::ABSOLUTE_ROUNDING {
+                let d2_4 = k.d2 * T::HALF * T::HALF;
+                (lip * T::from_i32(3) + curv + k.b.abs() * (T::ONE + k.d + d2_4) + T::TWO)
+                    * T::epsilon()
+            } else {
+                lip * g10 * (sp.tc.abs() + k.d + k.d) + g8 * k.b.abs()
+            };
             sum_abs += f.abs();
             n = n.saturating_add(1);
             // Extremes of f over the window: each kernel decreases with r (for b > 0).
@@ -427,7 +453,9 @@ impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
                 out.lower += f_near;
             }
         }
-        out.err += T::err_gamma(n.saturating_add(2)) * (sum_abs + self.threshold);
+        if !T::ABSOLUTE_ROUNDING {
+            out.err += T::err_gamma(n.saturating_add(2)) * (sum_abs + self.threshold);
+        }
         out
     }
 
@@ -440,7 +468,7 @@ impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
     ///
     /// Guarantees (module docs): no crossing is skipped unless the ray's stretch through
     /// it is shorter than `tol` (1.2e-4 of the smallest crossed radius in f32, 5.3e-9 in
-    /// f64), and hits are reported only at a bracketed sign change. `t_error` bounds
+    /// f64, 2e-3 in Q16.16), and hits are reported only at a bracketed sign change. `t_error` bounds
     /// `|t - t_exact|` to first order: the final bracket, widened by the field's rounding
     /// error divided by the slope along the ray. Where the ray meets the surface almost
     /// tangentially that quotient is capped at `tol` (the position along the ray is
@@ -498,8 +526,17 @@ impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
             return None;
         }
         let eps = T::epsilon();
+        // Fixed point resolves s to a step whatever its size: the scale terms, which keep
+        // a float's tol and t_res above the resolution of s near `scale`, are absolute
+        // there (relative, they stopped the refinement at 8 eps (scale + s), 2e-3 for a
+        // ball 10 units away, 130 steps).
+        let scale = if T::ABSOLUTE_ROUNDING { T::ONE } else { scale };
         let tol = (eps.sqrt() * T::HALF * d_min).max(T::from_i32(64) * eps * scale);
-        let t_res = T::from_i32(8) * eps * (scale + s_min.abs());
+        let t_res = if T::ABSOLUTE_ROUNDING {
+            T::from_i32(4) * eps
+        } else {
+            T::from_i32(8) * eps * (scale + s_min.abs())
+        };
 
         let mut s = s_min;
         let mut s_end = e1.min(s_max);
@@ -619,7 +656,14 @@ impl<T: Real, F: Fn(usize) -> Ball<T>> BlobGroup<T, F> {
         let mut it = 0;
         while it < MAX_REFINE {
             let width = hi.s - lo.s;
-            let open = width > t_res && best.g != T::ZERO && best.g.abs() > best.err;
+            // Fixed point also narrows a bracket wider than tol whose field is within its
+            // rounding bound of T: that bound is large for small balls (|F - T| is known
+            // to ~900 steps for d = 0.1, where q = r² keeps 655 levels), and stopping on
+            // it left brackets of 3e-3 where tol is 1e-3. The crossing the computed signs
+            // bracket is then within tol, and the t_error within 2 tol, as for floats.
+            let open = width > t_res
+                && ((best.g != T::ZERO && best.g.abs() > best.err)
+                    || (T::ABSOLUTE_ROUNDING && width > tol));
             if !open {
                 break;
             }
