@@ -170,6 +170,8 @@ const FX_T_TOL: f64 = 1e-3;
 /// Where a computed crossing may be, against the f64 reference (the tests' crossings
 /// have slopes of 0.4 and more): FX_FIELD / 0.4 = 8.4e-4.
 const FX_TOL: f64 = 1e-3;
+// The tolerances above hold their stated margins over the field bound.
+const _: () = assert!(FX_FIELD / 0.4 < FX_TOL && 2.0 * FX_FIELD < FX_NECK * FX_NECK / 3.0);
 /// The neck radius: the field on the neck's axis exceeds T by ρ²/3 (F = 2 f(sqrt(2.25 +
 /// ρ²)), f'(1.5) = -1/2); 0.05 gives 8.3e-4 = 54 δ, 2.5 FX_FIELD. (The floats' 1.5e-3
 /// exceeds T by 7.5e-7 = 0.05 δ: below the format's resolution.)
@@ -837,6 +839,8 @@ fn degenerate<T: Real>() {
     // (fixed point: every such value is a miss, never a wrapped number).
     let nan_ray: Ray<T> = Ray::new(
         Vec3::new(T::ZERO, T::ZERO, T::from_i32(-5)),
+        // inf - inf: the backend's NaN.
+        #[allow(clippy::eq_op)]
         Vec3::new(T::ZERO, T::ZERO, T::ONE / T::ZERO - T::ONE / T::ZERO),
     );
     assert!(group(&balls, Kernel::Links, half)
