@@ -517,6 +517,69 @@ impl Real for Fx {
         }))
     }
 
+    /// The three 2x2 determinants exactly (each product of two raw values is below 2^62,
+    /// their difference below 2^63), then one power of two for all three so the largest
+    /// magnitude is in [2^21, 2^22) raw, rounded to nearest; a nonzero value never rounds
+    /// to zero (it becomes one step of its sign), so every sign is exact: neighbouring
+    /// triangles, which compute their shared edge's function from the same two vertices,
+    /// see exactly opposite signs (watertight), and a zero is an exact zero.
+    fn edge_functions(x: [Fx; 3], y: [Fx; 3]) -> ([Fx; 3], i32) {
+        if x.iter().chain(&y).any(|c| c.special()) {
+            return ([Fx::NAN; 3], 0);
+        }
+        let cross =
+            |j: usize, k: usize| wide::mul_i32(x[j].0, y[k].0) - wide::mul_i32(y[j].0, x[k].0);
+        let e = [cross(1, 2), cross(2, 0), cross(0, 1)];
+        let m = e.iter().map(|v| v.unsigned_abs()).max().unwrap_or(0);
+        if m == 0 {
+            return ([Fx(0); 3], 0);
+        }
+        // e (Q32) = e' (Q16 raw) * 2^sh, so e in real units is e' * 2^(sh - 16).
+        let sh = (63 - m.leading_zeros() as i32) - 21;
+        let scaled = e.map(|v| {
+            let r = if sh > 0 {
+                (v + (1 << (sh - 1))) >> sh
+            } else {
+                v << -sh
+            };
+            let r = if r == 0 { v.signum() } else { r };
+            Fx(r as i32)
+        });
+        (scaled, sh - FRAC_BITS as i32)
+    }
+
+    /// Exact products, their difference exact in 64 bits, one rounding from Q32 to Q23
+    /// (Q16.16 raw times 2^7), saturated to an infinity beyond the range.
+    fn cross_fine(a: Fx, b: Fx, c: Fx, d: Fx) -> Fx {
+        if a.special() || b.special() || c.special() || d.special() {
+            return a * b - c * d;
+        }
+        let v = wide::mul_i32(a.0, b.0) - wide::mul_i32(c.0, d.0);
+        Fx::from_wide((v + (1 << 8)) >> 9)
+    }
+
+    /// `self * 2^k`, rounded to nearest, saturated to an infinity beyond the range.
+    fn mul_pow2(self, k: i32) -> Fx {
+        if self.special() || k == 0 {
+            return self;
+        }
+        let v = self.0 as i64;
+        if k > 0 {
+            if k >= 32 {
+                return if v > 0 {
+                    Fx::INFINITY
+                } else {
+                    Fx::NEG_INFINITY
+                };
+            }
+            Fx::from_wide(v << k)
+        } else if k <= -33 {
+            Fx(0)
+        } else {
+            Fx::from_wide((v + (1 << (-k - 1))) >> -k)
+        }
+    }
+
     #[inline]
     fn unit_scale(m: Fx) -> Fx {
         if m.0 <= 0 || m.special() {

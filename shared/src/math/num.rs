@@ -113,6 +113,39 @@ pub trait Real:
             None
         }
     }
+    /// The edge functions of the sheared triangle test, `x_j y_k - y_j x_k` for the edges
+    /// (j, k) = (1, 2), (2, 0), (0, 1), as `(e, k)` with each function `e_i * 2^k`.
+    ///
+    /// Floats: the products as written, `k = 0` (the triangle test's float path computes
+    /// them itself; this default is what it would compute). Fixed point overrides it: a
+    /// product rounds by half a step whatever its size, so the edge functions of a
+    /// triangle a few hundred steps across keep only a few significant bits and
+    /// misplace its edges by a good part of its size; [`crate::fixed::Fx`] forms them
+    /// exactly and scales all three by one power of two so the largest has 22 bits.
+    #[inline]
+    fn edge_functions(x: [Self; 3], y: [Self; 3]) -> ([Self; 3], i32) {
+        (
+            [
+                x[1] * y[2] - y[1] * x[2],
+                x[2] * y[0] - y[2] * x[0],
+                x[0] * y[1] - y[0] * x[1],
+            ],
+            0,
+        )
+    }
+    /// `(a b - c d) 2^7`. Fixed point forms it exactly and rounds once: with `a, d` a
+    /// vertex's coordinates relative to a ray's origin and `b, c` the ray's direction, it
+    /// is the vertex's sheared coordinate times `d_z`, to 2^-23 where a shear by the
+    /// rounded `d_x / d_z` put it off by up to half a step times |z| (10 steps at 20 units).
+    #[inline]
+    fn cross_fine(a: Self, b: Self, c: Self, d: Self) -> Self {
+        (a * b - c * d) * Self::from_i32(128)
+    }
+    /// `self * 2^k` (saturating in fixed point).
+    #[inline]
+    fn mul_pow2(self, k: i32) -> Self {
+        self * Self::from_f64(libm::ldexp(1.0, k))
+    }
     /// A scalar as stored in a SceneImage of format [`Real::STORAGE`].
     #[inline(always)]
     fn from_stored(bits: u32) -> Self {
