@@ -279,12 +279,17 @@ impl<T: Real> Ellipsoid<T> {
             // Fixed point: sums are exact and a product rounds by half a step whatever its
             // size, so nothing here grows with |centre| (the relative bound below is 190
             // steps for a centre 32 units away, and spawned rays were pushed off by that).
-            // On the shell q is a unit vector rounded per component (its length within a
-            // step of 1); on the cap it is off the plane by the rounding of the projection,
-            // a step and a half; L stretches either, and L q rounds once more.
-            let q_err = abs_mat_vec(&self.l, q.abs() + Vec3::splat(T::ONE));
-            (q_err + Vec3::splat(T::ONE)) * T::err_gamma(2)
-                + storage_error(&self.m, &self.l, q, storage_eps)
+            // On the shell q is a unit vector rounded per component: its length within
+            // 0.52 (|q_x| + |q_y| + |q_z|) <= 0.9 steps of 1, which moves c + L q off the
+            // surface by at most |L||q| times that (a rounding along the surface moves it
+            // along the surface); on the cap it is off the plane by the rounding of the
+            // projection, a step and a half. L q rounds by half a step more.
+            let q_err = if hit.part == EllipsoidPart::Shell {
+                abs_mat_vec(&self.l, q.abs()) * T::epsilon()
+            } else {
+                abs_mat_vec(&self.l, q.abs() + Vec3::splat(T::ONE)) * T::err_gamma(2)
+            };
+            q_err + Vec3::splat(T::epsilon()) + storage_error(&self.m, &self.l, q, storage_eps)
         } else {
             (self.center.abs() + abs_mat_vec(&self.l, q.abs())) * T::err_gamma(6)
                 + storage_error(&self.m, &self.l, q, storage_eps)
@@ -502,10 +507,11 @@ mod tests {
         // and the root's rounding, which the unit frame's short chord near the rim
         // magnifies); the normal within 4.1e-4 rad: the lens's radius of curvature near
         // its rim is 0.09, so a step along the surface (1.5e-5) turns it by 1.7e-4. The
-        // bound: 10.4 steps (2 steps times |L|(|q| + 1) + 1, and the stored entries).
+        // bound along the normal: at most 5.4 steps (a step times |L||q|, one for L q, and
+        // the stored entries').
         assert!(worst_p < 4.0, "hit point {worst_p} steps");
         assert!(worst_n < 5e-4, "normal {worst_n}");
-        assert!(worst_bound < 12.0, "bound {worst_bound} steps");
+        assert!(worst_bound < 6.5, "bound {worst_bound} steps");
     }
 
     #[test]
