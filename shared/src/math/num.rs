@@ -141,6 +141,16 @@ pub trait Real:
     fn cross_fine(a: Self, b: Self, c: Self, d: Self) -> Self {
         (a * b - c * d) * Self::from_i32(128)
     }
+    /// One Newton step for `|c + d s|² = 1` from `s`: `s - r / (2 (c + d s)·d)` with the
+    /// residual `r = |c + d s|² - 1`. Floats return `s` (their roots need no refining and
+    /// never call it). Fixed point forms `r` and the slope exactly in 64 bits (a residual
+    /// of Q16.16 products is off by steps, which near a grazing hit the step divides by the
+    /// small slope again) and declines (returns `s`) where the slope is under 2^-8 or the
+    /// step over 64 steps.
+    #[inline]
+    fn sphere_newton(_c: [Self; 3], _d: [Self; 3], s: Self) -> Self {
+        s
+    }
     /// `self * 2^k` (saturating in fixed point).
     #[inline]
     fn mul_pow2(self, k: i32) -> Self {
