@@ -151,6 +151,20 @@ pub trait Real:
     fn sphere_newton(_c: [Self; 3], _d: [Self; 3], s: Self) -> Self {
         s
     }
+    /// `m · (rel + dir tc)`. Fixed point keeps the point `rel + dir tc` to 2^-24 (a Q16.16
+    /// point is off by half a step per coordinate, which `m` stretches: by 2 steps for a
+    /// row of 4, glass.ron's lens) and rounds the dot product once.
+    #[inline]
+    fn local_dot(m: [Self; 3], rel: [Self; 3], dir: [Self; 3], tc: Self) -> Self {
+        Self::dot3(
+            m,
+            [
+                rel[0] + dir[0] * tc,
+                rel[1] + dir[1] * tc,
+                rel[2] + dir[2] * tc,
+            ],
+        )
+    }
     /// `self * 2^k` (saturating in fixed point).
     #[inline]
     fn mul_pow2(self, k: i32) -> Self {

@@ -60,15 +60,20 @@ pub(crate) fn local_origin<T: Real>(m: &Mat3<T>, center: Vec3<T>, ray: &Ray<T>) 
     } else {
         along / a
     };
-    // A ray that passes too far from the centre to hold the point overflows to a
-    // non-finite value, which every comparison below treats as a miss.
-    (tc, m.mul_vec(ray.origin + ray.dir * tc - center))
+    // The point itself to 2^-24 (`Real::local_dot`). A ray that passes too far from the
+    // centre to hold the point overflows to a non-finite value, which every comparison
+    // below treats as a miss.
+    let rel = ray.origin - center;
+    let (rel, dir) = ([rel.x, rel.y, rel.z], [ray.dir.x, ray.dir.y, ray.dir.z]);
+    let row = |r: Vec3<T>| T::local_dot([r.x, r.y, r.z], rel, dir, tc);
+    (tc, Vec3::new(row(m.r[0]), row(m.r[1]), row(m.r[2])))
 }
 
 /// The bound on the rounding of [`local_origin`]'s unit-frame point in fixed point: the
-/// view-space point is rounded by half a step per coordinate, which `m` stretches by at
-/// most its largest absolute row sum, and the product rounds once more. Zero for floats,
-/// whose bounds already cover `M (origin - centre)`.
+/// view-space point is rounded to 2^-25 per coordinate, which `m` stretches by at most
+/// its largest absolute row sum (counted as 2^-9 steps per unit, generously), and the
+/// product rounds once, half a step (counted as one). Zero for floats, whose bounds
+/// already cover `M (origin - centre)`.
 #[inline]
 pub(crate) fn local_origin_error<T: Real>(m: &Mat3<T>) -> T {
     if !T::ABSOLUTE_ROUNDING {
@@ -80,7 +85,7 @@ pub(crate) fn local_origin_error<T: Real>(m: &Mat3<T>) -> T {
         .dot(one)
         .max(m.r[1].abs().dot(one))
         .max(m.r[2].abs().dot(one));
-    (rows + T::ONE) * T::epsilon()
+    (rows * T::from_f32(1.0 / 512.0) + T::ONE) * T::epsilon()
 }
 
 impl<T: Real> Ellipsoid<T> {
