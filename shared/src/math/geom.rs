@@ -374,6 +374,8 @@ impl<T: Real> SlabSpan<T> {
 /// it through the other face that way (glass.ron's box, 33 steps above the floor), so
 /// rays into boxes, triangles and cut ellipsoids keep the normal offset
 /// ([`crate::render::Surface::spawn_origin`]).
+// The negated comparison is deliberate: it declines NaN too.
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
 #[inline]
 pub fn offset_along_ray<T: Real>(
     p: Vec3<T>,
