@@ -482,8 +482,8 @@ impl Real for Fx {
     /// `v / |v|` from the integers: the components shifted (exactly, or by at most one bit
     /// from the top of the range) so the largest magnitude is in [2^22, 2^23), their exact
     /// sum of squares (below 2^48), its rounded square root `L` (23 to 24 significant bits),
-    /// a 32-bit reciprocal `R = floor(2^54 / L)` (one 64-bit division) and each quotient
-    /// `w * R / 2^38` rounded once. Each component is then within half a step of the exact
+    /// a 32-bit reciprocal `R = floor(2^53 / L)` (one 64-bit division) and each quotient
+    /// `w * R / 2^37` rounded once. Each component is then within half a step of the exact
     /// `v_i / |v|` plus 2^-6 step (2^-7 each from the shift's and the root's rounding),
     /// whatever `|v|` is: a vector of length 34 keeps its unit vector's length to 1.5e-5
     /// (the reciprocal 1 / 34 in Q16.16 is off by 2.6e-4 of itself, and so was the length).
@@ -507,11 +507,15 @@ impl Real for Fx {
                 (r + (1 << (sh - 1))) >> sh
             }
         });
-        let sum: u64 = w.iter().map(|&x| (x * x) as u64).sum();
+        // |w| < 2^23: 32-bit factors (no 64-bit multiply call on ARMv6-M).
+        let sum: u64 = w
+            .iter()
+            .map(|&x| wide::mul_i32(x as i32, x as i32) as u64)
+            .sum();
         let l = wide::isqrt_rounded(sum) as u64; // in [2^22, 2^24)
-        let r = (1u64 << 54) / l.max(1); // below 2^32
+        let r = ((1u64 << 53) / l.max(1)) as u32; // at most 2^31
         Some(w.map(|x| {
-            let mag = (x.unsigned_abs() * r + (1 << 37)) >> 38; // at most 2^16 + 1
+            let mag = (wide::mul_u32(x.unsigned_abs() as u32, r) + (1 << 36)) >> 37; // <= 2^16 + 1
             let mag = mag.min(ONE_RAW as u64) as i32;
             Fx(if x < 0 { -mag } else { mag })
         }))
@@ -579,7 +583,9 @@ impl Real for Fx {
         let small = m.iter().all(|v| v.0.unsigned_abs() < 1 << 28)
             && p.iter().all(|v| v.unsigned_abs() < 1 << 31);
         let s: i128 = if small {
-            (m[0].0 as i64 * p[0] + m[1].0 as i64 * p[1] + m[2].0 as i64 * p[2]) as i128
+            // 32-bit factors (no 64-bit multiply call on ARMv6-M).
+            let mp = |i: usize| wide::mul_i32(m[i].0, p[i] as i32);
+            (mp(0) + mp(1) + mp(2)) as i128
         } else {
             (0..3).map(|i| m[i].0 as i128 * p[i] as i128).sum()
         };
@@ -604,12 +610,13 @@ impl Real for Fx {
         if !(c.iter().all(|&v| below(v, 20)) && d.iter().all(|&v| below(v, 18)) && below(s, 20)) {
             return s;
         }
+        // Products of two raw values in 32-bit factors (no 64-bit multiply call on ARMv6-M).
         let dot =
-            |a: [Fx; 3], b: [Fx; 3]| -> i64 { (0..3).map(|i| a[i].0 as i64 * b[i].0 as i64).sum() };
+            |a: [Fx; 3], b: [Fx; 3]| -> i64 { (0..3).map(|i| wide::mul_i32(a[i].0, b[i].0)).sum() };
         let (cc, cd, dd) = (dot(c, c), dot(c, d), dot(d, d)); // Q32
         let s64 = s.0 as i64; // Q16
-        let s2 = s64 * s64; // Q32
-                            // s² |d|²: Q64, below 2^96 here; in two halves to stay in i64.
+        let s2 = wide::mul_i32(s.0, s.0); // Q32
+                                          // s² |d|²: Q64, below 2^96 here; in two halves to stay in i64.
         let s2dd = ((s2 >> 16) * dd) + (((s2 & 0xffff) * dd) >> 16); // Q48
         let r = ((cc - (1i64 << 32)) << 16) + 2 * s64 * cd + s2dd; // Q48
                                                                    // q·d = c·d + s |d|²: Q32 + (Q16 Q32 = Q48) >> 16.
