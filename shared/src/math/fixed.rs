@@ -527,6 +527,7 @@ impl Real for Fx {
     /// to zero (it becomes one step of its sign), so every sign is exact: neighbouring
     /// triangles, which compute their shared edge's function from the same two vertices,
     /// see exactly opposite signs (watertight), and a zero is an exact zero.
+    #[inline(always)]
     fn edge_functions(x: [Fx; 3], y: [Fx; 3]) -> ([Fx; 3], i32) {
         if x.iter().chain(&y).any(|c| c.special()) {
             return ([Fx::NAN; 3], 0);
@@ -554,6 +555,7 @@ impl Real for Fx {
 
     /// Exact products, their difference exact in 64 bits, one rounding from Q32 to Q23
     /// (Q16.16 raw times 2^7), saturated to an infinity beyond the range.
+    #[inline(always)]
     fn cross_fine(a: Fx, b: Fx, c: Fx, d: Fx) -> Fx {
         if a.special() || b.special() || c.special() || d.special() {
             return a * b - c * d;
