@@ -1,7 +1,7 @@
 //! Watertightness of the triangle test and re-intersection of spawned rays.
 
 use links_core::desc::*;
-use links_core::geom::{offset_ray_origin, Ray, Vec3};
+use links_core::geom::{Ray, Vec3};
 use links_core::image::{SceneView, Section};
 use links_core::num::Real;
 use links_core::render::Tracer;
@@ -280,7 +280,9 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
             if d.dot(surf.ng) < T::ZERO {
                 d = -d;
             }
-            let out = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, d), d);
+            // Where the renderer starts a ray leaving the surface (fixed point: along the
+            // ray on ellipsoids and blobs, and for rays leaving outward).
+            let out = Ray::new(surf.spawn_origin(d), d);
             let re = tracer.first_surface(&out);
             assert!(
                 re.is_none(),
@@ -289,7 +291,7 @@ fn respawned_rays_never_rehit<T: Real>(seed: u64) {
                 re.map(|r| r.0)
             );
             outward += 1;
-            let inn = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, -d), -d);
+            let inn = Ray::new(surf.spawn_origin(-d), -d);
             match tracer.first_surface(&inn) {
                 Some((t, s2)) => {
                     // A flat face (triangle, box side) can never be crossed twice; a curved

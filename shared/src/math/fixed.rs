@@ -489,8 +489,8 @@ impl Real for Fx {
     /// `v / |v|` from the integers: the components shifted (exactly, or by at most one bit
     /// from the top of the range) so the largest magnitude is in [2^22, 2^23), their exact
     /// sum of squares (below 2^48), its rounded square root `L` (23 to 24 significant bits),
-    /// a 32-bit reciprocal `R = floor(2^54 / L)` (one 64-bit division) and each quotient
-    /// `w * R / 2^38` rounded once. Each component is then within half a step of the exact
+    /// a 32-bit reciprocal `R = floor(2^53 / L)` (one 64-bit division) and each quotient
+    /// `w * R / 2^37` rounded once. Each component is then within half a step of the exact
     /// `v_i / |v|` plus 2^-6 step (2^-7 each from the shift's and the root's rounding),
     /// whatever `|v|` is: a vector of length 34 keeps its unit vector's length to 1.5e-5
     /// (the reciprocal 1 / 34 in Q16.16 is off by 2.6e-4 of itself, and so was the length).
@@ -514,14 +514,157 @@ impl Real for Fx {
                 (r + (1 << (sh - 1))) >> sh
             }
         });
-        let sum: u64 = w.iter().map(|&x| (x * x) as u64).sum();
+        // |w| < 2^23: 32-bit factors (no 64-bit multiply call on ARMv6-M).
+        let sum: u64 = w
+            .iter()
+            .map(|&x| wide::mul_i32(x as i32, x as i32) as u64)
+            .sum();
         let l = wide::isqrt_rounded(sum) as u64; // in [2^22, 2^24)
-        let r = (1u64 << 54) / l.max(1); // below 2^32
+        let r = ((1u64 << 53) / l.max(1)) as u32; // at most 2^31
         Some(w.map(|x| {
-            let mag = (x.unsigned_abs() * r + (1 << 37)) >> 38; // at most 2^16 + 1
+            let mag = (wide::mul_u32(x.unsigned_abs() as u32, r) + (1 << 36)) >> 37; // <= 2^16 + 1
             let mag = mag.min(ONE_RAW as u64) as i32;
             Fx(if x < 0 { -mag } else { mag })
         }))
+    }
+
+    /// The three 2x2 determinants exactly (each product of two raw values is below 2^62,
+    /// their difference below 2^63), then one power of two for all three so the largest
+    /// magnitude is in [2^21, 2^22) raw, rounded to nearest; a nonzero value never rounds
+    /// to zero (it becomes one step of its sign), so every sign is exact: neighbouring
+    /// triangles, which compute their shared edge's function from the same two vertices,
+    /// see exactly opposite signs (watertight), and a zero is an exact zero.
+    #[inline(always)]
+    fn edge_functions(x: [Fx; 3], y: [Fx; 3]) -> ([Fx; 3], i32) {
+        if x.iter().chain(&y).any(|c| c.special()) {
+            return ([Fx::NAN; 3], 0);
+        }
+        let cross =
+            |j: usize, k: usize| wide::mul_i32(x[j].0, y[k].0) - wide::mul_i32(y[j].0, x[k].0);
+        let e = [cross(1, 2), cross(2, 0), cross(0, 1)];
+        let m = e.iter().map(|v| v.unsigned_abs()).max().unwrap_or(0);
+        if m == 0 {
+            return ([Fx(0); 3], 0);
+        }
+        // e (Q32) = e' (Q16 raw) * 2^sh, so e in real units is e' * 2^(sh - 16).
+        let sh = (63 - m.leading_zeros() as i32) - 21;
+        let scaled = e.map(|v| {
+            let r = if sh > 0 {
+                (v + (1 << (sh - 1))) >> sh
+            } else {
+                v << -sh
+            };
+            let r = if r == 0 { v.signum() } else { r };
+            Fx(r as i32)
+        });
+        (scaled, sh - FRAC_BITS as i32)
+    }
+
+    /// Exact products, their difference exact in 64 bits, one rounding from Q32 to Q23
+    /// (Q16.16 raw times 2^7), saturated to an infinity beyond the range.
+    #[inline(always)]
+    fn cross_fine(a: Fx, b: Fx, c: Fx, d: Fx) -> Fx {
+        if a.special() || b.special() || c.special() || d.special() {
+            return a * b - c * d;
+        }
+        let v = wide::mul_i32(a.0, b.0) - wide::mul_i32(c.0, d.0);
+        Fx::from_wide((v + (1 << 8)) >> 9)
+    }
+
+    /// The point in Q24 (`rel` exact, `dir tc` rounded from Q32), the products with `m` in
+    /// Q40, summed and rounded once, saturated to an infinity beyond the range. In 64 bits
+    /// while the point is under 128 and the row under 4096 (each product below 2^59), else
+    /// in 128 bits.
+    fn local_dot(m: [Fx; 3], rel: [Fx; 3], dir: [Fx; 3], tc: Fx) -> Fx {
+        if rel.iter().chain(&dir).chain(&m).any(|v| v.special()) || tc.special() {
+            return Fx::dot3(
+                m,
+                [
+                    rel[0] + dir[0] * tc,
+                    rel[1] + dir[1] * tc,
+                    rel[2] + dir[2] * tc,
+                ],
+            );
+        }
+        // Below 2^39 + 2^54: fits an i64.
+        let p = [0, 1, 2]
+            .map(|i| ((rel[i].0 as i64) << 8) + ((wide::mul_i32(dir[i].0, tc.0) + (1 << 7)) >> 8));
+        let small = m.iter().all(|v| v.0.unsigned_abs() < 1 << 28)
+            && p.iter().all(|v| v.unsigned_abs() < 1 << 31);
+        let s: i128 = if small {
+            // 32-bit factors (no 64-bit multiply call on ARMv6-M).
+            let mp = |i: usize| wide::mul_i32(m[i].0, p[i] as i32);
+            (mp(0) + mp(1) + mp(2)) as i128
+        } else {
+            (0..3).map(|i| m[i].0 as i128 * p[i] as i128).sum()
+        };
+        let r = (s + (1 << 23)) >> 24;
+        match i64::try_from(r) {
+            Ok(v) => Fx::from_wide(v),
+            Err(_) => Fx::wide_overflow(if r < 0 { -1 } else { 1 }),
+        }
+    }
+
+    /// In 64-bit integers: `q = c + d s` in Q32 (exact), the residual in Q48 as
+    /// `(|c|² - 1) 2^16 + 2 s (c·d) + s² |d|² / 2^16` (the last term rounded, 2^-48), the
+    /// slope `2 q·d` in Q32 (rounded from Q48), the step rounded to Q16.
+    fn sphere_newton(c: [Fx; 3], d: [Fx; 3], s: Fx) -> Fx {
+        if c.iter().chain(&d).any(|v| v.special()) || s.special() {
+            return s;
+        }
+        // A root's inputs are a few units at most (a unit-frame point near the sphere, a
+        // unit direction, a parameter within a chord): with |c|, |s| below 16 and |d| below
+        // 4 every sum below stays under 2^62.
+        let below = |v: Fx, bits: u32| v.0.unsigned_abs() < 1 << bits;
+        if !(c.iter().all(|&v| below(v, 20)) && d.iter().all(|&v| below(v, 18)) && below(s, 20)) {
+            return s;
+        }
+        // Products of two raw values in 32-bit factors (no 64-bit multiply call on ARMv6-M).
+        let dot =
+            |a: [Fx; 3], b: [Fx; 3]| -> i64 { (0..3).map(|i| wide::mul_i32(a[i].0, b[i].0)).sum() };
+        let (cc, cd, dd) = (dot(c, c), dot(c, d), dot(d, d)); // Q32
+        let s64 = s.0 as i64; // Q16
+        let s2 = wide::mul_i32(s.0, s.0); // Q32
+                                          // s² |d|²: Q64, below 2^96 here; in two halves to stay in i64.
+        let s2dd = ((s2 >> 16) * dd) + (((s2 & 0xffff) * dd) >> 16); // Q48
+        let r = ((cc - (1i64 << 32)) << 16) + 2 * s64 * cd + s2dd; // Q48
+                                                                   // q·d = c·d + s |d|²: Q32 + (Q16 Q32 = Q48) >> 16.
+        let qd = cd + ((s64 * dd) >> 16); // Q32
+        let g = 2 * qd; // Q32
+        if g.unsigned_abs() < 1 << 24 {
+            return s; // slope under 2^-8
+        }
+        // r / g is Q16; rounded to nearest.
+        let num = r;
+        let den = g;
+        let step = (num.abs() + den.abs() / 2) / den.abs();
+        let step = if (num < 0) != (den < 0) { -step } else { step };
+        if step.unsigned_abs() > 64 {
+            return s;
+        }
+        Fx(s.0 - step as i32)
+    }
+
+    /// `self * 2^k`, rounded to nearest, saturated to an infinity beyond the range.
+    fn mul_pow2(self, k: i32) -> Fx {
+        if self.special() || k == 0 {
+            return self;
+        }
+        let v = self.0 as i64;
+        if k > 0 {
+            if k >= 32 {
+                return if v > 0 {
+                    Fx::INFINITY
+                } else {
+                    Fx::NEG_INFINITY
+                };
+            }
+            Fx::from_wide(v << k)
+        } else if k <= -33 {
+            Fx(0)
+        } else {
+            Fx::from_wide((v + (1 << (-k - 1))) >> -k)
+        }
     }
 
     #[inline]
@@ -1227,6 +1370,103 @@ mod tests {
             let u = Fx::normalize3([Fx::ZERO, Fx::from_raw(-r), Fx::ZERO]).unwrap();
             assert_eq!(u.map(Fx::raw), [0, -ONE_RAW, 0]);
         }
+    }
+
+    /// One Newton step from a root off by up to 40 steps (6e-4) lands within 0.8 steps of
+    /// the exact root of the same (rounded) c and d where the half chord h is 0.05 or more:
+    /// half a step of rounding and the step's quadratic error, (6e-4)² / 2h = 0.25 steps.
+    #[test]
+    fn sphere_newton_refines_a_root_to_its_rounding() {
+        let mut seed = 0x1234_5678_u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut worst = 0f64;
+        for _ in 0..20_000 {
+            // A unit direction, a closest point at distance rho from the centre.
+            let d = Fx::normalize3([fx(next() - 0.5), fx(next() - 0.5), fx(next() - 0.5)]).unwrap();
+            let df = d.map(|v| v.to_f64());
+            let rho = 0.9987 * next(); // half chord >= 0.05
+            let (a, b) = (next() - 0.5, next() - 0.5);
+            let mut p = [a, b, 0.3];
+            let k = p[0] * df[0] + p[1] * df[1] + p[2] * df[2];
+            p = [0, 1, 2].map(|i| p[i] - k * df[i]);
+            let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            let c = p.map(|v| fx(v / l * rho));
+            // The exact roots of the rounded c and d.
+            let cf = c.map(|v| v.to_f64());
+            let dd: f64 = df.iter().map(|v| v * v).sum();
+            let cd: f64 = (0..3).map(|i| cf[i] * df[i]).sum();
+            let cc: f64 = cf.iter().map(|v| v * v).sum();
+            let disc = cd * cd - dd * (cc - 1.0);
+            for sign in [-1.0, 1.0] {
+                let root = (-cd + sign * disc.sqrt()) / dd;
+                let start = fx(root + (next() - 0.5) * 80.0 / 65536.0);
+                let got = Fx::sphere_newton(c, d, start).to_f64();
+                let err = (got - root).abs() * 65536.0;
+                worst = worst.max(err);
+                assert!(err <= 0.8, "{c:?} {d:?}: {got} vs {root} ({err} steps)");
+            }
+        }
+        assert!(worst > 0.4, "{worst}");
+        // Declines a slope under 2^-8 (tangent) and inputs out of range.
+        let c = [fx(1.0), fx(0.0), fx(0.0)];
+        let d = [fx(0.0), fx(1.0), fx(0.0)];
+        assert_eq!(Fx::sphere_newton(c, d, fx(0.001)).raw(), fx(0.001).raw());
+        assert_eq!(Fx::sphere_newton(c, d, fx(100.0)).raw(), fx(100.0).raw());
+    }
+
+    /// `m · (rel + dir tc)` within half a step and the point's 2^-25 per coordinate (times
+    /// the row) of the exact value, in both the 64-bit and the 128-bit range; where the
+    /// Q16.16 point `rel + dir * tc` carried half a step per coordinate times the row.
+    #[test]
+    fn local_dot_keeps_the_point_to_2_pow_minus_24() {
+        let mut seed = 99u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (mut worst, mut worst_q16) = (0f64, 0f64);
+        for k in 0..50_000 {
+            // Rows of 10,000 take the 128-bit path.
+            let big = if k % 10 == 0 { 10_000.0 } else { 4.0 };
+            let m = [0; 3].map(|_| fx((next() - 0.5) * 2.0 * big));
+            let reach = if k % 10 == 0 { 0.02 } else { 60.0 };
+            let rel = [0; 3].map(|_| fx((next() - 0.5) * reach));
+            let dir = Fx::normalize3([0; 3].map(|_| fx(next() - 0.5))).unwrap();
+            let tc = fx((next() - 0.5) * reach);
+            let f = |v: Fx| v.to_f64();
+            let exact: f64 = (0..3)
+                .map(|i| f(m[i]) * (f(rel[i]) + f(dir[i]) * f(tc)))
+                .sum();
+            let got = Fx::local_dot(m, rel, dir, tc);
+            if !got.is_finite() {
+                assert!(exact.abs() > 32_000.0, "{exact}");
+                continue;
+            }
+            let row: f64 = m.iter().map(|v| f(*v).abs()).sum();
+            let err = (got.to_f64() - exact).abs() * 65536.0;
+            assert!(err <= 0.5 + row / 512.0 + 1e-6, "{err} steps (row {row})");
+            worst = worst.max(err / (0.5 + row / 512.0));
+            let q16 = Fx::dot3(
+                m,
+                [
+                    rel[0] + dir[0] * tc,
+                    rel[1] + dir[1] * tc,
+                    rel[2] + dir[2] * tc,
+                ],
+            );
+            worst_q16 = worst_q16.max((q16.to_f64() - exact).abs() * 65536.0 / (0.5 + row / 512.0));
+        }
+        assert!(
+            worst > 0.5 && worst_q16 > 10.0 * worst,
+            "{worst} {worst_q16}"
+        );
     }
 
     #[test]

@@ -113,6 +113,63 @@ pub trait Real:
             None
         }
     }
+    /// The edge functions of the sheared triangle test, `x_j y_k - y_j x_k` for the edges
+    /// (j, k) = (1, 2), (2, 0), (0, 1), as `(e, k)` with each function `e_i * 2^k`.
+    ///
+    /// Floats: the products as written, `k = 0` (the triangle test's float path computes
+    /// them itself; this default is what it would compute). Fixed point overrides it: a
+    /// product rounds by half a step whatever its size, so the edge functions of a
+    /// triangle a few hundred steps across keep only a few significant bits and
+    /// misplace its edges by a good part of its size; [`crate::fixed::Fx`] forms them
+    /// exactly and scales all three by one power of two so the largest has 22 bits.
+    #[inline]
+    fn edge_functions(x: [Self; 3], y: [Self; 3]) -> ([Self; 3], i32) {
+        (
+            [
+                x[1] * y[2] - y[1] * x[2],
+                x[2] * y[0] - y[2] * x[0],
+                x[0] * y[1] - y[0] * x[1],
+            ],
+            0,
+        )
+    }
+    /// `(a b - c d) 2^7`. Fixed point forms it exactly and rounds once: with `a, d` a
+    /// vertex's coordinates relative to a ray's origin and `b, c` the ray's direction, it
+    /// is the vertex's sheared coordinate times `d_z`, to 2^-23 where a shear by the
+    /// rounded `d_x / d_z` put it off by up to half a step times |z| (10 steps at 20 units).
+    #[inline]
+    fn cross_fine(a: Self, b: Self, c: Self, d: Self) -> Self {
+        (a * b - c * d) * Self::from_i32(128)
+    }
+    /// One Newton step for `|c + d s|² = 1` from `s`: `s - r / (2 (c + d s)·d)` with the
+    /// residual `r = |c + d s|² - 1`. Floats return `s` (their roots need no refining and
+    /// never call it). Fixed point forms `r` and the slope exactly in 64 bits (a residual
+    /// of Q16.16 products is off by steps, which near a grazing hit the step divides by the
+    /// small slope again) and declines (returns `s`) where the slope is under 2^-8 or the
+    /// step over 64 steps.
+    #[inline]
+    fn sphere_newton(_c: [Self; 3], _d: [Self; 3], s: Self) -> Self {
+        s
+    }
+    /// `m · (rel + dir tc)`. Fixed point keeps the point `rel + dir tc` to 2^-24 (a Q16.16
+    /// point is off by half a step per coordinate, which `m` stretches: by 2 steps for a
+    /// row of 4, glass.ron's lens) and rounds the dot product once.
+    #[inline]
+    fn local_dot(m: [Self; 3], rel: [Self; 3], dir: [Self; 3], tc: Self) -> Self {
+        Self::dot3(
+            m,
+            [
+                rel[0] + dir[0] * tc,
+                rel[1] + dir[1] * tc,
+                rel[2] + dir[2] * tc,
+            ],
+        )
+    }
+    /// `self * 2^k` (saturating in fixed point).
+    #[inline]
+    fn mul_pow2(self, k: i32) -> Self {
+        self * Self::from_f64(libm::ldexp(1.0, k))
+    }
     /// A scalar as stored in a SceneImage of format [`Real::STORAGE`].
     #[inline(always)]
     fn from_stored(bits: u32) -> Self {

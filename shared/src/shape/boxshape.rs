@@ -23,15 +23,17 @@ impl<T: Real> BoxShape<T> {
         // from the eye the unit-frame origin is some 20 half-sizes away, and a slab root
         // (±1 - o) / d then carried the reciprocal's rounding 20-fold.
         let (tc, o) = local_origin(&self.m, self.center, ray);
-        let o_err = local_origin_error(&self.m);
         let d = self.m.mul_vec(ray.dir);
         let mut t0 = -T::MAX;
         let mut t1 = T::MAX;
         let mut f0 = 0u8;
         let mut f1 = 0u8;
-        // Rounding bound of the entry and exit roots, from the slab each one came from.
+        // Rounding bound of the entry and exit roots, from the slab each one came from
+        // (fixed point: that slab's |±1 - o| + 1 and |1/d|, the bound formed only for a box
+        // the ray meets).
         let mut e0 = T::ZERO;
         let mut e1 = T::ZERO;
+        let (mut g0, mut g1) = ((T::ZERO, T::ZERO), (T::ZERO, T::ZERO));
         let mut axis = 0;
         while axis < 3 {
             let (oi, di) = (o[axis], d[axis]);
@@ -53,31 +55,39 @@ impl<T: Real> BoxShape<T> {
                     core::mem::swap(&mut fnear, &mut ffar);
                 }
                 let err = if T::ABSOLUTE_ROUNDING {
-                    // Absolute rounding: the origin's error (o_err) and the reciprocal's
-                    // (half a step, and d's own half step grown by inv^2) times
-                    // |±1 - o| <= |o| + 1, the product's half step; the sum with tc is
-                    // exact.
-                    let span = oi.abs() + T::ONE;
-                    (o_err + span * inv.abs() * T::epsilon()) * inv.abs()
-                        + (span + T::ONE) * T::epsilon()
+                    T::ZERO
                 } else {
                     T::err_gamma(4) * (oi.abs() + T::ONE) * inv.abs()
                 };
+                let g = (oi.abs() + T::ONE, inv.abs());
                 if tn > t0 {
                     t0 = tn;
                     f0 = fnear;
                     e0 = err;
+                    g0 = g;
                 }
                 if tf < t1 {
                     t1 = tf;
                     f1 = ffar;
                     e1 = err;
+                    g1 = g;
                 }
             }
             axis += 1;
         }
         if t0 > t1 {
             return None;
+        }
+        if T::ABSOLUTE_ROUNDING {
+            // Absolute rounding: the origin's error (o_err) and the reciprocal's (half a
+            // step, and d's own half step grown by inv^2) times |±1 - o| <= |o| + 1, the
+            // product's half step; the sum with tc is exact.
+            let o_err = local_origin_error(&self.m);
+            let bound = |(span, inv): (T, T)| {
+                (o_err + span * inv * T::epsilon()) * inv + (span + T::ONE) * T::epsilon()
+            };
+            e0 = bound(g0);
+            e1 = bound(g1);
         }
         if t0 > e0 && t0 < t_max {
             Some(BoxHit { t: t0, face: f0 })

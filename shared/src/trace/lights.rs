@@ -4,7 +4,7 @@
 use super::surface::Surface;
 use super::tracer::{Tracer, TracerState, MAX_CROSSINGS};
 use super::traversal::Probe;
-use crate::geom::{offset_ray_origin, Ray, Vec3};
+use crate::geom::{Ray, Vec3};
 use crate::image::{LightKind, ShapeKind, ShapeRef};
 use crate::num::Real;
 use core::borrow::BorrowMut;
@@ -67,7 +67,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             return atten;
         }
         self.stats.shadow_rays += 1;
-        let mut origin = offset_ray_origin(surf.p, surf.p_error, surf.ng, dir);
+        let mut origin = surf.spawn_origin(dir);
         let far = dist < T::MAX;
         let light_pos = surf.p + dir * dist;
         if self.techniques.shadow_early_exit {
@@ -132,7 +132,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             if atten.max_component() < T::from_f32(1.0 / 1024.0) {
                 return Vec3::zero();
             }
-            origin = offset_ray_origin(s.p, s.p_error, s.ng, dir);
+            origin = s.spawn_origin(dir);
             k += 1;
         }
         Vec3::zero()
@@ -242,7 +242,7 @@ mod tests {
                     };
                     skipped += 1;
                     assert_eq!(shape, surf.shape);
-                    let origin = offset_ray_origin(surf.p, surf.p_error, surf.ng, dir);
+                    let origin = surf.spawn_origin(dir);
                     let probe = Probe::new(&Ray::new(origin, dir), None, false);
                     let leaf = crate::image::Leaf {
                         kind: shape.kind,

@@ -5,7 +5,7 @@ use super::surface::Surface;
 use super::texture::Mat;
 use super::tracer::{Tracer, TracerState, MAX_CROSSINGS};
 use super::traversal::Hit;
-use crate::geom::{offset_ray_origin, Ray, Vec3};
+use crate::geom::{Ray, Vec3};
 use crate::image::MAX_DEPTH_LIMIT;
 use crate::num::Real;
 use core::borrow::BorrowMut;
@@ -87,7 +87,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         if rc > T::ZERO && can_recurse {
             self.stats.reflect_rays += 1;
             let rdir = ray.dir.reflect(n).normalize();
-            let r = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, rdir), rdir);
+            let r = Ray::new(surf.spawn_origin(rdir), rdir);
             c = c + self.trace(&r, depth + 1) * rc;
         }
 
@@ -97,10 +97,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 self.straight_through(&surf, ray.dir)
             } else if self.camera.non_refractive {
                 self.stats.straight_rays += 1;
-                let r = Ray::new(
-                    offset_ray_origin(surf.p, surf.p_error, surf.ng, ray.dir),
-                    ray.dir,
-                );
+                let r = Ray::new(surf.spawn_origin(ray.dir), ray.dir);
                 self.trace(&r, depth + 1)
             } else {
                 // Snell's law; the outside is air.
@@ -115,7 +112,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                     self.stats.refract_rays += 1;
                     (ray.dir * eta + n * (eta * cos_i - k.sqrt())).normalize()
                 };
-                let r = Ray::new(offset_ray_origin(surf.p, surf.p_error, surf.ng, dir), dir);
+                let r = Ray::new(surf.spawn_origin(dir), dir);
                 self.trace(&r, depth + 1)
             };
             c = c + it.mul_elem(tc);
@@ -128,7 +125,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     pub(super) fn straight_through(&mut self, from: &Surface<T>, dir: Vec3<T>) -> Vec3<T> {
         let mut acc = Vec3::zero();
         let mut w = Vec3::splat(T::ONE);
-        let mut origin = offset_ray_origin(from.p, from.p_error, from.ng, dir);
+        let mut origin = from.spawn_origin(dir);
         let mut k = 0;
         while k < MAX_CROSSINGS {
             self.stats.straight_rays += 1;
@@ -143,7 +140,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             if w.max_component() < T::from_f32(1.0 / 1024.0) {
                 return acc;
             }
-            origin = offset_ray_origin(s.p, s.p_error, s.ng, dir);
+            origin = s.spawn_origin(dir);
             k += 1;
         }
         acc

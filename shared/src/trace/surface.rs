@@ -3,7 +3,7 @@
 
 use super::tracer::{Tracer, TracerState};
 use super::traversal::{blob_group, Hit, HitDetail};
-use crate::geom::{Ray, Vec3};
+use crate::geom::{offset_along_ray, offset_ray_origin, Ray, Vec3};
 use crate::image::{ShapeRef, NONE};
 use crate::num::Real;
 use crate::shape::ellipsoid::LocalSurface;
@@ -21,12 +21,21 @@ pub struct Surface<T> {
     pub uv: [T; 2],
     pub material: u32,
     pub shape: ShapeRef,
+    /// No edge within a spawned ray's offset (an ellipsoid without a cut, a blob): fixed
+    /// point may then offset along the spawned ray ([`Surface::spawn_origin`]).
+    pub edgeless: bool,
 }
 
-impl<T: Copy> Surface<T> {
+impl<T: Real> Surface<T> {
     /// The surface of a hit on a quadric-like shape (one normal for shading and geometry).
     #[inline(always)]
-    fn local(ls: LocalSurface<T>, uv: [T; 2], material: u32, shape: ShapeRef) -> Self {
+    fn local(
+        ls: LocalSurface<T>,
+        uv: [T; 2],
+        material: u32,
+        shape: ShapeRef,
+        edgeless: bool,
+    ) -> Self {
         Surface {
             p: ls.p,
             p_error: ls.p_error,
@@ -35,7 +44,24 @@ impl<T: Copy> Surface<T> {
             uv,
             material,
             shape,
+            edgeless,
         }
+    }
+
+    /// Where a ray leaving this surface along `dir` starts: off the surface by the hit
+    /// point's error bound ([`offset_ray_origin`]); in fixed point along the ray itself
+    /// where it leaves steeply enough ([`offset_along_ray`]), on an edgeless surface and
+    /// for rays leaving to the outside (which can't cross another face of the solid near
+    /// a convex edge; a concave corner within two offsets, a few steps, could be crossed,
+    /// as by the normal offset).
+    #[inline(always)]
+    pub fn spawn_origin(&self, dir: Vec3<T>) -> Vec3<T> {
+        if T::ABSOLUTE_ROUNDING && (self.edgeless || dir.dot(self.ng) > T::ZERO) {
+            if let Some(o) = offset_along_ray(self.p, self.p_error, self.ng, dir) {
+                return o;
+            }
+        }
+        offset_ray_origin(self.p, self.p_error, self.ng, dir)
     }
 }
 
@@ -75,6 +101,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                     uv,
                     material,
                     shape,
+                    edgeless: false,
                 }
             }
             HitDetail::Ellipsoid(h) => {
@@ -92,7 +119,8 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                         T::ONE - q.y.max(-T::ONE).min(T::ONE).acos() / T::PI,
                     ]
                 };
-                Surface::local(ls, uv, rec.material, shape)
+                let edgeless = T::ABSOLUTE_ROUNDING && rec.shape.cut.is_none();
+                Surface::local(ls, uv, rec.material, shape, edgeless)
             }
             HitDetail::Box(h) => {
                 let rec = s.boxshape::<T>(shape.index);
@@ -105,7 +133,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                     _ => (q.x, q.y),
                 };
                 let uv = [(a + T::ONE) * T::HALF, (b + T::ONE) * T::HALF];
-                Surface::local(ls, uv, rec.material, shape)
+                Surface::local(ls, uv, rec.material, shape, false)
             }
             HitDetail::Blob { t_error } => {
                 let (g, group) = blob_group(*s, shape.index);
@@ -126,6 +154,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                     uv: [T::ZERO, T::ZERO],
                     material: g.material,
                     shape,
+                    edgeless: T::ABSOLUTE_ROUNDING,
                 }
             }
         }
