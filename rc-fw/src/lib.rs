@@ -43,6 +43,9 @@ pub mod link {
     } else {
         NODES
     };
+    /// The nodes the root logic renders on, with the board's silence bound for them.
+    pub const RENDER_NODE_SET: links_core::serial::render::NodeSet =
+        links_core::serial::render::NodeSet::on(&PROFILE, RENDER_NODES as u16);
     /// As the root of a relay tree: how long a node exchange through a relay may wait for
     /// the node's frame before the root gives it up (`RelayedBus::with_timeout`; the value
     /// is `links_core::relay::RELAY_TIMEOUT_US`, which the simulator's firmware relay tree
@@ -345,6 +348,7 @@ mod tests {
             BoardProfile::F407
         };
         assert_eq!(super::link::PROFILE, p);
+        assert_eq!(super::link::RENDER_NODE_SET.timeout_us, p.node_timeout_us);
         assert_eq!(super::link::SPI_HZ, p.link.bit_rate_hz);
         let (hz, setup, hold) = if cfg!(feature = "board-f207") {
             (15_000_000, 12, 21)

@@ -53,7 +53,7 @@ mod fw {
     use links_core::serial::{Encoder, FrameStreamer};
     use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
     use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS, SERVE};
-    use rc_fw::link::RENDER_NODES;
+    use rc_fw::link::{RENDER_NODES, RENDER_NODE_SET};
     use rc_fw::pins::NODES;
     use rc_fw::plan::{FILM_BANK, SCENE};
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
@@ -253,7 +253,7 @@ mod fw {
                 &mut out,
                 &buf[..len],
                 frame,
-                RENDER_NODES as u16,
+                RENDER_NODE_SET,
                 film_enc,
                 last,
             );
@@ -350,7 +350,7 @@ mod fw {
                     &mut PipeQueue(&USB_QUEUE),
                     image,
                     frames,
-                    RENDER_NODES as u16,
+                    RENDER_NODE_SET,
                     &mut session.enc,
                     last,
                     Some((&mut port, SERVE)),

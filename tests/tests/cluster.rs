@@ -165,6 +165,44 @@ fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render(
     ));
 }
 
+/// Each board's node time-out keeps the F407's margin over the longest run a node renders:
+/// the time-outs' ratios follow the one-node frame times of photo1 (each board's own
+/// storage) within a factor of two, and 8 G0B1 nodes render photo1 at 256x240 (runs of 256
+/// pixels, each longer than the F407's 0.5 s on the M0+) without a false alarm, where the
+/// F407's bound raised several.
+#[test]
+fn node_time_outs_scale_with_the_boards_node_speed() {
+    use links_host::frame::fixed_image;
+    let f32_img = image("photo1.ron", 64, 60);
+    let q_img = fixed_image(&f32_img).expect("photo1 fits Q16.16");
+    let one_node =
+        |board: BoardProfile, img: &[u8]| run(img, SimConfig::buildable(board, 1)).time_s;
+    let f407 = BoardProfile::F407;
+    let base = one_node(f407, &f32_img);
+    for board in [BoardProfile::F207, BoardProfile::G0B1] {
+        let slower = one_node(board, &q_img) / base;
+        let bound = board.node_timeout_us as f64 / f407.node_timeout_us as f64;
+        assert!(
+            (0.5..=2.0).contains(&(bound / slower)),
+            "{}: time-out {bound:.1} times the F407's, node {slower:.1} times slower",
+            board.name
+        );
+    }
+    let big = fixed_image(&image("photo1.ron", 256, 240)).expect("photo1 fits Q16.16");
+    let g0b1 = SimConfig::buildable(BoardProfile::G0B1, 8);
+    let r = run(&big, g0b1.clone());
+    assert_eq!(r.root.timeouts, 0, "false alarms at the G0B1's own bound");
+    let f407_bound = SimConfig {
+        node_timeout_s: f407.node_timeout_us as f64 * 1e-6,
+        ..g0b1
+    };
+    let r = run(&big, f407_bound);
+    assert!(
+        r.root.timeouts > 0,
+        "the F407's bound raised no false alarm on the G0B1"
+    );
+}
+
 /// The relay tree (the F407's buildable topology): frames bit-identical to the single-node
 /// render at every node count (one and two levels of relays), policy, with and without
 /// batching, under bit errors and a node death; every node frame crosses every link up to

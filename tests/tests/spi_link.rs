@@ -744,7 +744,7 @@ fn rc_render_request_streams_the_frame_over_usb_and_answers_resend() {
             &mut Q(&usb),
             &img,
             1,
-            2,
+            rc_fw::render::NodeSet::on(&links_core::board::BoardProfile::F407, 2),
             &mut enc,
             &mut last,
         )

@@ -115,7 +115,8 @@ pub struct ClusterArgs {
     #[command(flatten)]
     pub faults: cli_cluster::FaultArgs,
     /// How long the RC waits for a silent node holding work before re-issuing it, in ms
-    /// (default 500, times N² with --aa N: a pixel is N² rays)
+    /// (default: the board's, scaled to its node's speed: f407 and ideal 500, f207 3000,
+    /// g0b1 12000; times N² with --aa N: a pixel is N² rays)
     #[arg(long)]
     pub timeout_ms: Option<f64>,
     /// A single-buffered RC: it composes, clocks and decodes one transfer at a time
@@ -169,10 +170,6 @@ impl ClusterArgs {
     }
 }
 
-/// The RC's time-out for a silent node holding work without `--timeout-ms`, at one ray per
-/// pixel (ms).
-const DEFAULT_TIMEOUT_MS: f64 = 500.0;
-
 /// The simulated cluster of `--nodes N` and the cluster options, checked.
 pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, CliError> {
     let c = &a.cluster;
@@ -191,7 +188,7 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
         c.topology,
     );
     let samples = f64::from(a.scene.aa.unwrap_or(1)).powi(2);
-    let timeout_ms = c.timeout_ms.unwrap_or(DEFAULT_TIMEOUT_MS * samples);
+    let timeout_ms = c.timeout_ms.unwrap_or(cfg.node_timeout_s * 1e3 * samples);
     if !(c.dm_ms.is_finite() && c.dm_ms >= 0.0 && timeout_ms.is_finite() && timeout_ms > 0.0) {
         return Err(CliError::Usage(
             "--dm-ms must be >= 0 and --timeout-ms > 0".into(),

@@ -210,6 +210,10 @@ pub struct BoardProfile {
     /// The storage the host compiles the nodes' SceneImages in unless told otherwise (the
     /// kernel the core runs best: f32 with an FPU, Q16.16 without).
     pub storage: Storage,
+    /// How long the RC lets a node holding work stay silent before it declares it dead
+    /// (µs; [`RootConfig::timeout_us`](crate::cluster::root::RootConfig::timeout_us)). A
+    /// node speaks once per pixel run, so this must exceed the longest run its core renders.
+    pub node_timeout_us: u64,
 }
 
 /// The STM32F407's core clock: 8 MHz crystal, PLL to 168 MHz (`links-board`'s clock tree).
@@ -218,6 +222,17 @@ const F407_CORE_CLOCK_HZ: u32 = 168_000_000;
 const F207_CORE_CLOCK_HZ: u32 = 120_000_000;
 /// The STM32G0B1's core clock: the 16 MHz HSI16, PLL to 64 MHz (the G0's maximum).
 const G0B1_CORE_CLOCK_HZ: u32 = 64_000_000;
+
+/// The F407 node's silence bound: 0.5 s, 2.5 times its longest run on photo1 at 512x480
+/// (0.15-0.2 s); a false alarm raises the time-out to twice the silence it missed
+/// (docs/reliability.md).
+const F407_NODE_TIMEOUT_US: u64 = 500_000;
+/// The slower cores' bounds keep the F407's margin: its 0.5 s times how much longer their
+/// node takes over the same frame (photo1 512x480 on one node, `links render
+/// scenes/photo1.ron --nodes 1 --board B`: F407 23.0 s, F207 149 s = 6.5 times, G0B1 548 s
+/// = 24 times; a host test holds the ratios to their cost models within a factor of two).
+const F207_NODE_TIMEOUT_US: u64 = 3_000_000;
+const G0B1_NODE_TIMEOUT_US: u64 = 12_000_000;
 
 impl BoardProfile {
     /// What the firmware builds today: STM32F4DISCOVERY boards (STM32F407VG at 168 MHz)
@@ -231,6 +246,7 @@ impl BoardProfile {
         core_clock_hz: F407_CORE_CLOCK_HZ,
         kernels: Kernels::Both,
         storage: Storage::F32,
+        node_timeout_us: F407_NODE_TIMEOUT_US,
     };
 
     /// NUCLEO-F207ZG boards (STM32F207ZG, Cortex-M3 at 120 MHz, no FPU) on the
@@ -245,6 +261,7 @@ impl BoardProfile {
         core_clock_hz: F207_CORE_CLOCK_HZ,
         kernels: Kernels::Fixed,
         storage: Storage::Q16_16,
+        node_timeout_us: F207_NODE_TIMEOUT_US,
     };
 
     /// NUCLEO-G0B1RE boards (STM32G0B1RE, Cortex-M0+ at 64 MHz, no FPU, 144 KB of SRAM) on
@@ -260,6 +277,7 @@ impl BoardProfile {
         core_clock_hz: G0B1_CORE_CLOCK_HZ,
         kernels: Kernels::Fixed,
         storage: Storage::Q16_16,
+        node_timeout_us: G0B1_NODE_TIMEOUT_US,
     };
 
     /// The simulator's idealised link ([`LinkProfile::IDEAL`]) on the F407's nodes (same
@@ -273,6 +291,7 @@ impl BoardProfile {
         core_clock_hz: F407_CORE_CLOCK_HZ,
         kernels: Kernels::Both,
         storage: Storage::F32,
+        node_timeout_us: F407_NODE_TIMEOUT_US,
     };
 
     /// Every profile the host knows, by name.

@@ -44,6 +44,26 @@ impl core::fmt::Display for RenderFail {
 
 impl core::error::Error for RenderFail {}
 
+/// The nodes a render runs on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct NodeSet {
+    pub count: u16,
+    /// How long one holding work may stay silent before the root declares it dead (µs).
+    pub timeout_us: u64,
+}
+
+impl NodeSet {
+    /// `count` nodes of `board`, with its silence bound
+    /// ([`BoardProfile::node_timeout_us`](crate::cluster::profile::BoardProfile::node_timeout_us)).
+    pub const fn on(board: &crate::cluster::profile::BoardProfile, count: u16) -> Self {
+        NodeSet {
+            count,
+            timeout_us: board.node_timeout_us,
+        }
+    }
+}
+
 /// Queue `bytes` once there is room.
 async fn send<R: Room, Q: ByteQueue>(room: &R, queue: &mut Q, bytes: &[u8]) -> bool {
     room.wait_room(bytes.len()).await;
@@ -85,7 +105,7 @@ pub async fn render_frames<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
     queue: &mut Q,
     image: &[u8],
     frames: u16,
-    nodes: u16,
+    nodes: NodeSet,
     enc: &mut Encoder,
     last: &mut Option<FrameStreamer>,
 ) -> Result<RootReport, RenderFail> {
@@ -111,7 +131,7 @@ pub async fn render_frames_with_line<B, C, R, Q, L>(
     queue: &mut Q,
     image: &[u8],
     frames: u16,
-    nodes: u16,
+    nodes: NodeSet,
     enc: &mut Encoder,
     last: &mut Option<FrameStreamer>,
     mut line: Option<(&mut L, ServeConfig)>,
@@ -143,7 +163,7 @@ pub async fn render_film_frame<B: RootBus, C: RootClock, R: Room, Q: ByteQueue>(
     queue: &mut Q,
     image: &[u8],
     frame: u16,
-    nodes: u16,
+    nodes: NodeSet,
     enc: &mut Encoder,
     last: &mut Option<FrameStreamer>,
 ) -> Result<RootReport, RenderFail> {
@@ -170,15 +190,15 @@ async fn render_one<B: RootBus, C: RootClock, R: Room, Q: ByteQueue, L: RcLine>(
     image: &[u8],
     (w, h): (u16, u16),
     frame: u16,
-    nodes: u16,
+    nodes: NodeSet,
     last: &mut Option<FrameStreamer>,
     line: Option<(&mut L, ServeConfig)>,
 ) -> Result<RootReport, RenderFail> {
     let cfg = RootConfig {
         policy: Policy::DECREASING,
-        nodes,
+        nodes: nodes.count,
         frames: 1,
-        timeout_us: RootConfig::DEFAULT_TIMEOUT_US,
+        timeout_us: nodes.timeout_us,
         double_buffer: true,
     };
     let scenes = [image];

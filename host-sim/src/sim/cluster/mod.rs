@@ -52,7 +52,7 @@ use links_core::board::{BoardProfile, NodeBoard};
 use links_core::node::{Kernels, NodeConfig, NodeReport};
 use links_core::num::Storage;
 use links_core::render::{Stats, Techniques};
-use links_core::root::{RootConfig, RootError, RootReport};
+use links_core::root::{RootError, RootReport};
 use links_core::sched::Policy;
 use links_core::wire::{self, Job};
 use rccost::RcCost;
@@ -140,7 +140,8 @@ pub struct SimConfig {
     /// [`nc_fw::plan::BOARD`], for [`BoardProfile::F407`]).
     pub board: NodeBoard,
     /// The RC declares a node holding jobs dead after this long without an exchange (s) and
-    /// re-issues its jobs; 0 = never. Default [`RootConfig::DEFAULT_TIMEOUT_US`] (0.5 s).
+    /// re-issues its jobs; 0 = never. Default: the board's
+    /// ([`BoardProfile::node_timeout_us`]: 0.5 s on the F407).
     pub node_timeout_s: f64,
     /// DM time per frame (s): frame `f`'s scene exists from `(f + 1) · dm_s_per_frame` on.
     /// Default 0: every scene is compiled before the run (see docs/cluster.md).
@@ -208,7 +209,7 @@ impl SimConfig {
             spi_dead: Vec::new(),
             backup_line: false,
             board: profile.node,
-            node_timeout_s: RootConfig::DEFAULT_TIMEOUT_US as f64 * 1e-6,
+            node_timeout_s: profile.node_timeout_us as f64 * 1e-6,
             dm_s_per_frame: 0.0,
             dm_frame_s: Vec::new(),
             collect: Collect::Snoop,

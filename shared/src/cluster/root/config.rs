@@ -24,10 +24,9 @@ pub struct RootConfig {
 }
 
 impl RootConfig {
-    /// 0.5 s: a live node rendering photo1 at 512x480 at 168 MHz is silent for at most
-    /// 0.15-0.2 s (its longest run), a 2.5x margin; a false alarm raises the time-out to
-    /// twice the silence it missed (see docs/reliability.md).
-    pub const DEFAULT_TIMEOUT_US: u64 = 500_000;
+    /// The F407 node's silence bound, 0.5 s (each board's:
+    /// [`BoardProfile::node_timeout_us`](crate::cluster::profile::BoardProfile::node_timeout_us)).
+    pub const DEFAULT_TIMEOUT_US: u64 = crate::cluster::profile::BoardProfile::F407.node_timeout_us;
 }
 
 /// Why the RC cannot run.
