@@ -115,8 +115,8 @@ pub struct ClusterArgs {
     #[command(flatten)]
     pub faults: cli_cluster::FaultArgs,
     /// How long the RC waits for a silent node holding work before re-issuing it, in ms
-    /// (default: the board's, scaled to its node's speed: f407 and ideal 500, f207 3000,
-    /// g0b1 12000; times N² with --aa N: a pixel is N² rays)
+    /// (default: the board's, scaled to its node's speed: f407 and ideal 500, f207 4000,
+    /// g0b1 15000; times N² with --aa N: a pixel is N² rays)
     #[arg(long)]
     pub timeout_ms: Option<f64>,
     /// A single-buffered RC: it composes, clocks and decodes one transfer at a time
