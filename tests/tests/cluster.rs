@@ -165,6 +165,56 @@ fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render(
     ));
 }
 
+/// Fixed-point frames stay bit-identical to the single-node fixed render under every policy
+/// (fixed divisions in spans and rectangles, static spans) and past one bus: 24 and 64 nodes
+/// on the buildable relay tree (the simulator's relay model), and 64 nodes through the
+/// firmware's relay code (`--relay firmware`, the F407 board whose nodes carry both
+/// kernels).
+#[test]
+fn fixed_point_frames_are_bit_identical_under_every_policy_and_topology() {
+    use links_host::cluster::relay::RelayCode;
+    use links_host::frame::{fixed_image, render_frame, Precision};
+    let img = fixed_image(&image("photo1.ron", 64, 60)).expect("photo1 fits Q16.16");
+    let want = render_frame(&img, Precision::Fixed, 1, &|| {})
+        .expect("renders")
+        .rgb;
+    let policies = [
+        Policy::Fixed {
+            divisions: 40,
+            shape: Split::Span,
+        },
+        Policy::Fixed {
+            divisions: 48,
+            shape: Split::Rect,
+        },
+        Policy::Static { shape: Split::Span },
+        Policy::DECREASING,
+    ];
+    for (board, nodes) in [
+        (BoardProfile::F207, 5u16),
+        (BoardProfile::G0B1, 24),
+        (BoardProfile::F407, 64),
+    ] {
+        for policy in policies {
+            let cfg = SimConfig {
+                policy,
+                ..SimConfig::buildable(board, nodes)
+            };
+            let what = format!("{} board, {nodes} nodes, {policy:?}", board.name);
+            let r = run(&img, cfg);
+            assert!(r.frames[0] == want, "{what}");
+            assert_eq!(r.root.pixels, 64 * 60, "{what}");
+        }
+    }
+    let firmware_relays = SimConfig {
+        relay: RelayCode::Firmware,
+        ..SimConfig::buildable(BoardProfile::F407, 64)
+    };
+    assert!(firmware_relays.tree().is_some(), "64 F407 nodes are a relay tree");
+    let r = run(&img, firmware_relays);
+    assert!(r.frames[0] == want, "the firmware's relay code");
+}
+
 /// Each board's node time-out keeps the F407's margin over the longest run a node renders:
 /// the time-outs' ratios follow the one-node frame times of photo1 (each board's own
 /// storage) within a factor of two, and 8 G0B1 nodes render photo1 at 256x240 (runs of 256
