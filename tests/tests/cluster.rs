@@ -210,7 +210,10 @@ fn fixed_point_frames_are_bit_identical_under_every_policy_and_topology() {
         relay: RelayCode::Firmware,
         ..SimConfig::buildable(BoardProfile::F407, 64)
     };
-    assert!(firmware_relays.tree().is_some(), "64 F407 nodes are a relay tree");
+    assert!(
+        firmware_relays.tree().is_some(),
+        "64 F407 nodes are a relay tree"
+    );
     let r = run(&img, firmware_relays);
     assert!(r.frames[0] == want, "the firmware's relay code");
 }
