@@ -88,7 +88,8 @@ impl LinkProfile {
     };
 
     /// The F207 boards' link: the F407's protocol (header, trailer, 8 nodes per bus, an RC
-    /// that clocks the wire only inside `finish`) at the F207's speeds. SPI1 at 15 MHz
+    /// whose bus task clocks the wire while the root logic composes the next transfer,
+    /// [`spi::RC_OVERLAPS`], as on the F407) at the F207's speeds. SPI1 at 15 MHz
     /// (APB2 60 MHz / 4, the same divider that holds on the F407 for a full-duplex slave
     /// behind the MISO multiplexer; the F207's SPI slave limit is 30 MHz); chip-select
     /// set-up and hold are the F407's 8 + 15 µs of software (EXTI wake-up, DMA re-arm) scaled
