@@ -4,6 +4,10 @@
 
 use links_core::board::BoardProfile;
 use links_core::node::NodeConfig;
+use links_core::wire::PixelCoding;
+
+/// Every pixel coding a node may use, for tests that cycle through them.
+const CODINGS: [PixelCoding; 3] = [PixelCoding::Raw, PixelCoding::Rle, PixelCoding::Delta];
 use links_core::sched::{Policy, Split};
 use links_core::wire::{self, Down, SCENE_CHUNK};
 use links_host::cluster::relay::{Topology, TreeShape};
@@ -68,7 +72,9 @@ fn cluster_frames_are_bit_identical_to_the_single_node_render() {
                 nodes,
                 buses,
                 policy,
-                node: NodeConfig { rle: i % 2 == 0 },
+                node: NodeConfig {
+                    coding: CODINGS[i % 3],
+                },
                 ..SimConfig::for_board(board)
             },
         );
@@ -284,7 +290,9 @@ fn relay_tree_frames_are_bit_identical_and_every_frame_crosses_each_link_once() 
             nodes,
             policy,
             topology: Topology::RelayTree { fanout: 8, batch },
-            node: NodeConfig { rle: i % 2 == 0 },
+            node: NodeConfig {
+                coding: CODINGS[i % 3],
+            },
             ..SimConfig::for_board(BoardProfile::F407)
         };
         let what = format!("{nodes} nodes, batch {batch}, {policy:?}");
@@ -553,7 +561,9 @@ fn broadcast_bytes_are_exact() {
         SimConfig {
             nodes: 4,
             buses: 2,
-            node: NodeConfig { rle: false },
+            node: NodeConfig {
+                coding: PixelCoding::Raw,
+            },
             ..SimConfig::default()
         },
     );
@@ -587,18 +597,27 @@ fn broadcast_bytes_are_exact() {
 }
 
 #[test]
-fn run_length_coding_is_lossless_and_shrinks_the_traffic() {
+fn pixel_coding_is_lossless_and_shrinks_the_traffic() {
     let img = image("photo1.ron", 64, 60);
-    let cfg = |rle| SimConfig {
+    let cfg = |coding| SimConfig {
         nodes: 4,
-        node: NodeConfig { rle },
+        node: NodeConfig { coding },
         ..SimConfig::default()
     };
-    let raw = run(&img, cfg(false));
-    let rle = run(&img, cfg(true));
+    let raw = run(&img, cfg(PixelCoding::Raw));
+    let rle = run(&img, cfg(PixelCoding::Rle));
+    let delta = run(&img, cfg(PixelCoding::Delta));
     assert!(raw.frames[0] == rle.frames[0]);
+    assert!(raw.frames[0] == delta.frames[0]);
     let up = |r: &SimReport| r.bus.iter().map(|b| b.up_bytes).sum::<u64>();
     assert!(up(&rle) * 3 < up(&raw) * 2, "{} vs {}", up(&rle), up(&raw));
+    // Delta coding also shortens the shaded runs RLE leaves raw.
+    assert!(
+        up(&delta) * 4 < up(&rle) * 3,
+        "{} vs {}",
+        up(&delta),
+        up(&rle)
+    );
 }
 
 #[test]

@@ -47,6 +47,7 @@ use links_core::spi::{
     self, Armed, Bank, MasterLink, MasterPort, PortError, Select, SlaveBanks, SlavePort,
     SlaveShared, ACK, BANK, CRC16, HEADER, NAK,
 };
+use links_core::wire::PixelCoding;
 use links_core::wire::{
     self, Down, Job, Region, SceneState, Up, CRC32, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
     SCENE_CHUNK,
@@ -982,7 +983,7 @@ fn some_down<'a>(rng: &mut Rng, data: &'a [u8], w: u32, h: u32) -> Down<'a> {
 fn some_up<'a>(rng: &mut Rng, buf: &'a [u8], w: u32, h: u32) -> Up<'a> {
     let n = rng.below(buf.len() + 1);
     let bytes = &buf[..n];
-    match rng.below(4) {
+    match rng.below(5) {
         0 => Up::Status {
             scene: some_scene_state(rng),
         },
@@ -995,7 +996,16 @@ fn some_up<'a>(rng: &mut Rng, buf: &'a [u8], w: u32, h: u32) -> Up<'a> {
             rgb: bytes,
             done: rng.chance(30),
         },
-        _ => Up::PixelsRle {
+        3 => Up::PixelsRle {
+            job: small_or_edge(rng, 64),
+            frame: small_or_edge(rng, 3) as u16,
+            y: small_or_edge(rng, h as u64) as u16,
+            x: small_or_edge(rng, w as u64) as u16,
+            len: small_or_edge(rng, MAX_RUN as u64) as u16,
+            data: bytes,
+            done: rng.chance(30),
+        },
+        _ => Up::PixelsDelta {
             job: small_or_edge(rng, 64),
             frame: small_or_edge(rng, 3) as u16,
             y: small_or_edge(rng, h as u64) as u16,
@@ -1100,6 +1110,19 @@ fn check_wire_bytes(bytes: &[u8], rng: &mut Rng, tally: &mut Tally) -> Verdict {
                 tally.note("rle round trips", 1);
             }
         }
+        if let Up::PixelsDelta { len, data, .. } = env.msg {
+            let mut out = vec![0u8; 3 * len as usize];
+            if wire::delta_decode(data, &mut out).is_ok() {
+                let mut coded = vec![0u8; 4 * len as usize];
+                let n = wire::delta_encode(&out, &mut coded).expect("room for every pixel");
+                let mut back = vec![0u8; out.len()];
+                wire::delta_decode(&coded[..n], &mut back).expect("own coding decodes");
+                assert_eq!(back, out);
+                // The encoder's own coding is never longer than the data it decoded from.
+                assert!(n <= data.len(), "{n} > {}", data.len());
+                tally.note("delta round trips", 1);
+            }
+        }
     }
     match (down, up) {
         (Ok(_), _) | (_, Ok(_)) => Verdict::Accepted,
@@ -1172,16 +1195,13 @@ impl NodeLink for ScriptLink<'_> {
             self.last_posted = Some(env.seq);
         }
         let mut buf = [0u8; 3 * MAX_RUN];
-        let (y, x, rgb): (u16, u16, &[u8]) = match env.msg {
-            Up::Pixels { y, x, rgb, .. } => (y, x, rgb),
-            Up::PixelsRle {
-                y, x, len, data, ..
-            } => {
-                let out = &mut buf[..3 * len as usize];
-                wire::rle_decode(data, out).expect("the node's coding decodes");
-                (y, x, &*out)
-            }
-            _ => return Ok(()),
+        let (y, x, rgb): (u16, u16, &[u8]) = match env
+            .msg
+            .pixel_run(&mut buf)
+            .expect("the node's coding decodes")
+        {
+            Some(r) => (r.y, r.x, r.rgb),
+            None => return Ok(()),
         };
         for (k, px) in rgb.chunks_exact(3).enumerate() {
             self.pixels.insert((y, x + k as u16), [px[0], px[1], px[2]]);
@@ -1420,7 +1440,7 @@ fn node_session(img: &[u8], reference: &[Rgb8], rng: &mut Rng, tally: &mut Tally
     let mut renderer = Budgeted { left: 4096 };
     let r = block_on(run_node(
         NodeConfig {
-            rle: rng.chance(70),
+            coding: [PixelCoding::Raw, PixelCoding::Rle, PixelCoding::Delta][rng.below(3)],
         },
         &mut link,
         &mut RealTime,

@@ -95,6 +95,11 @@ pub struct ClusterArgs {
     /// firmware link)
     #[arg(long, default_value = "model", value_parser = cli_cluster::parse_relay)]
     pub relay: crate::cluster::relay::RelayCode,
+    /// How the nodes may code their pixel runs (cluster only): raw, rle (raw or run-length
+    /// coded, whichever is shorter) or delta (raw, run-length or delta coded: shading steps
+    /// in one or two bytes a pixel)
+    #[arg(long, default_value = "rle", value_parser = cli_cluster::parse_pixel_coding)]
+    pub pixel_coding: links_core::wire::PixelCoding,
     /// A relay that stops answering: RELAY@SECONDS or FIRST-LAST@SECONDS of virtual time
     /// (repeatable; --relay firmware only)
     #[arg(long = "kill-relay", value_name = "RELAY@SECONDS")]
@@ -200,6 +205,7 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
         cfg.link = link;
     }
     cfg.relay = c.relay;
+    cfg.node.coding = c.pixel_coding;
     let relays = cfg.tree().and_then(Result::ok).map_or(0, |t| t.leaves);
     cfg.relay_deaths = cli_cluster::relay_deaths(&c.kill_relays, relays)?;
     cfg.dm_s_per_frame = c.dm_ms * 1e-3;

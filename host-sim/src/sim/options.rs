@@ -97,6 +97,17 @@ pub fn parse_relay(s: &str) -> Result<RelayCode, OptionError> {
     }
 }
 
+/// `--pixel-coding NAME`: how nodes may code their pixel runs.
+pub fn parse_pixel_coding(s: &str) -> Result<links_core::wire::PixelCoding, OptionError> {
+    use links_core::wire::PixelCoding;
+    match s {
+        "raw" => Ok(PixelCoding::Raw),
+        "rle" => Ok(PixelCoding::Rle),
+        "delta" => Ok(PixelCoding::Delta),
+        _ => Err(OptionError::UnknownPixelCoding(s.into())),
+    }
+}
+
 /// `--kill-relay` values (RELAY@SECONDS, FIRST-LAST@SECONDS) for a tree of `relays` relays.
 pub fn relay_deaths(values: &[String], relays: u16) -> Result<Vec<NodeDeath>, OptionError> {
     node_times(values, relays).map_err(|e| match e {
@@ -286,6 +297,7 @@ pub enum OptionError {
     UnknownLink(String),
     /// `--relay` with no such relay code.
     UnknownRelay(String),
+    UnknownPixelCoding(String),
     /// `--kill-relay` of a relay the tree does not have.
     NoSuchRelay {
         text: String,
@@ -332,6 +344,9 @@ impl fmt::Display for OptionError {
             }
             OptionError::UnknownRelay(s) => {
                 write!(f, "unknown relay code '{s}' (expected model or firmware)")
+            }
+            OptionError::UnknownPixelCoding(s) => {
+                write!(f, "unknown pixel coding '{s}' (expected raw, rle or delta)")
             }
             OptionError::NoSuchRelay { text, relay, relays: 0 } => write!(
                 f,
@@ -636,6 +651,16 @@ mod tests {
         assert_eq!(topology_note(&i), "");
         let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
         assert_eq!(eight.overloaded_bus(), None);
+    }
+
+    #[test]
+    fn pixel_codings_parse() {
+        use links_core::wire::PixelCoding;
+        assert_eq!(parse_pixel_coding("raw"), Ok(PixelCoding::Raw));
+        assert_eq!(parse_pixel_coding("rle"), Ok(PixelCoding::Rle));
+        assert_eq!(parse_pixel_coding("delta"), Ok(PixelCoding::Delta));
+        let e = parse_pixel_coding("qoi").unwrap_err().to_string();
+        assert!(e.contains("unknown pixel coding 'qoi'"), "{e}");
     }
 
     #[test]

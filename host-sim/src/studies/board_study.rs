@@ -12,7 +12,9 @@ use crate::sim::options::{board_text, topology_text};
 use crate::studies::report::table_head;
 use crate::studies::sweep_commands::single_and_steady;
 use links_core::board::BoardProfile;
+use links_core::node::NodeConfig;
 use links_core::root::MAX_BUSES;
+use links_core::wire::PixelCoding;
 
 /// One measured configuration: single frame and steady state, with their speed-ups.
 struct Point {
@@ -254,6 +256,19 @@ fn topology_table(
                     batch: true,
                 },
                 ..star(3)
+            },
+        ),
+        (
+            "(c) batched, delta-coded pixels (--pixel-coding delta)",
+            SimConfig {
+                topology: Topology::RelayTree {
+                    fanout: 8,
+                    batch: true,
+                },
+                node: NodeConfig {
+                    coding: PixelCoding::Delta,
+                },
+                ..star(1)
             },
         ),
         ("one RC with 8 buses (not an F407)", star(8)),

@@ -12,6 +12,7 @@ use crate::studies::cluster_sweep::{
 use crate::studies::report::{table_head, write_file};
 use links_core::board::BoardProfile;
 use links_core::node::NodeConfig;
+use links_core::wire::PixelCoding;
 use std::path::Path;
 
 /// The Fig. 5.1 study: the bus table (raw vs RLE pixels, 1/2/4 buses at 64 nodes) printed,
@@ -39,21 +40,23 @@ pub fn nodes_study(
         "bus busy (single)",
         "bytes (single)",
     ]));
-    for rle in [false, true] {
+    for coding in [PixelCoding::Raw, PixelCoding::Rle, PixelCoding::Delta] {
+        let name = match coding {
+            PixelCoding::Raw => "raw RGB8",
+            PixelCoding::Rle => "RLE",
+            PixelCoding::Delta => "RLE or delta",
+        };
         for buses in [1u16, 2, 4] {
-            progress(&format!(
-                "64 nodes, {buses} bus(es), {}",
-                if rle { "RLE" } else { "raw RGB8" }
-            ));
+            progress(&format!("64 nodes, {buses} bus(es), {name}"));
             let cfg = SimConfig {
                 buses,
-                node: NodeConfig { rle },
+                node: NodeConfig { coding },
                 ..base.clone()
             };
             let (one, one_steady, r, steady) = single_and_steady(image, &cfg).map_err(e)?;
             table.push_str(&format!(
                 "| {} | {buses} | {:.4} | {:.2} | {:.4} | {:.2} | {:.1}% | {} |\n",
-                if rle { "RLE" } else { "raw RGB8" },
+                name,
                 r.time_s,
                 one / r.time_s,
                 steady,

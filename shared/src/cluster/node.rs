@@ -16,8 +16,8 @@
 use super::landing::{scene_range, Landed, LentBank, NoLanding, SceneKey, SceneLanding};
 use super::link::{Incoming, LinkError, NodeLink};
 use super::wire::{
-    self, Down, Job, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN, MAX_SCENE,
-    PIECES_PER_CHUNK, SCENE_CHUNK, SCENE_PIECE,
+    self, Down, Job, PixelCoding, SceneState, Up, JOB_QUEUE, MAX_CHUNKS, MAX_MESSAGE, MAX_RUN,
+    MAX_SCENE, PIECES_PER_CHUNK, SCENE_CHUNK, SCENE_PIECE,
 };
 use crate::image::SceneView;
 use crate::num::Storage;
@@ -74,13 +74,16 @@ impl WorkClock for RealTime {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct NodeConfig {
-    /// Send a pixel run run-length coded ([`Up::PixelsRle`]) when that is shorter.
-    pub rle: bool,
+    /// How pixel runs may be coded: each run goes as the shortest of raw and these
+    /// ([`Up::PixelsRle`], [`Up::PixelsDelta`]).
+    pub coding: PixelCoding,
 }
 
 impl Default for NodeConfig {
     fn default() -> Self {
-        Self { rle: true }
+        Self {
+            coding: PixelCoding::Rle,
+        }
     }
 }
 
@@ -516,13 +519,8 @@ where
                 nc.push_slot(|seq, buf| wire::encode(seq, ack, &Up::Status { scene }, buf))
             } else if let Some(b) = nc.built.take() {
                 let rgb = pix[..b.len].as_flattened();
-                let rle = if cfg.rle {
-                    wire::rle_encode(rgb, &mut coded)
-                } else {
-                    None
-                };
-                let up = match rle {
-                    Some(n) if n < rgb.len() => Up::PixelsRle {
+                let up = match wire::code_pixels(cfg.coding, rgb, &mut coded) {
+                    wire::Coded::Rle(n) => Up::PixelsRle {
                         job: b.job,
                         frame: b.frame,
                         y: b.y,
@@ -531,7 +529,16 @@ where
                         data: &coded[..n],
                         done: b.done,
                     },
-                    _ => Up::Pixels {
+                    wire::Coded::Delta(n) => Up::PixelsDelta {
+                        job: b.job,
+                        frame: b.frame,
+                        y: b.y,
+                        x: b.x,
+                        len: b.len as u16,
+                        data: &coded[..n],
+                        done: b.done,
+                    },
+                    wire::Coded::Raw => Up::Pixels {
                         job: b.job,
                         frame: b.frame,
                         y: b.y,

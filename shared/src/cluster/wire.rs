@@ -22,8 +22,9 @@
 use core::fmt;
 use serde::{Deserialize, Serialize};
 
-/// Protocol version carried in every message (4: scene repairs may come in pieces).
-pub const PROTOCOL_VERSION: u8 = 4;
+/// Protocol version carried in every message (4: scene repairs may come in pieces; 5: pixel
+/// runs may come delta-coded, [`Up::PixelsDelta`]).
+pub const PROTOCOL_VERSION: u8 = 5;
 /// Most pixels in one [`Up::Pixels`] message (one full 512-pixel scanline).
 pub const MAX_RUN: usize = 512;
 /// Bytes of scene image in one broadcast chunk.
@@ -198,6 +199,18 @@ pub enum Up<'a> {
         data: &'a [u8],
         done: bool,
     },
+    /// As [`Up::Pixels`], the `len` pixels delta-coded ([`delta_encode`]): lossless, and
+    /// shorter than the raw bytes over smooth shading too, where run-length coding is not.
+    PixelsDelta {
+        job: u32,
+        frame: u16,
+        y: u16,
+        x: u16,
+        len: u16,
+        #[serde(serialize_with = "bytes")]
+        data: &'a [u8],
+        done: bool,
+    },
 }
 
 /// Serialise a payload as one block of bytes (postcard: varint length + the bytes, exactly
@@ -242,6 +255,251 @@ pub fn rle_decode(data: &[u8], out: &mut [u8]) -> Result<(), WireError> {
             d.copy_from_slice(&q[1..4]);
         }
         at += 3 * count;
+    }
+    if at == out.len() {
+        Ok(())
+    } else {
+        Err(WireError::Malformed)
+    }
+}
+
+/// A pixel run's place and its RGB8 pixels ([`Up::pixel_run`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PixelRun<'a> {
+    pub job: u32,
+    pub frame: u16,
+    pub y: u16,
+    pub x: u16,
+    pub rgb: &'a [u8],
+    pub done: bool,
+}
+
+impl<'a> Up<'a> {
+    /// The pixel run this message carries, a coded one expanded into `buf`: `Ok(None)` for
+    /// a message that carries none, [`WireError::Malformed`] for a coding that does not
+    /// decode or does not fit `buf`.
+    pub fn pixel_run<'b>(&self, buf: &'b mut [u8]) -> Result<Option<PixelRun<'b>>, WireError>
+    where
+        'a: 'b,
+    {
+        let (job, frame, y, x, rgb, done) = match *self {
+            Up::Pixels {
+                job,
+                frame,
+                y,
+                x,
+                rgb,
+                done,
+            } => (job, frame, y, x, rgb, done),
+            Up::PixelsRle {
+                job,
+                frame,
+                y,
+                x,
+                len,
+                data,
+                done,
+            }
+            | Up::PixelsDelta {
+                job,
+                frame,
+                y,
+                x,
+                len,
+                data,
+                done,
+            } => {
+                let out = buf
+                    .get_mut(..3 * len as usize)
+                    .ok_or(WireError::Malformed)?;
+                if matches!(self, Up::PixelsRle { .. }) {
+                    rle_decode(data, out)?;
+                } else {
+                    delta_decode(data, out)?;
+                }
+                (job, frame, y, x, &*out, done)
+            }
+            Up::Status { .. } | Up::Poll => return Ok(None),
+        };
+        Ok(Some(PixelRun {
+            job,
+            frame,
+            y,
+            x,
+            rgb,
+            done,
+        }))
+    }
+}
+
+/// How a pixel run is coded on the wire ([`Up::Pixels`], [`Up::PixelsRle`],
+/// [`Up::PixelsDelta`]): a node sends the shortest of raw and the codings it may use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PixelCoding {
+    /// Raw RGB8 only.
+    Raw,
+    /// Raw or run-length coded.
+    Rle,
+    /// Raw, run-length or delta coded.
+    Delta,
+}
+
+/// How [`code_pixels`] coded a run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coded {
+    /// Shortest raw: send the pixels as they are.
+    Raw,
+    /// The first `n` bytes of the buffer, run-length coded.
+    Rle(usize),
+    /// The first `n` bytes of the buffer, delta coded.
+    Delta(usize),
+}
+
+/// Code `rgb` as the shortest of raw and what `coding` allows, into `out` (ties go to the
+/// simpler coding).
+pub fn code_pixels(coding: PixelCoding, rgb: &[u8], out: &mut [u8]) -> Coded {
+    let rle = match coding {
+        PixelCoding::Raw => None,
+        PixelCoding::Rle | PixelCoding::Delta => rle_encode(rgb, out).filter(|&n| n < rgb.len()),
+    };
+    if coding == PixelCoding::Delta {
+        let best = rle.unwrap_or(rgb.len());
+        if let Some(n) = delta_encode(rgb, out).filter(|&n| n < best) {
+            return Coded::Delta(n);
+        }
+        // `out` now holds the delta coding: code the winner again.
+        if let Some(n) = rle {
+            return match rle_encode(rgb, out) {
+                Some(m) if m == n => Coded::Rle(n),
+                _ => Coded::Raw,
+            };
+        }
+        return Coded::Raw;
+    }
+    rle.map_or(Coded::Raw, Coded::Rle)
+}
+
+// Delta coding ([`delta_encode`]): one tag byte per operation, each pixel coded against the
+// one before it (the run starts from black), channel differences wrapping modulo 256.
+/// `00rrggbb`: each channel differs by -2..=1 (stored + 2).
+const DELTA_SMALL: u8 = 0b00 << 6;
+/// `01nnnnnn`: the previous pixel again, n + 1 times (1..=64).
+const DELTA_RUN: u8 = 0b01 << 6;
+/// `10gggggg rrrrbbbb`: green differs by -32..=31 (stored + 32), red and blue by green's
+/// difference -8..=7 (stored + 8): shading changes the three channels together.
+const DELTA_LUMA: u8 = 0b10 << 6;
+/// `11000000 r g b`: the pixel itself. Other `11` tags are not used (malformed).
+const DELTA_LITERAL: u8 = 0b11 << 6;
+const DELTA_MAX_RUN: usize = 64;
+
+/// Delta-code RGB8 pixels (see the tag constants above): a run of equal pixels takes one
+/// byte per 64, a small change one byte, a shading step two, anything else four. Returns the
+/// coded length, or `None` if it would not fit `out`.
+pub fn delta_encode(rgb: &[u8], out: &mut [u8]) -> Option<usize> {
+    let mut n = 0;
+    let mut prev = [0u8; 3];
+    let mut run = 0usize;
+    let mut put = |n: &mut usize, bytes: &[u8]| -> Option<()> {
+        out.get_mut(*n..*n + bytes.len())?.copy_from_slice(bytes);
+        *n += bytes.len();
+        Some(())
+    };
+    for p in rgb.chunks_exact(3) {
+        let p = [p[0], p[1], p[2]];
+        if p == prev {
+            run += 1;
+            if run == DELTA_MAX_RUN {
+                put(&mut n, &[DELTA_RUN | (run - 1) as u8])?;
+                run = 0;
+            }
+            continue;
+        }
+        if run > 0 {
+            put(&mut n, &[DELTA_RUN | (run - 1) as u8])?;
+            run = 0;
+        }
+        let d = |c: usize| p[c].wrapping_sub(prev[c]) as i8 as i16;
+        let (dr, dg, db) = (d(0), d(1), d(2));
+        let (rg, bg) = (dr - dg, db - dg);
+        if (-2..=1).contains(&dr) && (-2..=1).contains(&dg) && (-2..=1).contains(&db) {
+            let v = ((dr + 2) << 4 | (dg + 2) << 2 | (db + 2)) as u8;
+            put(&mut n, &[DELTA_SMALL | v])?;
+        } else if (-32..=31).contains(&dg) && (-8..=7).contains(&rg) && (-8..=7).contains(&bg) {
+            let v = [
+                DELTA_LUMA | (dg + 32) as u8,
+                ((rg + 8) << 4 | (bg + 8)) as u8,
+            ];
+            put(&mut n, &v)?;
+        } else {
+            put(&mut n, &[DELTA_LITERAL, p[0], p[1], p[2]])?;
+        }
+        prev = p;
+    }
+    if run > 0 {
+        put(&mut n, &[DELTA_RUN | (run - 1) as u8])?;
+    }
+    Some(n)
+}
+
+/// Decode [`delta_encode`]'s output into `out`, which must be filled exactly (whole pixels);
+/// anything else (a truncated operation, an unused tag, too many or too few pixels) is
+/// [`WireError::Malformed`].
+pub fn delta_decode(data: &[u8], out: &mut [u8]) -> Result<(), WireError> {
+    if !out.len().is_multiple_of(3) {
+        return Err(WireError::Malformed);
+    }
+    let mut prev = [0u8; 3];
+    let (mut i, mut at) = (0usize, 0usize);
+    while let Some(&tag) = data.get(i) {
+        let px = match tag & 0b1100_0000 {
+            DELTA_RUN => {
+                // The one operation of several pixels.
+                let count = (tag & 0x3f) as usize + 1;
+                let dst = out
+                    .get_mut(at..at + 3 * count)
+                    .ok_or(WireError::Malformed)?;
+                for d in dst.chunks_exact_mut(3) {
+                    d.copy_from_slice(&prev);
+                }
+                at += 3 * count;
+                i += 1;
+                continue;
+            }
+            DELTA_SMALL => {
+                i += 1;
+                let d = |s: u8| ((tag >> s) & 3).wrapping_sub(2);
+                [
+                    prev[0].wrapping_add(d(4)),
+                    prev[1].wrapping_add(d(2)),
+                    prev[2].wrapping_add(d(0)),
+                ]
+            }
+            DELTA_LUMA => {
+                let &b = data.get(i + 1).ok_or(WireError::Malformed)?;
+                i += 2;
+                let dg = (tag & 0x3f).wrapping_sub(32);
+                [
+                    prev[0].wrapping_add(dg.wrapping_add((b >> 4).wrapping_sub(8))),
+                    prev[1].wrapping_add(dg),
+                    prev[2].wrapping_add(dg.wrapping_add((b & 0x0f).wrapping_sub(8))),
+                ]
+            }
+            _ => {
+                if tag != DELTA_LITERAL {
+                    return Err(WireError::Malformed);
+                }
+                let p = data.get(i + 1..i + 4).ok_or(WireError::Malformed)?;
+                i += 4;
+                [p[0], p[1], p[2]]
+            }
+        };
+        // Every other operation is one pixel.
+        out.get_mut(at..at + 3)
+            .ok_or(WireError::Malformed)?
+            .copy_from_slice(&px);
+        at += 3;
+        prev = px;
     }
     if at == out.len() {
         Ok(())
@@ -608,6 +866,69 @@ mod tests {
         );
         assert_eq!(rle_encode(&rgb, &mut coded[..7]), None);
         assert_eq!(rle_encode(&[], &mut coded), Some(0));
+    }
+
+    #[test]
+    fn delta_round_trips_codes_shading_short_and_rejects_bad_input() {
+        // A shaded gradient (steps of 1-9 per channel), a flat stretch, noise.
+        let mut rgb = [0u8; 3 * 600];
+        let mut state = 0x2545_f491_u32;
+        for (i, p) in rgb.chunks_exact_mut(3).enumerate() {
+            state ^= state << 13;
+            state ^= state >> 17;
+            state ^= state << 5;
+            let v = match i {
+                0..200 => [(40 + i / 2) as u8, (60 + i) as u8, (i * 9 / 8) as u8],
+                200..400 => [9, 9, 200],
+                _ => state.to_le_bytes()[..3].try_into().unwrap(),
+            };
+            p.copy_from_slice(&v);
+        }
+        let mut coded = [0u8; 4 * 600];
+        let n = delta_encode(&rgb, &mut coded).unwrap();
+        let mut back = [0u8; 3 * 600];
+        delta_decode(&coded[..n], &mut back).unwrap();
+        assert_eq!(back, rgb);
+        // The gradient alone: one or two bytes a pixel, where RLE needs four.
+        let g = delta_encode(&rgb[..600], &mut coded).unwrap();
+        assert!(g <= 2 * 200 && g > 200, "{g}");
+        assert_eq!(rle_encode(&rgb[..600], &mut [0u8; 4 * 200]), Some(800));
+        // The flat stretch: 200 pixels in a literal and four run bytes (199 = 64 + 64 + 64
+        // + 7 repeats).
+        assert_eq!(delta_encode(&rgb[600..1200], &mut coded), Some(4 + 4));
+        // Every single-pixel step from black codes and decodes, through each tag.
+        for v in [
+            [0, 0, 0],
+            [1, 0, 255],
+            [254, 254, 254],
+            [20, 30, 25],
+            [200, 7, 9],
+        ] {
+            let n = delta_encode(&v, &mut coded).unwrap();
+            let mut one = [0u8; 3];
+            delta_decode(&coded[..n], &mut one).unwrap();
+            assert_eq!(one, v);
+        }
+        let n = delta_encode(&rgb, &mut coded).unwrap();
+        assert_eq!(
+            delta_decode(&coded[..n - 1], &mut back),
+            Err(WireError::Malformed)
+        );
+        assert_eq!(
+            delta_decode(&coded[..n], &mut back[..30]),
+            Err(WireError::Malformed)
+        );
+        assert_eq!(
+            delta_decode(&[0b1100_0001], &mut [0u8; 3]),
+            Err(WireError::Malformed)
+        );
+        assert_eq!(
+            delta_decode(&[DELTA_LUMA], &mut [0u8; 3]),
+            Err(WireError::Malformed)
+        );
+        assert_eq!(delta_decode(&[], &mut [0u8; 2]), Err(WireError::Malformed));
+        assert_eq!(delta_encode(&rgb, &mut coded[..7]), None);
+        assert_eq!(delta_encode(&[], &mut coded), Some(0));
     }
 
     #[test]

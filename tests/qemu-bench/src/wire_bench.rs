@@ -135,6 +135,21 @@ pub fn run(m: &mut impl Meter) -> bool {
         m.line("rle_expand", 4 * quads, MAX_RUN, t);
     }
 
+    // Delta coding: 512 pixels of a shading gradient (one operation a pixel, one or two
+    // bytes each) and of a flat run (a literal and 8 run bytes).
+    for gradient in [true, false] {
+        let mut rgb = [0u8; 3 * MAX_RUN];
+        for (i, p) in rgb.chunks_exact_mut(3).enumerate() {
+            let v = if gradient { i } else { 0 };
+            p.copy_from_slice(&[(40 + v / 2) as u8, (60 + v) as u8, (v * 9 / 8) as u8]);
+        }
+        let n = wire::delta_encode(&rgb, &mut coded).unwrap_or(0);
+        let t = per(m, &mut || {
+            ok &= wire::delta_decode(black_box(&coded[..n]), &mut out).is_ok();
+        });
+        m.line("delta_expand", n, MAX_RUN, t);
+    }
+
     // Copying pixels into a frame memory (the RC as the pixel sink, no snooping collector).
     for n in [384usize, 1536] {
         let t = per(m, &mut || {

@@ -68,28 +68,10 @@ impl FrameMemory {
 
     /// Capture one NC -> RC frame off the wire.
     pub fn snoop(&mut self, bytes: &[u8]) {
-        match wire::decode::<Up>(bytes) {
-            Ok(env) => match env.msg {
-                Up::Pixels {
-                    frame, y, x, rgb, ..
-                } => self.put(frame, y, x, rgb),
-                Up::PixelsRle {
-                    frame,
-                    y,
-                    x,
-                    len,
-                    data,
-                    ..
-                } => {
-                    let mut rgb = vec![0u8; 3 * len as usize];
-                    if wire::rle_decode(data, &mut rgb).is_ok() {
-                        self.put(frame, y, x, &rgb);
-                    } else {
-                        self.bad_messages += 1;
-                    }
-                }
-                _ => {}
-            },
+        let mut buf = [0u8; 3 * wire::MAX_RUN];
+        match wire::decode::<Up>(bytes).and_then(|env| env.msg.pixel_run(&mut buf)) {
+            Ok(Some(r)) => self.put(r.frame, r.y, r.x, r.rgb),
+            Ok(None) => {}
             Err(_) => self.bad_messages += 1,
         }
     }

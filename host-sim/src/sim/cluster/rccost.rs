@@ -41,6 +41,9 @@ pub struct RcCost {
     /// `wire::rle_decode`: per `(count, r, g, b)` quadruple and per pixel written.
     pub rle_per_quad: f64,
     pub rle_per_pixel: f64,
+    /// `wire::delta_decode`: per coded byte and per pixel written.
+    pub delta_per_byte: f64,
+    pub delta_per_pixel: f64,
     /// CRC-32 of a scene image, per byte.
     pub crc_per_byte: f64,
     /// Copying pixels to the frame memory when the RC is the pixel sink, per byte.
@@ -59,6 +62,8 @@ impl RcCost {
         decode_per_byte: 5.25,
         rle_per_quad: 30.0,
         rle_per_pixel: 4.8,
+        delta_per_byte: 28.6,
+        delta_per_pixel: 6.35,
         crc_per_byte: 5.25,
         copy_per_byte: 1.06,
     };
@@ -74,6 +79,8 @@ impl RcCost {
         decode_per_byte: 0.0,
         rle_per_quad: 0.0,
         rle_per_pixel: 0.0,
+        delta_per_byte: 0.0,
+        delta_per_pixel: 0.0,
         crc_per_byte: 0.0,
         copy_per_byte: 0.0,
     };
@@ -93,6 +100,11 @@ impl RcCost {
                     Ok(Up::PixelsRle { len, data, .. }) => {
                         i += self.rle_per_quad * (data.len() / 4) as f64
                             + self.rle_per_pixel * len as f64;
+                        len as usize
+                    }
+                    Ok(Up::PixelsDelta { len, data, .. }) => {
+                        i += self.delta_per_byte * data.len() as f64
+                            + self.delta_per_pixel * len as f64;
                         len as usize
                     }
                     _ => 0,

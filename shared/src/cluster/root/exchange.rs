@@ -138,44 +138,28 @@ impl RootState {
         match env.msg {
             Up::Poll => {}
             Up::Status { scene } => slot.take_status(scene),
-            msg @ (Up::Pixels { .. } | Up::PixelsRle { .. }) => self.take_pixels(node, msg, sink),
+            msg @ (Up::Pixels { .. } | Up::PixelsRle { .. } | Up::PixelsDelta { .. }) => {
+                self.take_pixels(node, msg, sink)
+            }
         }
     }
 
-    /// Take a run of pixels (plain or run-length coded) that `node` sent in sequence.
+    /// Take a run of pixels (plain or coded) that `node` sent in sequence.
     fn take_pixels<P: PixelSink>(&mut self, node: NodeId, msg: Up<'_>, sink: &mut P) {
         let slot = &mut self.nodes[node as usize];
         let mut buf = [0u8; 3 * wire::MAX_RUN];
-        let (job, frame, y, x, rgb, done) = match msg {
-            Up::Pixels {
-                job,
-                frame,
-                y,
-                x,
-                rgb,
-                done,
-            } => (job, frame, y, x, rgb, done),
-            Up::PixelsRle {
-                job,
-                frame,
-                y,
-                x,
-                len,
-                data,
-                done,
-            } => {
-                let Some(out) = buf.get_mut(..3 * len as usize) else {
-                    self.report.rejected += 1;
-                    return;
-                };
-                if wire::rle_decode(data, out).is_err() {
-                    self.report.rejected += 1;
-                    return;
-                }
-                (job, frame, y, x, &*out, done)
-            }
-            _ => return,
+        let Ok(Some(run)) = msg.pixel_run(&mut buf) else {
+            self.report.rejected += 1;
+            return;
         };
+        let wire::PixelRun {
+            job,
+            frame,
+            y,
+            x,
+            rgb,
+            done,
+        } = run;
         let Some(k) = slot
             .jobs
             .iter()
