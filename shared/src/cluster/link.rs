@@ -149,6 +149,12 @@ pub trait RootBus {
         None
     }
 
+    /// How many exchanges are in flight now (started and not yet taken), where the bus
+    /// keeps count (only buses with [`RootBus::in_flight`] above 1; 0 otherwise).
+    fn flying(&self) -> u16 {
+        0
+    }
+
     /// A node with an exchange in flight, if any (only buses with [`RootBus::in_flight`]
     /// above 1 say): the root logic takes them all before it ends.
     fn pending(&self) -> Option<NodeId> {

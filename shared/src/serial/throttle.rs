@@ -30,14 +30,14 @@ pub struct Throttle<'r, B, R> {
 }
 
 impl<B, R> Throttle<'_, B, R> {
-    /// Room a node must find before it is reported ready: two exchanges' worth (one more
-    /// than a bus keeps in flight, [`RootBus::in_flight`]).
+    /// Room a node must find before it is reported ready: two exchanges' worth, or on a bus
+    /// with several in flight ([`RootBus::flying`]) one more than are in flight now.
     pub fn reserve(&self) -> usize
     where
         B: RootBus,
     {
         self.need
-            .saturating_mul(self.bus.in_flight().max(1) as usize + 1)
+            .saturating_mul(self.bus.flying().max(1) as usize + 1)
     }
 }
 
@@ -84,6 +84,10 @@ impl<B: RootBus, R: Room> RootBus for Throttle<'_, B, R> {
     // A frame that came back was paid for when its exchange began.
     fn arrived(&self) -> Option<NodeId> {
         self.bus.arrived()
+    }
+
+    fn flying(&self) -> u16 {
+        self.bus.flying()
     }
 
     fn pending(&self) -> Option<NodeId> {

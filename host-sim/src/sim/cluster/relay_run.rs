@@ -247,7 +247,13 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
             let mut bufs = Box::new(RelayedBuffers::new());
             let r = match RelayedBus::new(bus, &mut bufs, 0, per) {
                 Ok(relayed) => {
-                    let mut relayed = relayed.with_timeout(timeout_clock, RELAY_TIMEOUT_US);
+                    let depth = std::env::var("LINKS_RELAY_DEPTH")
+                        .ok()
+                        .and_then(|d| d.parse().ok())
+                        .unwrap_or(links_core::relay::DEPTH);
+                    let mut relayed = relayed
+                        .with_timeout(timeout_clock, RELAY_TIMEOUT_US)
+                        .with_depth(depth);
                     let r = run_bus(0, &mut relayed, rc_clock, root, dm, sink).await;
                     *link.relayed.borrow_mut() = relayed.counters;
                     r

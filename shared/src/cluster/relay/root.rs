@@ -2,10 +2,10 @@
 //! relays on one link.
 
 use super::batch::{forward, parse, BatchWriter, Kind, Record, Relayed};
-use super::{RelayError, MAX_RELAY_NODES, MAX_ROUTED};
+use super::{RelayError, CAST_WAIT_US, MAX_RELAY_NODES, MAX_ROUTED};
 use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
 use crate::cluster::root::{NoClock, RootClock};
-use crate::cluster::wire::MAX_MESSAGE;
+use crate::cluster::wire::{self, Down, MAX_MESSAGE};
 use core::task::Poll;
 use embassy_futures::poll_once;
 use embassy_futures::select::{select, Either};
@@ -42,7 +42,8 @@ pub struct RelayedCounters {
     pub most_in_flight: u32,
 }
 
-/// The buffers of a [`RelayedBus`] (27.5 KB with [`SLOTS`] = 16: the firmware places them
+/// The buffers of a [`RelayedBus`] (`SLOTS + 3` frames of [`MAX_MESSAGE`]: 29,944 bytes
+/// with [`SLOTS`] = 16, 6,304 with one exchange in flight before; the firmware places them
 /// in SRAM beside the scene, since all-zero bytes are a valid value).
 pub struct RelayedBuffers {
     /// One frame buffer per node exchange in flight, one for the broadcast waiting to go
@@ -139,6 +140,16 @@ pub struct RelayedBus<'m, L, C = NoClock> {
     next_scan: u16,
     /// Where the next scan of the relays for a link exchange starts (round the link).
     next_link: u16,
+    /// Broadcasts put on the link in this run (until `Stop`), and per relay how many it
+    /// reported passed on to its bus ([`Kind::Forwarded`]): the next broadcast waits until
+    /// every relay has passed on all but one (a relay has two receive banks).
+    casts: u16,
+    acked: [u16; MAX_RELAYS],
+    /// Relays that did not report within the time-out while a broadcast waited for them
+    /// (bit `r`; no longer waited for until they report again).
+    deaf: u32,
+    /// When a broadcast waiting for the relays' reports goes anyway (µs).
+    cast_until: Option<u64>,
     pub counters: RelayedCounters,
 }
 
@@ -180,6 +191,10 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
             dangling: None,
             next_scan: 0,
             next_link: 0,
+            casts: 0,
+            acked: [0; MAX_RELAYS],
+            deaf: 0,
+            cast_until: None,
             counters: RelayedCounters::default(),
         })
     }
@@ -205,6 +220,10 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
             dangling: self.dangling,
             next_scan: self.next_scan,
             next_link: self.next_link,
+            casts: self.casts,
+            acked: self.acked,
+            deaf: self.deaf,
+            cast_until: self.cast_until,
             counters: self.counters,
         }
     }
@@ -298,7 +317,8 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
             .map(|s| s.node)
     }
 
-    /// The earliest time-out of an exchange in flight.
+    /// The earliest time-out of an exchange in flight, or of a broadcast waiting for the
+    /// relays' reports.
     fn deadline(&self) -> Option<u64> {
         if self.timeout_us == 0 {
             return None;
@@ -310,7 +330,15 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                 Stage::Asked { deadline, .. } => Some(deadline),
                 Stage::Answered { .. } => None,
             })
+            .chain(self.cast_until)
             .min()
+    }
+
+    /// Whether relay `r` has not reported passing on all but the last broadcast (and is
+    /// waited for).
+    fn lags(&self, r: u16) -> bool {
+        self.deaf & (1u32 << (r as u32 % 32)) == 0
+            && self.casts.wrapping_sub(self.acked[r as usize % MAX_RELAYS]) > 1
     }
 
     /// The link operation worth starting now, if the link is free: the pending broadcast;
@@ -333,7 +361,8 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                 continue;
             }
             let (n, unsent, asked) = self.on_relay(r);
-            let class = if unsent {
+            let lagging = matches!(self.cast, Some(Cast::Queued { .. })) && self.lags(r);
+            let class = if unsent || lagging {
                 0
             } else if asked {
                 1
@@ -360,9 +389,20 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                         len: len as u32 + 1,
                         max: MAX_MESSAGE as u32,
                     })?;
+                    let stop = matches!(
+                        wire::decode::<Down>(frame).map(|e| e.msg),
+                        Ok(Down::Stop)
+                    );
                     self.link.start(Transfer::Broadcast, n)?;
                     self.cast = Some(Cast::OnLink);
                     self.dangling = Some(LinkOp::Broadcast);
+                    self.casts = self.casts.wrapping_add(1);
+                    if stop {
+                        // The relays end with it; the next run counts from 0 again.
+                        self.casts = 0;
+                        self.acked = [0; MAX_RELAYS];
+                        self.deaf = 0;
+                    }
                 }
                 Ok(())
             }
@@ -520,6 +560,20 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                         None => self.counters.stray_frames += 1,
                     }
                 }
+                Ok(Record {
+                    kind: Kind::Forwarded,
+                    data: &[lo, hi],
+                    ..
+                }) => {
+                    // (A count above ours is from an earlier run's batch: ignored.)
+                    let done = u16::from_le_bytes([lo, hi]);
+                    if let Some(a) = self.acked.get_mut(r as usize) {
+                        if done <= self.casts {
+                            *a = done;
+                            self.deaf &= !(1u32 << (r as u32 % 32));
+                        }
+                    }
+                }
                 _ => self.counters.bad_batches += 1,
             }
         }
@@ -620,7 +674,28 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
                         return res.map(|()| 0);
                     }
                     Some(Cast::Queued { .. }) if self.dangling.is_none() => {
-                        self.begin(LinkOp::Broadcast)?
+                        // Every relay must have passed on all but the last broadcast (it
+                        // reports that in its batches); one that does not report within
+                        // CAST_WAIT_US (a report lost to a bit error, a relay that stopped)
+                        // is not waited for again until it reports. Without a time-out
+                        // (no clock) broadcasts are not held back.
+                        if self.timeout_us == 0 || (0..self.relays).all(|r| !self.lags(r)) {
+                            self.cast_until = None;
+                            self.begin(LinkOp::Broadcast)?;
+                            continue;
+                        }
+                        let now = self.clock.now_us();
+                        let wait = self.timeout_us.min(CAST_WAIT_US);
+                        let until = *self.cast_until.get_or_insert(now.saturating_add(wait));
+                        if now >= until {
+                            for r in 0..self.relays {
+                                if self.lags(r) {
+                                    self.deaf |= 1u32 << (r as u32 % 32);
+                                }
+                            }
+                            continue;
+                        }
+                        self.pump().await?
                     }
                     _ => self.settle().await?,
                 }
@@ -641,6 +716,10 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
 
     fn arrived(&self) -> Option<NodeId> {
         self.arrived_in()
+    }
+
+    fn flying(&self) -> u16 {
+        self.slots.iter().flatten().count() as u16
     }
 
     fn pending(&self) -> Option<NodeId> {
