@@ -236,7 +236,11 @@ fn several_node_exchanges_are_in_flight_and_each_frame_comes_back_once() {
     let run = tree(2, 3, Vec::new(), Vec::new());
     let c = run.counters;
     assert!(c.most_in_flight > 2, "{c:?}");
-    assert_eq!((c.stray_frames, c.timeouts, c.bad_batches), (0, 0, 0), "{c:?}");
+    assert_eq!(
+        (c.stray_frames, c.timeouts, c.bad_batches),
+        (0, 0, 0),
+        "{c:?}"
+    );
     let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
     assert_eq!(routed, run.root.exchanges);
     // A link exchange brings at most one node frame up.
@@ -326,7 +330,10 @@ fn a_relay_that_stops_answering_costs_its_nodes_not_the_frame() {
         given_up += counters.timeouts;
         declared_dead += report.timeouts;
     }
-    assert!(given_up > 0 && declared_dead > 0, "{given_up} {declared_dead}");
+    assert!(
+        given_up > 0 && declared_dead > 0,
+        "{given_up} {declared_dead}"
+    );
 }
 
 /// Render through two relays of two nodes, relay 1 dying once its bus has carried `after`

@@ -45,7 +45,13 @@ fn check_clean(what: &str, r: &SimReport, relays: usize) {
     assert_eq!(leaf, r.root.exchanges as u64, "{what}");
     for rep in f.relays.iter().flatten() {
         // Every root broadcast reached each relay's bus once, and the final Stop.
-        assert_eq!(rep.forwarded, r.root.broadcasts + 1, "{what}: {:?} {:?}", r.link, f.relays);
+        assert_eq!(
+            rep.forwarded,
+            r.root.broadcasts + 1,
+            "{what}: {:?} {:?}",
+            r.link,
+            f.relays
+        );
         assert_eq!(rep.bad_frames, 0, "{what}");
     }
     assert_eq!((f.root.timeouts, f.root.bad_batches), (0, 0), "{what}");

@@ -3,7 +3,8 @@
 //! (`links_core::relay`), in virtual time.
 //!
 //! - **The root** (`rc-fw --features relay-root`): `run_bus` over
-//!   [`RelayedBus`]`::new(link, ..).with_timeout(clock, RELAY_TIMEOUT_US)`, where `link` is
+//!   [`RelayedBus`]`::new(link, ..).with_timeout(clock, RELAY_TIMEOUT_US)` (up to
+//!   `links_core::relay::DEPTH` node exchanges in flight per relay), where `link` is
 //!   the split master of an emulated SPI bus of its own whose "nodes" are the relays (the
 //!   same [`super::spi_bus`] emulation and board-profile timing as every bus), its CPU
 //!   charged by [`RcClock`] (composing, decoding) and [`LinkCpu`] (its `RelayedBus`'s
@@ -247,13 +248,7 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
             let mut bufs = Box::new(RelayedBuffers::new());
             let r = match RelayedBus::new(bus, &mut bufs, 0, per) {
                 Ok(relayed) => {
-                    let depth = std::env::var("LINKS_RELAY_DEPTH")
-                        .ok()
-                        .and_then(|d| d.parse().ok())
-                        .unwrap_or(links_core::relay::DEPTH);
-                    let mut relayed = relayed
-                        .with_timeout(timeout_clock, RELAY_TIMEOUT_US)
-                        .with_depth(depth);
+                    let mut relayed = relayed.with_timeout(timeout_clock, RELAY_TIMEOUT_US);
                     let r = run_bus(0, &mut relayed, rc_clock, root, dm, sink).await;
                     *link.relayed.borrow_mut() = relayed.counters;
                     r

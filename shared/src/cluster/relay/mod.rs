@@ -54,9 +54,9 @@ pub use batch::{
 pub use node::{run_relay, RelayBuffers, RelayReport};
 pub use root::{RelayedBuffers, RelayedBus, RelayedCounters, DEPTH, MAX_RELAYS, SLOTS};
 
-use crate::cluster::link::{LinkError, NodeId};
 #[cfg(doc)]
 use crate::cluster::link::RootBus;
+use crate::cluster::link::{LinkError, NodeId};
 use core::fmt;
 
 /// How long the root of a relay tree lets a node exchange through a relay wait for the

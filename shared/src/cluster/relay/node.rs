@@ -113,10 +113,7 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
             }
             posted = true;
             report.batches += 1;
-            let held = nodes
-                .held
-                .and_then(|(n, _)| bit(0, count, n))
-                .unwrap_or(0);
+            let held = nodes.held.and_then(|(n, _)| bit(0, count, n)).unwrap_or(0);
             nodes.in_post = nodes.answered & !held;
             nodes.waiting = report_waiting;
             up.clear();

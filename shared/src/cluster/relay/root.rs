@@ -385,14 +385,12 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
             LinkOp::Broadcast => {
                 if let Some(Cast::Queued { buf, len }) = self.cast {
                     let frame = self.buf.frames[buf as usize].get(..len).unwrap_or(&[]);
-                    let n = forward(frame, self.link.tx_bank()).map_err(|_| LinkError::TooLong {
-                        len: len as u32 + 1,
-                        max: MAX_MESSAGE as u32,
-                    })?;
-                    let stop = matches!(
-                        wire::decode::<Down>(frame).map(|e| e.msg),
-                        Ok(Down::Stop)
-                    );
+                    let n =
+                        forward(frame, self.link.tx_bank()).map_err(|_| LinkError::TooLong {
+                            len: len as u32 + 1,
+                            max: MAX_MESSAGE as u32,
+                        })?;
+                    let stop = matches!(wire::decode::<Down>(frame).map(|e| e.msg), Ok(Down::Stop));
                     self.link.start(Transfer::Broadcast, n)?;
                     self.cast = Some(Cast::OnLink);
                     self.dangling = Some(LinkOp::Broadcast);
@@ -412,7 +410,8 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                 // exchange), as many as fit.
                 let (first, per) = (self.first, self.per_relay.max(1));
                 let base = first.wrapping_add(r.wrapping_mul(per));
-                let mut w = BatchWriter::new(self.link.tx_bank()).map_err(|_| LinkError::Aborted)?;
+                let mut w =
+                    BatchWriter::new(self.link.tx_bank()).map_err(|_| LinkError::Aborted)?;
                 let mut carried = [false; SLOTS];
                 let mut requests = 0u32;
                 for pass_sent in [true, false] {
@@ -432,13 +431,12 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                         let data = self.buf.frames[buf as usize]
                             .get(..len as usize)
                             .unwrap_or(&[]);
-                        if w
-                            .push(Record {
-                                kind: Kind::Request,
-                                node: local,
-                                data,
-                            })
-                            .is_ok()
+                        if w.push(Record {
+                            kind: Kind::Request,
+                            node: local,
+                            data,
+                        })
+                        .is_ok()
                         {
                             carried[i] = true;
                             requests += 1;
@@ -542,9 +540,11 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                     data,
                 }) if node < per => {
                     let node = base.wrapping_add(node);
-                    let slot = self.slots.iter_mut().flatten().find(|s| {
-                        s.node == node && matches!(s.stage, Stage::Asked { .. })
-                    });
+                    let slot = self
+                        .slots
+                        .iter_mut()
+                        .flatten()
+                        .find(|s| s.node == node && matches!(s.stage, Stage::Asked { .. }));
                     match slot {
                         Some(s) => {
                             if let Some(dst) = frames
