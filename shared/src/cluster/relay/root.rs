@@ -772,3 +772,144 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::cell::Cell;
+    use embassy_futures::block_on;
+
+    /// Time that jumps to whatever is waited for.
+    struct Jump(Cell<u64>);
+
+    impl RootClock for &Jump {
+        fn now_us(&self) -> u64 {
+            self.0.get()
+        }
+        async fn at_us(&self, t: u64) {
+            self.0.set(self.0.get().max(t));
+        }
+    }
+
+    /// A link to relays that answer each request in their next exchange with a two-byte
+    /// frame (0xAA, the node's index on the relay); relays not `alive` never raise their
+    /// line. Each transfer takes 50 µs of `clock`.
+    struct Relays<'c> {
+        clock: &'c Jump,
+        alive: Vec<bool>,
+        bank: [u8; MAX_MESSAGE],
+        started: Option<(Transfer, usize)>,
+        /// Per relay: the requests it has and will answer next time, and those it answered
+        /// (a request seen again is dropped, as a relay does).
+        owed: Vec<Vec<NodeId>>,
+        done: Vec<Vec<NodeId>>,
+        broadcasts: u32,
+    }
+
+    impl RootBus for Relays<'_> {
+        fn nodes(&self) -> (NodeId, u16) {
+            (0, self.alive.len() as u16)
+        }
+        async fn wait_ready(&mut self) -> NodeId {
+            match self.alive.iter().position(|&a| a) {
+                Some(r) => r as NodeId,
+                None => core::future::pending().await,
+            }
+        }
+        fn ready(&self) -> Option<NodeId> {
+            self.alive.iter().position(|&a| a).map(|r| r as NodeId)
+        }
+        fn line(&self, node: NodeId) -> bool {
+            self.alive.get(node as usize) == Some(&true)
+        }
+        fn tx_bank(&mut self) -> &mut [u8] {
+            &mut self.bank
+        }
+        fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
+            if self.started.replace((transfer, len)).is_some() {
+                return Err(LinkError::Busy);
+            }
+            Ok(())
+        }
+        async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+            let (transfer, len) = self.started.take().ok_or(LinkError::Aborted)?;
+            self.clock.0.set(self.clock.0.get() + 50);
+            let Transfer::Exchange(r) = transfer else {
+                self.broadcasts += 1;
+                return Ok(0);
+            };
+            let mut w = BatchWriter::new(rx).map_err(|_| LinkError::Aborted)?;
+            for node in self.owed[r as usize].drain(..) {
+                self.done[r as usize].push(node);
+                w.push(Record {
+                    kind: Kind::Frame,
+                    node,
+                    data: &[0xAA, node as u8],
+                })
+                .map_err(|_| LinkError::Aborted)?;
+            }
+            let n = w.bytes().len();
+            if let Ok(Relayed::Batch { records, .. }) = parse(&self.bank[..len]) {
+                for rec in records.flatten() {
+                    let seen = self.owed[r as usize].contains(&rec.node)
+                        || self.done[r as usize].contains(&rec.node);
+                    if !seen {
+                        self.owed[r as usize].push(rec.node);
+                    }
+                }
+            }
+            Ok(n)
+        }
+    }
+
+    #[test]
+    fn exchanges_through_two_relays_are_in_flight_at_once_and_a_dead_relays_time_out() {
+        let clock = Jump(Cell::new(0));
+        let link = Relays {
+            clock: &clock,
+            alive: vec![true, false],
+            bank: [0; MAX_MESSAGE],
+            started: None,
+            owed: vec![Vec::new(), Vec::new()],
+            done: vec![Vec::new(), Vec::new()],
+            broadcasts: 0,
+        };
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let mut bus = RelayedBus::new(link, &mut bufs, 0, 3)
+            .unwrap()
+            .with_timeout(&clock, 1_000);
+        assert_eq!(bus.in_flight(), 4);
+        // Two exchanges with relay 0's nodes, one with relay 1's: all in flight at once.
+        for node in [0, 1, 3] {
+            bus.tx_bank()[..3].copy_from_slice(&[1, 2, node as u8]);
+            assert_eq!(bus.start(Transfer::Exchange(node), 3), Ok(()));
+        }
+        assert_eq!(bus.flying(), 3);
+        // Relay 0 has two in flight (its depth); a node in flight cannot begin again.
+        assert_eq!(bus.start(Transfer::Exchange(2), 3), Err(LinkError::Busy));
+        assert_eq!(bus.start(Transfer::Exchange(3), 3), Err(LinkError::Busy));
+        let mut rx = [0u8; MAX_MESSAGE];
+        // Relay 0's frames come back (in either order); relay 1's exchange ends at its
+        // time-out, empty, counted.
+        assert_eq!(block_on(bus.finish_node(1, &mut rx)), Ok(2));
+        assert_eq!(rx[..2], [0xAA, 1]);
+        assert_eq!(block_on(bus.finish_node(0, &mut rx)), Ok(2));
+        assert_eq!(rx[..2], [0xAA, 0]);
+        assert_eq!(bus.counters.timeouts, 0);
+        assert_eq!(bus.pending(), Some(3));
+        assert_eq!(block_on(bus.finish_node(3, &mut rx)), Ok(0));
+        assert!(clock.0.get() >= 1_000);
+        assert_eq!(bus.counters.timeouts, 1);
+        assert_eq!((bus.flying(), bus.pending()), (0, None));
+        assert_eq!(bus.counters.most_in_flight, 3);
+        assert_eq!(bus.counters.stray_frames, 0);
+        // A broadcast goes on the link when finished (relay 1 is not waited for beyond
+        // CAST_WAIT_US: it never reports).
+        for k in 0..3u8 {
+            bus.tx_bank()[..2].copy_from_slice(&[9, k]);
+            assert_eq!(bus.start(Transfer::Broadcast, 2), Ok(()));
+            assert_eq!(block_on(bus.finish(&mut rx)), Ok(0));
+        }
+        assert_eq!(bus.link().broadcasts, 3);
+    }
+}
