@@ -10,9 +10,11 @@
 //! before the node's chip-select fell: a transfer ends for the slave when its chip-select
 //! rises, before the master's hold time, which the timeline's interval includes) and the
 //! one that brought the node's frame up (the next one with that relay); every other
-//! exchange on the root's link only gathered. `RelayedBus` has one node exchange in flight, so the node exchanges
-//! follow each other: the cycle from one frame's arrival at the root to the next's is split
-//! into its parts.
+//! exchange on the root's link only gathered. The breakdown assumes one node exchange in
+//! flight (as `RelayedBus` had before it kept several, `links_core::relay::DEPTH` per relay:
+//! `docs/cluster.md`), so the node exchanges follow each other: the cycle from one frame's
+//! arrival at the root to the next's is split into its parts; with several in flight its
+//! parts overlap and only the frame time and the nodes' share are meaningful.
 
 use links_core::board::BoardProfile;
 use links_host::cluster::exec::Ps;

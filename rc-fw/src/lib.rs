@@ -67,8 +67,9 @@ pub mod plan {
     /// bank size (`links_core::spi::BANK`).
     pub const LINK_BANKS: usize = 3 * BANK;
     /// As the root of a relay tree (feature `relay-root`): the buffers of
-    /// `links_core::relay::RelayedBus` (two compose buffers, the answer, the relay's batch),
-    /// in SRAM (the CCM has no room), taken from the scene's share.
+    /// `links_core::relay::RelayedBus` (a frame buffer per node exchange in flight,
+    /// `links_core::relay::SLOTS`, one for the broadcast waiting to go, one to compose in,
+    /// the relay's batch), in SRAM (the CCM has no room), taken from the scene's share.
     pub const RELAYED: usize = if cfg!(feature = "relay-root") {
         core::mem::size_of::<links_core::relay::RelayedBuffers>()
     } else {
@@ -316,18 +317,22 @@ mod tests {
         use super::plan::{FILM_BANK, RELAYED, SCENE};
         let per_bus = PROFILE.link.nodes_per_bus as usize;
         let relayed = core::mem::size_of::<links_core::relay::RelayedBuffers>();
-        assert_eq!(relayed, 4 * links_core::wire::MAX_MESSAGE);
+        assert_eq!(
+            relayed,
+            (links_core::relay::SLOTS + 3) * links_core::wire::MAX_MESSAGE
+        );
         if cfg!(feature = "relay-root") {
             assert_eq!((RENDER_NODES, RELAYED), (NODES * per_bus, relayed));
             if cfg!(feature = "board-f407") {
-                // 128 KB - 3 DMA banks - 6,304 B, in whole KB; a film's second bank is what
-                // the first (a node's 61,440-byte bank) leaves.
-                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 119_808, 61_440));
+                // 128 KB - 3 DMA banks - 29,944 B (16 node exchanges in flight), in whole
+                // KB; a film's second bank is what the first (a node's 61,440-byte bank)
+                // leaves: 34,816 B (58,368 with one exchange in flight, 6,304 B of buffers).
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 96_256, 61_440));
             }
             if cfg!(feature = "board-g0b1") {
-                // 80 KB - 3 DMA banks - 6,304 B = 70,852 -> 69 KB; the first film bank is a
-                // node's 40 KB bank, as without the relays.
-                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 70_656, 40_960));
+                // 80 KB - 3 DMA banks - 29,944 B = 47,212 -> 46 KB; the first film bank is a
+                // node's 40 KB bank, as without the relays (the second: 6 KB).
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 47_104, 40_960));
             }
         } else {
             assert_eq!((RENDER_NODES, RELAYED), (NODES, 0));

@@ -10,7 +10,9 @@ use core::task::Poll;
 use embassy_futures::join::join;
 use embassy_futures::select::{select, Either};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
-use links_core::relay::{run_relay, RelayBuffers, RelayReport, RelayedBuffers, RelayedBus};
+use links_core::relay::{
+    run_relay, RelayBuffers, RelayReport, RelayedBuffers, RelayedBus, RelayedCounters, DEPTH, SLOTS,
+};
 use links_core::root::{run_bus, NoClock, RootClock, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
 use links_core::testkit::spi::*;
@@ -97,6 +99,8 @@ fn relay(root_bus: SharedBus, r: usize, bus: SharedBus) -> Task<RelayReport> {
 
 struct Run {
     root: RootReport,
+    /// What the root's `RelayedBus` counted.
+    counters: RelayedCounters,
     relays: Vec<RelayReport>,
     nodes: Vec<NodeReport>,
     root_bus: SharedBus,
@@ -110,6 +114,17 @@ fn tree(
     per: usize,
     faults: Vec<(u64, Dir, usize)>,
     relay0_faults: Vec<(u64, Dir, usize)>,
+) -> Run {
+    tree_at_depth(relays, per, faults, relay0_faults, DEPTH)
+}
+
+/// [`tree`] with at most `depth` node exchanges in flight per relay.
+fn tree_at_depth(
+    relays: usize,
+    per: usize,
+    faults: Vec<(u64, Dir, usize)>,
+    relay0_faults: Vec<(u64, Dir, usize)>,
+    depth: u16,
 ) -> Run {
     let (w, h) = (24u32, 16u32);
     let img = bundled_image("photo1.ron", w, h);
@@ -133,7 +148,9 @@ fn tree(
     relay_buses[0].borrow_mut().faults = relay0_faults;
     let (shared, front, task, mut port) = master_split(&root_bus, 0);
     let mut bufs = Box::new(RelayedBuffers::new());
-    let mut relayed = RelayedBus::new(front, &mut bufs, 0, per as u16).expect("a tree that fits");
+    let mut relayed = RelayedBus::new(front, &mut bufs, 0, per as u16)
+        .expect("a tree that fits")
+        .with_depth(depth);
     let rc = async {
         let logic = run_bus(0, &mut relayed, &NoClock, &root, &scenes[..], &sink);
         match select(logic, task.run(&mut port, shared)).await {
@@ -157,8 +174,14 @@ fn tree(
         let b = b.borrow();
         assert!(b.violations.is_empty(), "{:?}", b.violations);
     }
+    let counters = relayed.counters;
+    assert!(
+        counters.most_in_flight as usize <= (depth as usize * relays).min(SLOTS),
+        "{counters:?}"
+    );
     Run {
         root: root_report,
+        counters,
         relays: relay_reports,
         nodes: node_reports,
         root_bus,
@@ -203,6 +226,30 @@ fn two_relays_under_one_root_render_the_single_node_frame() {
         assert!(r.routed > 0);
     }
     assert_eq!(run.root.bad_messages, 0);
+}
+
+#[test]
+fn several_node_exchanges_are_in_flight_and_each_frame_comes_back_once() {
+    // Two relays of three nodes, two exchanges in flight per relay: at times four at
+    // once, and still every exchange the root took is one a relay clocked, every frame
+    // taken once (no stray frames), no exchange given up.
+    let run = tree(2, 3, Vec::new(), Vec::new());
+    let c = run.counters;
+    assert!(c.most_in_flight > 2, "{c:?}");
+    assert_eq!(
+        (c.stray_frames, c.timeouts, c.bad_batches),
+        (0, 0, 0),
+        "{c:?}"
+    );
+    let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
+    assert_eq!(routed, run.root.exchanges);
+    // A link exchange brings at most one node frame up.
+    assert!(c.link_exchanges >= run.root.exchanges, "{c:?}");
+    // One exchange in flight per relay: at most two at once, the same frame.
+    let one = tree_at_depth(2, 3, Vec::new(), Vec::new(), 1);
+    assert!(one.counters.most_in_flight <= 2, "{:?}", one.counters);
+    let routed: u32 = one.relays.iter().map(|r| r.routed).sum();
+    assert_eq!(routed, one.root.exchanges);
 }
 
 #[test]
@@ -272,6 +319,26 @@ impl RootClock for &PollClock {
 /// relay time-out the root waited for ever in `finish`.
 #[test]
 fn a_relay_that_stops_answering_costs_its_nodes_not_the_frame() {
+    // Relay 1 dies once its own bus has carried the scene (19 broadcasts) and a few node
+    // exchanges, at several moments: with exchanges in flight through it, while its nodes
+    // hold jobs. Every frame is the single-node render; the exchanges in flight through
+    // the dead relay end at the relay time-out (counted), and at some moment the root logic
+    // declares its nodes dead.
+    let (mut given_up, mut declared_dead) = (0, 0);
+    for after in 20..=26 {
+        let (report, counters) = relay_dies_after(after);
+        given_up += counters.timeouts;
+        declared_dead += report.timeouts;
+    }
+    assert!(
+        given_up > 0 && declared_dead > 0,
+        "{given_up} {declared_dead}"
+    );
+}
+
+/// Render through two relays of two nodes, relay 1 dying once its bus has carried `after`
+/// transfers; the frame must be the single-node render.
+fn relay_dies_after(after: u64) -> (RootReport, RelayedCounters) {
     let (w, h, per) = (24u32, 16u32, 2usize);
     let img = bundled_image("photo1.ron", w, h);
     let want = render_frame(&img, Precision::F32, 1, &|| {})
@@ -305,13 +372,11 @@ fn a_relay_that_stops_answering_costs_its_nodes_not_the_frame() {
             Either::First(r) => r.expect("root runs"),
         }
     };
-    // Relay 1 dies once its own bus has carried the scene (19 broadcasts) and a few node
-    // exchanges: its nodes hold jobs by then.
     let dying: Task<()> = {
         let bus1 = relay_buses[1].clone();
         let relay1 = relay(root_bus.clone(), 1, bus1.clone());
         let died = core::future::poll_fn(move |cx| {
-            if bus1.borrow().transfers > 24 {
+            if bus1.borrow().transfers > after {
                 return Poll::Ready(());
             }
             cx.waker().wake_by_ref();
@@ -347,6 +412,5 @@ fn a_relay_that_stops_answering_costs_its_nodes_not_the_frame() {
         want,
         "the frame is the single-node render"
     );
-    assert!(report.timeouts > 0, "{report:?}");
-    assert!(relayed.counters.timeouts > 0, "{:?}", relayed.counters);
+    (report, relayed.counters)
 }

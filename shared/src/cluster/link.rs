@@ -131,6 +131,47 @@ pub trait RootBus {
     /// is in flight.
     async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError>;
 
+    /// Most exchanges this bus keeps in flight at once. 1 (the default, every link): one
+    /// transfer at a time, each [`RootBus::start`] after the last one's `finish`. More (a
+    /// bus of relays, [`crate::relay::RelayedBus`]): `start` may begin an exchange with
+    /// another node while some are in flight (it fails with [`LinkError::Busy`] when none
+    /// may begin), [`RootBus::ready`] names only nodes an exchange may begin with now,
+    /// [`RootBus::wait_ready`] also returns when a frame came back, and each exchange is
+    /// taken with [`RootBus::finish_node`] once [`RootBus::arrived`] names it.
+    fn in_flight(&self) -> u16 {
+        1
+    }
+
+    /// A node whose exchange in flight has ended (its frame is here, or it was given up):
+    /// [`RootBus::finish_node`] takes it without waiting. Only buses with
+    /// [`RootBus::in_flight`] above 1 say.
+    fn arrived(&self) -> Option<NodeId> {
+        None
+    }
+
+    /// How many exchanges are in flight now (started and not yet taken), where the bus
+    /// keeps count (only buses with [`RootBus::in_flight`] above 1; 0 otherwise).
+    fn flying(&self) -> u16 {
+        0
+    }
+
+    /// A node with an exchange in flight, if any (only buses with [`RootBus::in_flight`]
+    /// above 1 say): the root logic takes them all before it ends.
+    fn pending(&self) -> Option<NodeId> {
+        None
+    }
+
+    /// Wait for the exchange with `node` to end and take its frame, as `finish` does (the
+    /// default: `finish`).
+    async fn finish_node(&mut self, node: NodeId, rx: &mut [u8]) -> Result<usize, LinkError> {
+        let _ = node;
+        self.finish(rx).await
+    }
+
+    /// Take what the link under the bus has finished and start what it can, without
+    /// waiting (the root logic calls it whenever it looks for work; a no-op by default).
+    fn poll(&mut self) {}
+
     /// Swap frames with `node`: send `tx`, receive its frame into `rx`; returns the number
     /// of bytes received (start + finish, nothing else in flight).
     async fn exchange(

@@ -30,9 +30,14 @@ pub struct Throttle<'r, B, R> {
 }
 
 impl<B, R> Throttle<'_, B, R> {
-    /// Room a node must find before it is reported ready: two exchanges' worth.
-    pub fn reserve(&self) -> usize {
-        self.need.saturating_mul(2)
+    /// Room a node must find before it is reported ready: two exchanges' worth, or on a bus
+    /// with several in flight ([`RootBus::flying`]) one more than are in flight now.
+    pub fn reserve(&self) -> usize
+    where
+        B: RootBus,
+    {
+        self.need
+            .saturating_mul(self.bus.flying().max(1) as usize + 1)
     }
 }
 
@@ -45,7 +50,8 @@ impl<B: RootBus, R: Room> RootBus for Throttle<'_, B, R> {
         loop {
             self.room.wait_room(self.reserve()).await;
             let n = self.bus.wait_ready().await;
-            if self.room.has_room(self.reserve()) {
+            // (A frame that came back needs no room of its own: see `reserve`.)
+            if self.bus.arrived().is_some() || self.room.has_room(self.reserve()) {
                 return n;
             }
         }
@@ -69,6 +75,31 @@ impl<B: RootBus, R: Room> RootBus for Throttle<'_, B, R> {
 
     async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
         self.bus.finish(rx).await
+    }
+
+    fn in_flight(&self) -> u16 {
+        self.bus.in_flight()
+    }
+
+    // A frame that came back was paid for when its exchange began.
+    fn arrived(&self) -> Option<NodeId> {
+        self.bus.arrived()
+    }
+
+    fn flying(&self) -> u16 {
+        self.bus.flying()
+    }
+
+    fn pending(&self) -> Option<NodeId> {
+        self.bus.pending()
+    }
+
+    async fn finish_node(&mut self, node: NodeId, rx: &mut [u8]) -> Result<usize, LinkError> {
+        self.bus.finish_node(node, rx).await
+    }
+
+    fn poll(&mut self) {
+        self.bus.poll()
     }
 }
 

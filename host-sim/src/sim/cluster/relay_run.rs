@@ -3,7 +3,8 @@
 //! (`links_core::relay`), in virtual time.
 //!
 //! - **The root** (`rc-fw --features relay-root`): `run_bus` over
-//!   [`RelayedBus`]`::new(link, ..).with_timeout(clock, RELAY_TIMEOUT_US)`, where `link` is
+//!   [`RelayedBus`]`::new(link, ..).with_timeout(clock, RELAY_TIMEOUT_US)` (up to
+//!   `links_core::relay::DEPTH` node exchanges in flight per relay), where `link` is
 //!   the split master of an emulated SPI bus of its own whose "nodes" are the relays (the
 //!   same [`super::spi_bus`] emulation and board-profile timing as every bus), its CPU
 //!   charged by [`RcClock`] (composing, decoding) and [`LinkCpu`] (its `RelayedBus`'s

@@ -9,8 +9,11 @@
 //! `waiting` (up; 0 down) has bit `i` set for the relay's `i`-th node when its ready line
 //! is up and it waits to be asked (the parent then composes its reply). Records: a
 //! [`Kind::Request`] (down) is the root's reply for a node, to clock in the node's next
-//! exchange; a [`Kind::Frame`] (up) is what the node sent in that exchange. Decoding checks
-//! every length against the frame and never panics.
+//! exchange; a [`Kind::Frame`] (up) is what the node sent in that exchange; a
+//! [`Kind::Forwarded`] (up, node 0, 2 bytes: u16 LE) is how many root broadcasts the relay
+//! has passed on to its bus in this run (the root sends the next one only when each relay
+//! has passed on all but one, so none is dropped for want of a receive bank). Decoding
+//! checks every length against the frame and never panics.
 
 use super::RelayError;
 use crate::cluster::link::NodeId;
@@ -41,6 +44,8 @@ pub enum Kind {
     Request,
     /// Up: the node's frame from the exchange that carried the reply (empty: nothing intact).
     Frame,
+    /// Up: the root broadcasts the relay has passed on so far (u16 LE; node 0).
+    Forwarded,
 }
 
 impl Kind {
@@ -48,6 +53,7 @@ impl Kind {
         match self {
             Kind::Request => 1,
             Kind::Frame => 2,
+            Kind::Forwarded => 3,
         }
     }
 
@@ -55,6 +61,7 @@ impl Kind {
         match b {
             1 => Ok(Kind::Request),
             2 => Ok(Kind::Frame),
+            3 => Ok(Kind::Forwarded),
             kind => Err(RelayError::UnknownKind { kind }),
         }
     }

@@ -26,15 +26,22 @@
 //! node's frame comes back, so a lost down half costs one more exchange). Nothing read from
 //! either link can make the relay panic; no heap: the relay's buffers are the caller's.
 //!
-//! Limits of this version: [`RelayedBus`] has one node exchange in flight per root bus (a
-//! frame crosses the parent's link twice per exchange, request down and frame up). The
-//! request goes on the link from `start` when its relay's line is up (so the root logic's
-//! work overlaps it); until the frame is up the asked node's relay is exchanged with
-//! whenever its line is up, other ready relays otherwise (refreshing their `waiting`
-//! maps). The simulator runs this code (`links render --relay firmware`) and measures the
-//! cost of the one exchange in flight (`docs/cluster.md`). A relay
-//! that stops answering costs the root a time-out per exchange ([`RelayedBus::with_timeout`];
-//! without one, `finish` waits for ever).
+//! Several node exchanges in flight: [`RelayedBus`] keeps up to [`DEPTH`] per relay
+//! ([`SLOTS`] in all; [`RootBus::in_flight`]), so the root's link, the root's CPU and the
+//! relays' buses work at once. `run_bus` composes a reply for every node the bus may begin
+//! an exchange with ([`RootBus::ready`]) and takes each frame when it comes back
+//! ([`RootBus::arrived`], [`RootBus::finish_node`]) without waiting for the others. Each
+//! reply waits in its own buffer of [`RelayedBuffers`] and goes down in every exchange with
+//! its relay until the node's frame comes up into the same buffer; the root's link takes, in
+//! turn round the relays whose line is up, (1) a relay with a reply to take down for the
+//! first time, (2) one whose node's frame may be up, (3) one with nothing in flight and no
+//! waiting node the root knows of (it has news). A relay sends one node frame up per batch,
+//! so the exchange that brings a frame up usually carries that relay's next request down.
+//! Broadcasts go on the link when the root logic finishes them (as before: a relay forwards
+//! one on its bus before it can take the next two). The simulator runs this code (`links
+//! render --relay firmware`; `docs/cluster.md`). A relay that stops answering costs the root
+//! a time-out per exchange in flight with its nodes ([`RelayedBus::with_timeout`]; without
+//! one, those exchanges wait for ever), while the other relays' exchanges go on.
 
 mod batch;
 mod node;
@@ -45,8 +52,10 @@ pub use batch::{
     MAX_RELAY_NODES, MAX_ROUTED, RECORD, TAG_BATCH, TAG_FORWARD,
 };
 pub use node::{run_relay, RelayBuffers, RelayReport};
-pub use root::{RelayedBuffers, RelayedBus, RelayedCounters, MAX_RELAYS};
+pub use root::{RelayedBuffers, RelayedBus, RelayedCounters, DEPTH, MAX_RELAYS, SLOTS};
 
+#[cfg(doc)]
+use crate::cluster::link::RootBus;
 use crate::cluster::link::{LinkError, NodeId};
 use core::fmt;
 
@@ -57,6 +66,13 @@ use core::fmt;
 /// node time-out (`RootConfig::DEFAULT_TIMEOUT_US`) then retires the nodes of a relay that
 /// stopped.
 pub const RELAY_TIMEOUT_US: u64 = 20_000;
+
+/// How long a root broadcast waits for a relay's report that it has passed on all but the
+/// last one (µs; [`Kind::Forwarded`], with [`RelayedBus::with_timeout`]'s clock): a relay
+/// forwards the largest broadcast in about 0.5 ms on the F407, so a report lost to a bit
+/// error (or a relay that stopped) costs a broadcast this once; that relay is then not
+/// waited for until it reports again.
+pub const CAST_WAIT_US: u64 = 2_000;
 
 /// What went wrong on a relay link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -41,6 +41,9 @@ struct Nodes {
     answered: u32,
     /// Answered in the batch now posted: idle again once the parent takes it.
     in_post: u32,
+    /// A node frame clocked when the batch had no room left for it (its node and length,
+    /// in the relay's `node` buffer): it opens the next batch.
+    held: Option<(NodeId, u16)>,
 }
 
 /// Run a relay until the root's `Stop` has been passed on: forward the parent's broadcasts
@@ -63,6 +66,8 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
     let mut report = RelayReport::default();
     let mut nodes = Nodes::default();
     let mut posted = false;
+    // The broadcasts passed on as last told to the parent.
+    let mut told: u16 = 0;
     loop {
         // 1. Nodes whose line is up and that are not being served wait to be asked.
         let mut fresh = 0u32;
@@ -80,8 +85,22 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         // 2. Post a batch when there is news, or a node waits for its request (the line to
         // the parent stays up so the request can come down).
         let report_waiting = nodes.waiting | fresh;
-        if !posted && (up.records() > 0 || report_waiting != 0) {
+        let forwarded = report.forwarded as u16;
+        if !posted && (up.records() > 0 || report_waiting != 0 || forwarded != told) {
             up.set_waiting(report_waiting);
+            // How many broadcasts it has passed on (when that changed and it fits; else
+            // in the next batch).
+            if forwarded != told
+                && up
+                    .push(Record {
+                        kind: Kind::Forwarded,
+                        node: 0,
+                        data: &forwarded.to_le_bytes(),
+                    })
+                    .is_ok()
+            {
+                told = forwarded;
+            }
             match parent.post(up.bytes()) {
                 Ok(()) => {}
                 // A batch of an earlier run (before the last `Stop`) still waits for the
@@ -94,9 +113,17 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
             }
             posted = true;
             report.batches += 1;
-            nodes.in_post = nodes.answered;
+            let held = nodes.held.and_then(|(n, _)| bit(0, count, n)).unwrap_or(0);
+            nodes.in_post = nodes.answered & !held;
             nodes.waiting = report_waiting;
             up.clear();
+            if let Some((n, len)) = nodes.held.take() {
+                up.push(Record {
+                    kind: Kind::Frame,
+                    node: n,
+                    data: node.get(..len as usize).unwrap_or(&[]),
+                })?;
+            }
         }
         // 3. Wait for the parent, or (when no line is up) for a node's line.
         let got = if busy_line || fresh != 0 {
@@ -147,7 +174,8 @@ async fn forward<B: RootBus>(
     }
 }
 
-/// Clock every waiting node the parent's batch has a request for, and queue its frame.
+/// Clock every waiting node the parent's batch has a request for, and queue its frame (one
+/// that no longer fits the batch is held for the next; while one is held, requests wait).
 async fn serve<B: RootBus>(
     bus: &mut B,
     frame: &[u8],
@@ -183,8 +211,9 @@ async fn serve<B: RootBus>(
                 continue;
             }
         };
-        // The node's frame must fit the batch: else leave it waiting (the root asks again).
-        if up.room() < super::MAX_ROUTED {
+        // The node's frame goes into the batch, or is held for the next one (one at most:
+        // while one is held, leave the node waiting; the root asks again).
+        if nodes.held.is_some() {
             continue;
         }
         let got = bus
@@ -192,15 +221,16 @@ async fn serve<B: RootBus>(
             .await?;
         // A frame too long to route is sent up empty (the root counts it bad, the node's
         // go-back sends it again).
-        let data = rx
-            .get(..got)
-            .filter(|d| d.len() <= up.room())
-            .unwrap_or(&[]);
-        up.push(Record {
-            kind: Kind::Frame,
-            node,
-            data,
-        })?;
+        let len = if got <= super::MAX_ROUTED { got } else { 0 };
+        if len <= up.room() {
+            up.push(Record {
+                kind: Kind::Frame,
+                node,
+                data: rx.get(..len).unwrap_or(&[]),
+            })?;
+        } else {
+            nodes.held = Some((node, len as u16));
+        }
         nodes.waiting &= !b;
         nodes.answered |= b;
         report.routed += 1;

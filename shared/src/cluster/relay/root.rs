@@ -2,14 +2,25 @@
 //! relays on one link.
 
 use super::batch::{forward, parse, BatchWriter, Kind, Record, Relayed};
-use super::{RelayError, MAX_RELAY_NODES, MAX_ROUTED};
+use super::{RelayError, CAST_WAIT_US, MAX_RELAY_NODES, MAX_ROUTED};
 use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
 use crate::cluster::root::{NoClock, RootClock};
-use crate::cluster::wire::MAX_MESSAGE;
+use crate::cluster::wire::{self, Down, MAX_MESSAGE};
+use core::task::Poll;
+use embassy_futures::poll_once;
 use embassy_futures::select::{select, Either};
 
 /// Most relays on one link.
 pub const MAX_RELAYS: usize = 32;
+
+/// Most node exchanges a [`RelayedBus`] keeps in flight at once (each holds one frame
+/// buffer of [`RelayedBuffers`]: its reply until the node's frame comes back into it).
+pub const SLOTS: usize = 16;
+
+/// Node exchanges in flight per relay unless told otherwise ([`RelayedBus::with_depth`]):
+/// one being clocked on the relay's bus, one more whose reply is already down (or goes
+/// down in the exchange that brings the first one's frame up).
+pub const DEPTH: u16 = 2;
 
 /// What the root's end of the relay link saw.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -27,15 +38,18 @@ pub struct RelayedCounters {
     /// Node exchanges given up (handed to the root logic empty) because no frame came up
     /// within the time-out ([`RelayedBus::with_timeout`]): a relay that stopped answering.
     pub timeouts: u32,
+    /// The most node exchanges that were in flight at once.
+    pub most_in_flight: u32,
 }
 
-/// The buffers of a [`RelayedBus`] (6.3 KB: the firmware places them in SRAM beside the
-/// scene, since all-zero bytes are a valid value).
+/// The buffers of a [`RelayedBus`] (`SLOTS + 3` frames of [`MAX_MESSAGE`]: 29,944 bytes
+/// with [`SLOTS`] = 16, 6,304 with one exchange in flight before; the firmware places them
+/// in SRAM beside the scene, since all-zero bytes are a valid value).
 pub struct RelayedBuffers {
-    /// Two compose buffers (double buffering, as the SPI link's banks).
-    pub tx: [[u8; MAX_MESSAGE]; 2],
-    /// The node frame that answered the request in flight.
-    pub answer: [u8; MAX_MESSAGE],
+    /// One frame buffer per node exchange in flight, one for the broadcast waiting to go
+    /// and one to compose the next frame in: an exchange's buffer holds its reply until the
+    /// node's frame comes back into it.
+    pub frames: [[u8; MAX_MESSAGE]; SLOTS + 2],
     /// What the link's last relay exchange brought.
     pub rx: [u8; MAX_MESSAGE],
 }
@@ -43,8 +57,7 @@ pub struct RelayedBuffers {
 impl RelayedBuffers {
     pub const fn new() -> Self {
         RelayedBuffers {
-            tx: [[0; MAX_MESSAGE]; 2],
-            answer: [0; MAX_MESSAGE],
+            frames: [[0; MAX_MESSAGE]; SLOTS + 2],
             rx: [0; MAX_MESSAGE],
         }
     }
@@ -56,15 +69,50 @@ impl Default for RelayedBuffers {
     }
 }
 
-/// The link operation the root has started and not yet taken.
+/// Where a node exchange in flight is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Op {
-    Exchange(NodeId),
+enum Stage {
+    /// The reply (`len` bytes) goes down in every exchange with the node's relay until the
+    /// node's frame comes up (`sent`: it went down at least once); given up at `deadline`
+    /// (µs, with a time-out).
+    Asked { len: u16, sent: bool, deadline: u64 },
+    /// The node's frame (`len` bytes) is in the buffer.
+    Answered { len: u16 },
+}
+
+/// A node exchange in flight: the node, its frame buffer, its stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Slot {
+    node: NodeId,
+    buf: u8,
+    stage: Stage,
+}
+
+/// An operation on the root's link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LinkOp {
+    /// An exchange with relay `r`: the requests for its nodes down, its batch up.
+    Gather(u16),
+    /// The pending root broadcast.
     Broadcast,
 }
 
+/// The root broadcast started and not yet taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Cast {
+    /// In frame buffer `buf` (`len` bytes): it goes on the link in `finish` (as the link's
+    /// own broadcasts end there; the relays forward each one on their buses before they can
+    /// take the next, two at most, so the root does not send them back to back).
+    Queued { buf: u8, len: usize },
+    /// On the link.
+    OnLink,
+    /// Off the link, with how it went.
+    Done(Result<(), LinkError>),
+}
+
 /// The nodes behind `relays` relays on `link` (relay `r` is the link's node `link_first +
-/// r`; its nodes are `first + r * per_relay ..`), as one [`RootBus`] for `run_bus`.
+/// r`; its nodes are `first + r * per_relay ..`), as one [`RootBus`] for `run_bus`, with
+/// up to [`DEPTH`] node exchanges in flight per relay ([`RootBus::in_flight`]).
 ///
 /// `link`'s `finish` must be safe to drop while awaited (a relay exchange is started and
 /// finished inside `wait_ready`, which `run_bus` races against its timers): the split link
@@ -78,16 +126,30 @@ pub struct RelayedBus<'m, L, C = NoClock> {
     first: NodeId,
     per_relay: u16,
     relays: u16,
+    /// Most node exchanges in flight per relay.
+    depth: u16,
     /// Per relay: its nodes waiting to be asked, as it last reported (bit `i`: its `i`-th).
     waiting: [u32; MAX_RELAYS],
-    /// Which of `buf.tx` is idle (the other one may be on the wire).
-    idle: usize,
-    started: Option<(Op, usize)>,
-    /// The length of the node frame in `buf.answer` that answered the request in flight.
-    answer: Option<usize>,
-    /// A relay exchange started on the link and not yet taken (its relay index).
-    dangling: Option<u16>,
+    /// The node exchanges in flight.
+    slots: [Option<Slot>; SLOTS],
+    /// The frame buffer the next reply is composed in (no slot's).
+    compose: u8,
+    cast: Option<Cast>,
+    /// The link operation started and not yet taken.
+    dangling: Option<LinkOp>,
     next_scan: u16,
+    /// Where the next scan of the relays for a link exchange starts (round the link).
+    next_link: u16,
+    /// Broadcasts put on the link in this run (until `Stop`), and per relay how many it
+    /// reported passed on to its bus ([`Kind::Forwarded`]): the next broadcast waits until
+    /// every relay has passed on all but one (a relay has two receive banks).
+    casts: u16,
+    acked: [u16; MAX_RELAYS],
+    /// Relays that did not report within the time-out while a broadcast waited for them
+    /// (bit `r`; no longer waited for until they report again).
+    deaf: u32,
+    /// When a broadcast waiting for the relays' reports goes anyway (µs).
+    cast_until: Option<u64>,
     pub counters: RelayedCounters,
 }
 
@@ -121,20 +183,26 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
             first,
             per_relay,
             relays,
+            depth: DEPTH,
             waiting: [0; MAX_RELAYS],
-            idle: 0,
-            started: None,
-            answer: None,
+            slots: [None; SLOTS],
+            compose: 0,
+            cast: None,
             dangling: None,
             next_scan: 0,
+            next_link: 0,
+            casts: 0,
+            acked: [0; MAX_RELAYS],
+            deaf: 0,
+            cast_until: None,
             counters: RelayedCounters::default(),
         })
     }
 
-    /// Give a node exchange up after `timeout_us` of `clock` without its frame: `finish`
-    /// hands the root logic an empty frame (counted in `timeouts`), so a relay that stopped
-    /// answering costs the root its nodes (their jobs time out and go elsewhere), not its
-    /// bus. Without it `finish` waits for ever.
+    /// Give a node exchange up after `timeout_us` of `clock` without its frame: it ends
+    /// with an empty frame (counted in `timeouts`), so a relay that stopped answering costs
+    /// the root its nodes (their jobs time out and go elsewhere), not its bus. Without it an
+    /// exchange waits for ever.
     pub fn with_timeout<C: RootClock>(self, clock: C, timeout_us: u64) -> RelayedBus<'m, L, C> {
         RelayedBus {
             link: self.link,
@@ -144,12 +212,18 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
             first: self.first,
             per_relay: self.per_relay,
             relays: self.relays,
+            depth: self.depth,
             waiting: self.waiting,
-            idle: self.idle,
-            started: self.started,
-            answer: self.answer,
+            slots: self.slots,
+            compose: self.compose,
+            cast: self.cast,
             dangling: self.dangling,
             next_scan: self.next_scan,
+            next_link: self.next_link,
+            casts: self.casts,
+            acked: self.acked,
+            deaf: self.deaf,
+            cast_until: self.cast_until,
             counters: self.counters,
         }
     }
@@ -160,6 +234,13 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
         &self.link
     }
 
+    /// At most `depth` node exchanges in flight per relay (1 to [`SLOTS`]; [`DEPTH`] unless
+    /// told).
+    pub fn with_depth(mut self, depth: u16) -> Self {
+        self.depth = depth.clamp(1, SLOTS as u16);
+        self
+    }
+
     /// Relay index and bit of `node`.
     fn place(&self, node: NodeId) -> Option<(u16, u32)> {
         let k = node.checked_sub(self.first)?;
@@ -167,67 +248,267 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
         (r < self.relays).then_some((r, 1u32 << i))
     }
 
-    /// `node`'s index on its relay's bus (what the relay's records carry).
-    fn local(&self, node: NodeId) -> NodeId {
-        node.wrapping_sub(self.first) % self.per_relay.max(1)
+    fn relay_of(&self, node: NodeId) -> Option<u16> {
+        self.place(node).map(|(r, _)| r)
     }
 
+    /// The slot of `node`'s exchange in flight.
+    fn slot_of(&self, node: NodeId) -> Option<usize> {
+        self.slots
+            .iter()
+            .position(|s| s.is_some_and(|s| s.node == node))
+    }
+
+    /// Node exchanges in flight through relay `r`, and whether one waits to go down for the
+    /// first time, or to come up.
+    fn on_relay(&self, r: u16) -> (u16, bool, bool) {
+        let (mut n, mut unsent, mut asked) = (0, false, false);
+        for s in self.slots.iter().flatten() {
+            if self.relay_of(s.node) == Some(r) {
+                n += 1;
+                if let Stage::Asked { sent, .. } = s.stage {
+                    unsent |= !sent;
+                    asked |= sent;
+                }
+            }
+        }
+        (n, unsent, asked)
+    }
+
+    /// Bits of relay `r`'s nodes with an exchange in flight.
+    fn busy_bits(&self, r: u16) -> u32 {
+        self.slots
+            .iter()
+            .flatten()
+            .filter_map(|s| self.place(s.node))
+            .filter(|&(q, _)| q == r)
+            .fold(0, |m, (_, b)| m | b)
+    }
+
+    /// A node an exchange may begin with now: waiting, none in flight with it, its relay
+    /// below `depth`, a slot free.
     fn ready_in(&self) -> Option<NodeId> {
+        if self.slots.iter().all(Option::is_some) {
+            return None;
+        }
         let total = self.relays * self.per_relay;
-        let busy = match self.started {
-            Some((Op::Exchange(n), _)) => Some(n),
-            _ => None,
-        };
         (0..total)
             .map(|k| (self.next_scan + k) % total)
             .map(|k| self.first + k)
             .find(|&n| {
-                Some(n) != busy
-                    && self
-                        .place(n)
-                        .is_some_and(|(r, b)| self.waiting[r as usize] & b != 0)
+                self.place(n).is_some_and(|(r, b)| {
+                    self.waiting[r as usize] & b != 0
+                        && self.busy_bits(r) & b == 0
+                        && self.on_relay(r).0 < self.depth
+                })
             })
     }
 
-    /// Start an exchange with relay `r`: the request for `asking` (if it is behind `r`)
-    /// down, its batch up.
-    fn start_gather(&mut self, r: u16, asking: Option<(NodeId, usize)>) -> Result<(), LinkError> {
-        let (link_first, _) = self.link.nodes();
-        let request = asking
-            .filter(|&(node, _)| self.place(node).is_some_and(|(q, _)| q == r))
-            .map(|(node, len)| (self.local(node), len));
-        let bank = self.link.tx_bank();
-        let mut w = BatchWriter::new(bank).map_err(|_| LinkError::Aborted)?;
-        if let Some((node, len)) = request {
-            let data = self.buf.tx[self.idle ^ 1].get(..len).unwrap_or(&[]);
-            w.push(Record {
-                kind: Kind::Request,
-                node,
-                data,
+    /// A node exchange that has ended: its frame is here, or its time is up.
+    fn arrived_in(&self) -> Option<NodeId> {
+        let now = (self.timeout_us > 0).then(|| self.clock.now_us());
+        self.slots
+            .iter()
+            .flatten()
+            .find(|s| match s.stage {
+                Stage::Answered { .. } => true,
+                Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
             })
-            .map_err(|_| LinkError::TooLong {
-                len: len as u32,
-                max: MAX_ROUTED as u32,
-            })?;
+            .map(|s| s.node)
+    }
+
+    /// The earliest time-out of an exchange in flight, or of a broadcast waiting for the
+    /// relays' reports.
+    fn deadline(&self) -> Option<u64> {
+        if self.timeout_us == 0 {
+            return None;
         }
-        let n = w.bytes().len();
-        self.link
-            .start(Transfer::Exchange(link_first.wrapping_add(r)), n)?;
-        self.dangling = Some(r);
-        self.counters.link_exchanges += 1;
-        self.counters.gathering += u32::from(request.is_none());
-        Ok(())
+        self.slots
+            .iter()
+            .flatten()
+            .filter_map(|s| match s.stage {
+                Stage::Asked { deadline, .. } => Some(deadline),
+                Stage::Answered { .. } => None,
+            })
+            .chain(self.cast_until)
+            .min()
     }
 
-    /// Take the relay exchange on the link (if any) and apply its batch.
+    /// Whether relay `r` has not reported passing on all but the last broadcast (and is
+    /// waited for).
+    fn lags(&self, r: u16) -> bool {
+        self.deaf & (1u32 << (r as u32 % 32)) == 0
+            && self.casts.wrapping_sub(self.acked[r as usize % MAX_RELAYS]) > 1
+    }
+
+    /// The link operation worth starting now, if the link is free: the pending broadcast;
+    /// else, round the link from `next_link`, a relay whose line is up that (1) has a reply
+    /// to take down for the first time, (2) has one down whose frame may be up, (3) has no
+    /// exchange in flight and no waiting node the root knows of (it has news).
+    fn pick(&self) -> Option<LinkOp> {
+        if self.dangling.is_some() {
+            return None;
+        }
+        if self.cast == Some(Cast::OnLink) {
+            return None;
+        }
+        let (link_first, _) = self.link.nodes();
+        let relays = self.relays.max(1);
+        let mut best: Option<(u8, u16)> = None;
+        for k in 0..relays {
+            let r = (self.next_link + k) % relays;
+            if !self.link.line(link_first.wrapping_add(r)) {
+                continue;
+            }
+            let (n, unsent, asked) = self.on_relay(r);
+            let lagging = matches!(self.cast, Some(Cast::Queued { .. })) && self.lags(r);
+            let class = if unsent || lagging {
+                0
+            } else if asked {
+                1
+            } else if n == 0 && self.waiting[r as usize] == 0 {
+                2
+            } else {
+                continue;
+            };
+            if best.is_none_or(|(c, _)| class < c) {
+                best = Some((class, r));
+            }
+        }
+        best.map(|(_, r)| LinkOp::Gather(r))
+    }
+
+    /// Start `op` on the link.
+    fn begin(&mut self, op: LinkOp) -> Result<(), LinkError> {
+        let (link_first, _) = self.link.nodes();
+        match op {
+            LinkOp::Broadcast => {
+                if let Some(Cast::Queued { buf, len }) = self.cast {
+                    let frame = self.buf.frames[buf as usize].get(..len).unwrap_or(&[]);
+                    let n =
+                        forward(frame, self.link.tx_bank()).map_err(|_| LinkError::TooLong {
+                            len: len as u32 + 1,
+                            max: MAX_MESSAGE as u32,
+                        })?;
+                    let stop = matches!(wire::decode::<Down>(frame).map(|e| e.msg), Ok(Down::Stop));
+                    self.link.start(Transfer::Broadcast, n)?;
+                    self.cast = Some(Cast::OnLink);
+                    self.dangling = Some(LinkOp::Broadcast);
+                    self.casts = self.casts.wrapping_add(1);
+                    if stop {
+                        // The relays end with it; the next run counts from 0 again.
+                        self.casts = 0;
+                        self.acked = [0; MAX_RELAYS];
+                        self.deaf = 0;
+                    }
+                }
+                Ok(())
+            }
+            LinkOp::Gather(r) => {
+                // Every reply for the relay's nodes still without its frame, those already
+                // down first (the relay drops one it served: its frame comes up in this
+                // exchange), as many as fit.
+                let (first, per) = (self.first, self.per_relay.max(1));
+                let base = first.wrapping_add(r.wrapping_mul(per));
+                let mut w =
+                    BatchWriter::new(self.link.tx_bank()).map_err(|_| LinkError::Aborted)?;
+                let mut carried = [false; SLOTS];
+                let mut requests = 0u32;
+                for pass_sent in [true, false] {
+                    for (i, s) in self.slots.iter().enumerate() {
+                        let Some(Slot {
+                            node,
+                            buf,
+                            stage: Stage::Asked { len, sent, .. },
+                        }) = *s
+                        else {
+                            continue;
+                        };
+                        let local = node.wrapping_sub(base);
+                        if sent != pass_sent || node < base || local >= per {
+                            continue;
+                        }
+                        let data = self.buf.frames[buf as usize]
+                            .get(..len as usize)
+                            .unwrap_or(&[]);
+                        if w.push(Record {
+                            kind: Kind::Request,
+                            node: local,
+                            data,
+                        })
+                        .is_ok()
+                        {
+                            carried[i] = true;
+                            requests += 1;
+                        }
+                    }
+                }
+                let n = w.bytes().len();
+                self.link
+                    .start(Transfer::Exchange(link_first.wrapping_add(r)), n)?;
+                for (s, c) in self.slots.iter_mut().zip(carried) {
+                    if let Some(Slot {
+                        stage: Stage::Asked { sent, .. },
+                        ..
+                    }) = s
+                    {
+                        *sent |= c;
+                    }
+                }
+                self.dangling = Some(LinkOp::Gather(r));
+                self.next_link = (r + 1) % self.relays.max(1);
+                self.counters.link_exchanges += 1;
+                self.counters.gathering += u32::from(requests == 0);
+                Ok(())
+            }
+        }
+    }
+
+    /// What the link operation `op` ended with.
+    fn landed(&mut self, op: LinkOp, got: Result<usize, LinkError>) -> Result<(), LinkError> {
+        self.dangling = None;
+        match op {
+            LinkOp::Broadcast => {
+                self.cast = Some(Cast::Done(got.map(|_| ())));
+                Ok(())
+            }
+            LinkOp::Gather(r) => {
+                self.apply(r, got?);
+                Ok(())
+            }
+        }
+    }
+
+    /// Take the link operation in flight (if any), waiting for it.
     async fn settle(&mut self) -> Result<(), LinkError> {
-        let Some(r) = self.dangling else {
+        let Some(op) = self.dangling else {
             return Ok(());
         };
-        let got = self.link.finish(&mut self.buf.rx).await?;
-        self.dangling = None;
-        self.apply(r, got);
-        Ok(())
+        let got = self.link.finish(&mut self.buf.rx).await;
+        self.landed(op, got)
+    }
+
+    /// One step of the link: take the operation in flight, or start the one worth
+    /// starting, or wait for a relay's line (or the earliest time-out) and exchange with it.
+    async fn pump(&mut self) -> Result<(), LinkError> {
+        if self.dangling.is_some() {
+            return self.settle().await;
+        }
+        if let Some(op) = self.pick() {
+            return self.begin(op);
+        }
+        let relay = match self.deadline() {
+            None => self.link.wait_ready().await,
+            Some(t) => match select(self.link.wait_ready(), self.clock.at_us(t)).await {
+                Either::First(relay) => relay,
+                Either::Second(()) => return Ok(()),
+            },
+        };
+        // Nothing better: gather from a relay whose line is up (it has news).
+        let op = self
+            .pick()
+            .unwrap_or(LinkOp::Gather(relay.wrapping_sub(self.link.nodes().0)));
+        self.begin(op)
     }
 
     /// Apply relay `r`'s batch (`got` bytes in `rx`): its waiting nodes, its node frames.
@@ -236,17 +517,15 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
             // Nothing intact came up (the link asks again); keep what we knew.
             return;
         }
-        let asking = match self.started {
-            Some((Op::Exchange(n), _)) => Some(n),
-            _ => None,
-        };
         // Records name a relay's nodes by their index on its bus.
-        let base = self.first + r * self.per_relay;
-        let Ok(Relayed::Batch { waiting, records }) = parse(&self.buf.rx[..got]) else {
+        let per = self.per_relay;
+        let base = self.first.wrapping_add(r.wrapping_mul(per));
+        let RelayedBuffers { frames, rx } = &mut *self.buf;
+        let Ok(Relayed::Batch { waiting, records }) = parse(rx.get(..got).unwrap_or(&[])) else {
             self.counters.bad_batches += 1;
             return;
         };
-        let mask = match self.per_relay {
+        let mask = match per {
             32.. => u32::MAX,
             p => (1u32 << p) - 1,
         };
@@ -259,15 +538,42 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                     kind: Kind::Frame,
                     node,
                     data,
-                }) if asking.is_some_and(|a| a.checked_sub(base) == Some(node))
-                    && self.answer.is_none() =>
-                {
-                    self.buf.answer[..data.len()].copy_from_slice(data);
-                    self.answer = Some(data.len());
+                }) if node < per => {
+                    let node = base.wrapping_add(node);
+                    let slot = self
+                        .slots
+                        .iter_mut()
+                        .flatten()
+                        .find(|s| s.node == node && matches!(s.stage, Stage::Asked { .. }));
+                    match slot {
+                        Some(s) => {
+                            if let Some(dst) = frames
+                                .get_mut(s.buf as usize)
+                                .and_then(|f| f.get_mut(..data.len()))
+                            {
+                                dst.copy_from_slice(data);
+                                s.stage = Stage::Answered {
+                                    len: data.len() as u16,
+                                };
+                            }
+                        }
+                        None => self.counters.stray_frames += 1,
+                    }
                 }
                 Ok(Record {
-                    kind: Kind::Frame, ..
-                }) => self.counters.stray_frames += 1,
+                    kind: Kind::Forwarded,
+                    data: &[lo, hi],
+                    ..
+                }) => {
+                    // (A count above ours is from an earlier run's batch: ignored.)
+                    let done = u16::from_le_bytes([lo, hi]);
+                    if let Some(a) = self.acked.get_mut(r as usize) {
+                        if done <= self.casts {
+                            *a = done;
+                            self.deaf &= !(1u32 << (r as u32 % 32));
+                        }
+                    }
+                }
                 _ => self.counters.bad_batches += 1,
             }
         }
@@ -281,19 +587,11 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
 
     async fn wait_ready(&mut self) -> NodeId {
         loop {
-            if let Some(n) = self.ready_in() {
+            self.poll();
+            if let Some(n) = self.arrived_in().or_else(|| self.ready_in()) {
                 return n;
             }
-            // Gather from a relay whose line is up (it has news).
-            if self.settle().await.is_err() {
-                self.dangling = None;
-            }
-            if let Some(n) = self.ready_in() {
-                return n;
-            }
-            let relay = self.link.wait_ready().await;
-            let r = relay.wrapping_sub(self.link.nodes().0);
-            if self.start_gather(r, None).is_ok() && self.settle().await.is_err() {
+            if self.pump().await.is_err() {
                 self.dangling = None;
             }
         }
@@ -309,11 +607,11 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
     }
 
     fn tx_bank(&mut self) -> &mut [u8] {
-        &mut self.buf.tx[self.idle][..MAX_ROUTED]
+        &mut self.buf.frames[self.compose as usize][..MAX_ROUTED]
     }
 
     fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
-        if self.started.is_some() {
+        if self.cast.is_some() {
             return Err(LinkError::Busy);
         }
         if len > MAX_ROUTED {
@@ -322,92 +620,296 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
                 max: MAX_ROUTED as u32,
             });
         }
-        let op = match transfer {
+        match transfer {
             Transfer::Exchange(node) => {
                 let (r, b) = self.place(node).ok_or(LinkError::NoSuchNode { node })?;
+                let free = self.slots.iter().position(Option::is_none);
+                let (Some(i), None) = (free, self.slot_of(node)) else {
+                    return Err(LinkError::Busy);
+                };
+                if self.on_relay(r).0 >= self.depth {
+                    return Err(LinkError::Busy);
+                }
                 self.waiting[r as usize] &= !b;
                 self.next_scan = (node - self.first + 1) % (self.relays * self.per_relay);
-                Op::Exchange(node)
+                let deadline = self.clock.now_us().saturating_add(self.timeout_us);
+                self.slots[i] = Some(Slot {
+                    node,
+                    buf: self.compose,
+                    stage: Stage::Asked {
+                        len: len as u16,
+                        sent: false,
+                        deadline,
+                    },
+                });
+                let busy = self.slots.iter().flatten().count() as u32;
+                self.counters.most_in_flight = self.counters.most_in_flight.max(busy);
             }
-            Transfer::Broadcast => Op::Broadcast,
-        };
-        self.started = Some((op, len));
-        self.answer = None;
-        self.idle ^= 1;
-        // Put the request on the link now if its relay's line is up and the link is free:
-        // the root logic decodes the last frame and composes the next reply while it
-        // crosses (else `finish` sends it).
-        if let (Op::Exchange(node), None) = (op, self.dangling) {
-            let (link_first, _) = self.link.nodes();
-            if let Some((r, _)) = self.place(node) {
-                if self.link.line(link_first.wrapping_add(r)) {
-                    // A failure leaves it to `finish`, which sends it again.
-                    let _ = self.start_gather(r, Some((node, len)));
-                }
+            Transfer::Broadcast => {
+                self.cast = Some(Cast::Queued {
+                    buf: self.compose,
+                    len,
+                });
             }
         }
+        // The next frame goes into a buffer no exchange or broadcast holds (there are
+        // SLOTS + 2).
+        let cast = match self.cast {
+            Some(Cast::Queued { buf, .. }) => Some(buf),
+            _ => None,
+        };
+        let owned = |b: u8| Some(b) == cast || self.slots.iter().flatten().any(|s| s.buf == b);
+        self.compose = (0..=SLOTS as u8 + 1).find(|&b| !owned(b)).unwrap_or(0);
+        // Put it on the link now if the link is free.
+        self.poll();
         Ok(())
     }
 
     async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
-        let (op, len) = self.started.ok_or(LinkError::Aborted)?;
-        self.settle().await?;
-        match op {
-            Op::Broadcast => {
-                let n = forward(&self.buf.tx[self.idle ^ 1][..len], self.link.tx_bank()).map_err(
-                    |_| LinkError::TooLong {
-                        len: len as u32 + 1,
-                        max: MAX_MESSAGE as u32,
-                    },
-                )?;
-                self.link.start(Transfer::Broadcast, n)?;
-                self.link.finish(&mut []).await?;
-                self.started = None;
-                Ok(0)
-            }
-            Op::Exchange(node) => {
-                // Gather from ready relays (round the link) until the node's frame is up,
-                // with the request to every exchange with its relay; give up at the
-                // deadline (a relay that stopped answering). The node's relay goes first
-                // whenever its line is up: the round would come back to it last (the
-                // link's scan starts after the relay last exchanged with), and only its
-                // exchanges bring the frame that ends this one.
-                let deadline = self.clock.now_us().saturating_add(self.timeout_us);
-                let (link_first, _) = self.link.nodes();
-                let own = self.place(node).map(|(r, _)| link_first.wrapping_add(r));
-                while self.answer.is_none() {
-                    // (Checked before waiting too: other relays may be ready all the time.)
-                    let late = self.timeout_us > 0 && self.clock.now_us() >= deadline;
-                    let relay = if late {
-                        None
-                    } else if let Some(own) = own.filter(|&r| self.link.line(r)) {
-                        Some(own)
-                    } else if self.timeout_us == 0 {
-                        Some(self.link.wait_ready().await)
-                    } else {
-                        match select(self.link.wait_ready(), self.clock.at_us(deadline)).await {
-                            Either::First(relay) => Some(relay),
-                            Either::Second(()) => None,
+        if self.cast.is_some() {
+            loop {
+                match self.cast {
+                    Some(Cast::Done(res)) => {
+                        self.cast = None;
+                        return res.map(|()| 0);
+                    }
+                    Some(Cast::Queued { .. }) if self.dangling.is_none() => {
+                        // Every relay must have passed on all but the last broadcast (it
+                        // reports that in its batches); one that does not report within
+                        // CAST_WAIT_US (a report lost to a bit error, a relay that stopped)
+                        // is not waited for again until it reports. Without a time-out
+                        // (no clock) broadcasts are not held back.
+                        if self.timeout_us == 0 || (0..self.relays).all(|r| !self.lags(r)) {
+                            self.cast_until = None;
+                            self.begin(LinkOp::Broadcast)?;
+                            continue;
                         }
-                    };
-                    let Some(relay) = relay else {
-                        self.started = None;
-                        self.counters.timeouts += 1;
-                        return Ok(0);
-                    };
-                    let r = relay.wrapping_sub(self.link.nodes().0);
-                    self.start_gather(r, Some((node, len)))?;
-                    self.settle().await?;
+                        let now = self.clock.now_us();
+                        let wait = self.timeout_us.min(CAST_WAIT_US);
+                        let until = *self.cast_until.get_or_insert(now.saturating_add(wait));
+                        if now >= until {
+                            for r in 0..self.relays {
+                                if self.lags(r) {
+                                    self.deaf |= 1u32 << (r as u32 % 32);
+                                }
+                            }
+                            continue;
+                        }
+                        self.pump().await?
+                    }
+                    _ => self.settle().await?,
                 }
-                self.started = None;
-                let n = self.answer.take().unwrap_or(0);
-                let max = rx.len() as u32;
-                let dst = rx
-                    .get_mut(..n)
-                    .ok_or(LinkError::TooLong { len: n as u32, max })?;
-                dst.copy_from_slice(&self.buf.answer[..n]);
-                Ok(n)
             }
         }
+        let node = self
+            .arrived_in()
+            .or_else(|| self.slots.iter().flatten().map(|s| s.node).next())
+            .ok_or(LinkError::Aborted)?;
+        self.finish_node(node, rx).await
+    }
+
+    fn in_flight(&self) -> u16 {
+        self.depth
+            .saturating_mul(self.relays)
+            .clamp(1, SLOTS as u16)
+    }
+
+    fn arrived(&self) -> Option<NodeId> {
+        self.arrived_in()
+    }
+
+    fn flying(&self) -> u16 {
+        self.slots.iter().flatten().count() as u16
+    }
+
+    fn pending(&self) -> Option<NodeId> {
+        self.slots.iter().flatten().map(|s| s.node).next()
+    }
+
+    async fn finish_node(&mut self, node: NodeId, rx: &mut [u8]) -> Result<usize, LinkError> {
+        loop {
+            let i = self.slot_of(node).ok_or(LinkError::Aborted)?;
+            let Some(slot) = self.slots[i] else {
+                return Err(LinkError::Aborted);
+            };
+            match slot.stage {
+                Stage::Answered { len } => {
+                    self.slots[i] = None;
+                    let n = len as usize;
+                    let max = rx.len() as u32;
+                    let dst = rx
+                        .get_mut(..n)
+                        .ok_or(LinkError::TooLong { len: n as u32, max })?;
+                    dst.copy_from_slice(&self.buf.frames[slot.buf as usize][..n]);
+                    return Ok(n);
+                }
+                Stage::Asked { deadline, .. }
+                    if self.timeout_us > 0 && self.clock.now_us() >= deadline =>
+                {
+                    self.slots[i] = None;
+                    self.counters.timeouts += 1;
+                    return Ok(0);
+                }
+                Stage::Asked { .. } => self.pump().await?,
+            }
+        }
+    }
+
+    fn poll(&mut self) {
+        if let Some(op) = self.dangling {
+            match poll_once(self.link.finish(&mut self.buf.rx)) {
+                Poll::Pending => return,
+                Poll::Ready(got) => {
+                    // A failed relay exchange is asked again; a failed broadcast is
+                    // `finish`'s to report.
+                    let _ = self.landed(op, got);
+                }
+            }
+        }
+        if let Some(op) = self.pick() {
+            // A failure leaves it to the next look.
+            let _ = self.begin(op);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::cell::Cell;
+    use embassy_futures::block_on;
+
+    /// Time that jumps to whatever is waited for.
+    struct Jump(Cell<u64>);
+
+    impl RootClock for &Jump {
+        fn now_us(&self) -> u64 {
+            self.0.get()
+        }
+        async fn at_us(&self, t: u64) {
+            self.0.set(self.0.get().max(t));
+        }
+    }
+
+    /// A link to relays that answer each request in their next exchange with a two-byte
+    /// frame (0xAA, the node's index on the relay); relays not `alive` never raise their
+    /// line. Each transfer takes 50 µs of `clock`.
+    struct Relays<'c> {
+        clock: &'c Jump,
+        alive: Vec<bool>,
+        bank: [u8; MAX_MESSAGE],
+        started: Option<(Transfer, usize)>,
+        /// Per relay: the requests it has and will answer next time, and those it answered
+        /// (a request seen again is dropped, as a relay does).
+        owed: Vec<Vec<NodeId>>,
+        done: Vec<Vec<NodeId>>,
+        broadcasts: u32,
+    }
+
+    impl RootBus for Relays<'_> {
+        fn nodes(&self) -> (NodeId, u16) {
+            (0, self.alive.len() as u16)
+        }
+        async fn wait_ready(&mut self) -> NodeId {
+            match self.alive.iter().position(|&a| a) {
+                Some(r) => r as NodeId,
+                None => core::future::pending().await,
+            }
+        }
+        fn ready(&self) -> Option<NodeId> {
+            self.alive.iter().position(|&a| a).map(|r| r as NodeId)
+        }
+        fn line(&self, node: NodeId) -> bool {
+            self.alive.get(node as usize) == Some(&true)
+        }
+        fn tx_bank(&mut self) -> &mut [u8] {
+            &mut self.bank
+        }
+        fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
+            if self.started.replace((transfer, len)).is_some() {
+                return Err(LinkError::Busy);
+            }
+            Ok(())
+        }
+        async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+            let (transfer, len) = self.started.take().ok_or(LinkError::Aborted)?;
+            self.clock.0.set(self.clock.0.get() + 50);
+            let Transfer::Exchange(r) = transfer else {
+                self.broadcasts += 1;
+                return Ok(0);
+            };
+            let mut w = BatchWriter::new(rx).map_err(|_| LinkError::Aborted)?;
+            for node in self.owed[r as usize].drain(..) {
+                self.done[r as usize].push(node);
+                w.push(Record {
+                    kind: Kind::Frame,
+                    node,
+                    data: &[0xAA, node as u8],
+                })
+                .map_err(|_| LinkError::Aborted)?;
+            }
+            let n = w.bytes().len();
+            if let Ok(Relayed::Batch { records, .. }) = parse(&self.bank[..len]) {
+                for rec in records.flatten() {
+                    let seen = self.owed[r as usize].contains(&rec.node)
+                        || self.done[r as usize].contains(&rec.node);
+                    if !seen {
+                        self.owed[r as usize].push(rec.node);
+                    }
+                }
+            }
+            Ok(n)
+        }
+    }
+
+    #[test]
+    fn exchanges_through_two_relays_are_in_flight_at_once_and_a_dead_relays_time_out() {
+        let clock = Jump(Cell::new(0));
+        let link = Relays {
+            clock: &clock,
+            alive: vec![true, false],
+            bank: [0; MAX_MESSAGE],
+            started: None,
+            owed: vec![Vec::new(), Vec::new()],
+            done: vec![Vec::new(), Vec::new()],
+            broadcasts: 0,
+        };
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let mut bus = RelayedBus::new(link, &mut bufs, 0, 3)
+            .unwrap()
+            .with_timeout(&clock, 1_000);
+        assert_eq!(bus.in_flight(), 4);
+        // Two exchanges with relay 0's nodes, one with relay 1's: all in flight at once.
+        for node in [0, 1, 3] {
+            bus.tx_bank()[..3].copy_from_slice(&[1, 2, node as u8]);
+            assert_eq!(bus.start(Transfer::Exchange(node), 3), Ok(()));
+        }
+        assert_eq!(bus.flying(), 3);
+        // Relay 0 has two in flight (its depth); a node in flight cannot begin again.
+        assert_eq!(bus.start(Transfer::Exchange(2), 3), Err(LinkError::Busy));
+        assert_eq!(bus.start(Transfer::Exchange(3), 3), Err(LinkError::Busy));
+        let mut rx = [0u8; MAX_MESSAGE];
+        // Relay 0's frames come back (in either order); relay 1's exchange ends at its
+        // time-out, empty, counted.
+        assert_eq!(block_on(bus.finish_node(1, &mut rx)), Ok(2));
+        assert_eq!(rx[..2], [0xAA, 1]);
+        assert_eq!(block_on(bus.finish_node(0, &mut rx)), Ok(2));
+        assert_eq!(rx[..2], [0xAA, 0]);
+        assert_eq!(bus.counters.timeouts, 0);
+        assert_eq!(bus.pending(), Some(3));
+        assert_eq!(block_on(bus.finish_node(3, &mut rx)), Ok(0));
+        assert!(clock.0.get() >= 1_000);
+        assert_eq!(bus.counters.timeouts, 1);
+        assert_eq!((bus.flying(), bus.pending()), (0, None));
+        assert_eq!(bus.counters.most_in_flight, 3);
+        assert_eq!(bus.counters.stray_frames, 0);
+        // A broadcast goes on the link when finished (relay 1 is not waited for beyond
+        // CAST_WAIT_US: it never reports).
+        for k in 0..3u8 {
+            bus.tx_bank()[..2].copy_from_slice(&[9, k]);
+            assert_eq!(bus.start(Transfer::Broadcast, 2), Ok(()));
+            assert_eq!(block_on(bus.finish(&mut rx)), Ok(0));
+        }
+        assert_eq!(bus.link().broadcasts, 3);
     }
 }

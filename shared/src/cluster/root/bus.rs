@@ -233,8 +233,11 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
     scenes: &S,
     sink: &RefCell<P>,
 ) -> Result<RootReport, RootError> {
-    let mut rx = [0u8; MAX_MESSAGE];
     let double = root.borrow().cfg.double_buffer;
+    if double && bus.in_flight() > 1 {
+        return run_overlapped(index, bus, clock, root, scenes, sink).await;
+    }
+    let mut rx = [0u8; MAX_MESSAGE];
     let mut st = BusState::NEW;
     let (first, count) = bus.nodes();
     loop {
@@ -336,6 +339,124 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
         } else {
             let got = bus.finish(&mut rx).await?;
             complete(next, &rx[..got.min(rx.len())], clock, root, sink).await;
+        }
+    }
+}
+
+/// [`run_bus`] on a bus that keeps several exchanges in flight ([`RootBus::in_flight`] > 1,
+/// a bus of relays): take every frame that came back ([`RootBus::arrived`]) first, then
+/// compose and start an exchange with every node the bus may begin one with
+/// ([`RootBus::ready`]), without waiting for the ones in flight; broadcasts, roll calls,
+/// time-outs and the end as [`run_bus`] (a broadcast ends before the next transfer starts).
+async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: PixelSink>(
+    index: usize,
+    bus: &mut B,
+    clock: &C,
+    root: &RefCell<RootState>,
+    scenes: &S,
+    sink: &RefCell<P>,
+) -> Result<RootReport, RootError> {
+    let mut rx = [0u8; MAX_MESSAGE];
+    let mut st = BusState::NEW;
+    let (first, count) = bus.nodes();
+    loop {
+        bus.poll();
+        if root.borrow().finished() {
+            // Take the exchanges still in flight (each ends, or times out), then `Stop`.
+            while let Some(node) = bus.arrived().or(bus.pending()) {
+                let got = bus.finish_node(node, &mut rx).await?;
+                complete(
+                    Sent::Exchange(node),
+                    &rx[..got.min(rx.len())],
+                    clock,
+                    root,
+                    sink,
+                )
+                .await;
+            }
+            return stop(&mut st, &mut rx, bus, clock, root, sink).await;
+        }
+        // 1. A node's frame came back: take it.
+        if let Some(node) = bus.arrived() {
+            let got = bus.finish_node(node, &mut rx).await?;
+            complete(
+                Sent::Exchange(node),
+                &rx[..got.min(rx.len())],
+                clock,
+                root,
+                sink,
+            )
+            .await;
+            continue;
+        }
+        // 2. Choose the next transfer and compose it.
+        let ready = bus.ready();
+        let mut wake: Option<u16> = None;
+        if ready.is_none() {
+            let now = clock.now_us();
+            let sent = st.scene_sent(root.borrow().handing_out());
+            root.borrow_mut().expire(first, count, now, sent);
+            let (waiting, orphaned, every) = {
+                let r = root.borrow();
+                (
+                    r.roll_call(first, count, st.bframe),
+                    r.orphaned(),
+                    r.timeout_us(),
+                )
+            };
+            wake = st.roll_call(waiting, orphaned, every, now);
+            let can_send = root.borrow().may_broadcast(st.bframe);
+            if wake.is_none() && !(can_send && scenes.produced(st.bframe)) {
+                if let Some(sent) = st.inflight.take() {
+                    let got = bus.finish(&mut rx).await?;
+                    complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
+                    continue;
+                }
+                // Returns on a ready node or a frame back (looked at next round).
+                let _ = wait_for_work(index, bus, clock, root, scenes, &st, sent, can_send).await;
+                continue;
+            }
+        }
+        let (next, n) = match ready {
+            Some(node) => {
+                let mut r = root.borrow_mut();
+                r.heard(node, clock.now_us());
+                (Sent::Exchange(node), r.reply(node, scenes, bus.tx_bank()))
+            }
+            None if wake.is_some() => (
+                Sent::Broadcast,
+                wire::encode(
+                    0,
+                    0,
+                    &Down::Wake {
+                        frame: wake.unwrap_or(0),
+                    },
+                    bus.tx_bank(),
+                )
+                .unwrap_or(0),
+            ),
+            None => (
+                Sent::Broadcast,
+                st.compose_scene(clock, root, scenes, bus.tx_bank())?,
+            ),
+        };
+        let crc_bytes = root.borrow_mut().take_crc_work();
+        if crc_bytes > 0 {
+            clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;
+        }
+        clock.worked(RcWork::Encode { bytes: n }).await;
+        // 3. A broadcast still on the link ends first; exchanges in flight run on.
+        if let Some(sent) = st.inflight.take() {
+            let got = bus.finish(&mut rx).await?;
+            complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
+        }
+        let transfer = match next {
+            Sent::Exchange(node) => Transfer::Exchange(node),
+            Sent::Broadcast => Transfer::Broadcast,
+        };
+        bus.start(transfer, n)?;
+        if next == Sent::Broadcast {
+            st.inflight = Some(next);
         }
     }
 }
