@@ -234,10 +234,12 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
     sink: &RefCell<P>,
 ) -> Result<RootReport, RootError> {
     let double = root.borrow().cfg.double_buffer;
-    if double && bus.in_flight() > 1 {
-        return run_overlapped(index, bus, clock, root, scenes, sink).await;
-    }
+    // One receive buffer for either loop: a buffer of each would both live in this future
+    // (1.5 KB more on every RC, as its statics).
     let mut rx = [0u8; MAX_MESSAGE];
+    if double && bus.in_flight() > 1 {
+        return run_overlapped(index, bus, clock, root, scenes, sink, &mut rx).await;
+    }
     let mut st = BusState::NEW;
     let (first, count) = bus.nodes();
     loop {
@@ -355,8 +357,8 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
     root: &RefCell<RootState>,
     scenes: &S,
     sink: &RefCell<P>,
+    rx: &mut [u8; MAX_MESSAGE],
 ) -> Result<RootReport, RootError> {
-    let mut rx = [0u8; MAX_MESSAGE];
     let mut st = BusState::NEW;
     let (first, count) = bus.nodes();
     loop {
@@ -364,7 +366,7 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
         if root.borrow().finished() {
             // Take the exchanges still in flight (each ends, or times out), then `Stop`.
             while let Some(node) = bus.arrived().or(bus.pending()) {
-                let got = bus.finish_node(node, &mut rx).await?;
+                let got = bus.finish_node(node, &mut rx[..]).await?;
                 complete(
                     Sent::Exchange(node),
                     &rx[..got.min(rx.len())],
@@ -374,11 +376,11 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
                 )
                 .await;
             }
-            return stop(&mut st, &mut rx, bus, clock, root, sink).await;
+            return stop(&mut st, &mut rx[..], bus, clock, root, sink).await;
         }
         // 1. A node's frame came back: take it.
         if let Some(node) = bus.arrived() {
-            let got = bus.finish_node(node, &mut rx).await?;
+            let got = bus.finish_node(node, &mut rx[..]).await?;
             complete(
                 Sent::Exchange(node),
                 &rx[..got.min(rx.len())],
@@ -408,7 +410,7 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
             let can_send = root.borrow().may_broadcast(st.bframe);
             if wake.is_none() && !(can_send && scenes.produced(st.bframe)) {
                 if let Some(sent) = st.inflight.take() {
-                    let got = bus.finish(&mut rx).await?;
+                    let got = bus.finish(&mut rx[..]).await?;
                     complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
                     continue;
                 }
@@ -447,7 +449,7 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
         clock.worked(RcWork::Encode { bytes: n }).await;
         // 3. A broadcast still on the link ends first; exchanges in flight run on.
         if let Some(sent) = st.inflight.take() {
-            let got = bus.finish(&mut rx).await?;
+            let got = bus.finish(&mut rx[..]).await?;
             complete(sent, &rx[..got.min(rx.len())], clock, root, sink).await;
         }
         let transfer = match next {
