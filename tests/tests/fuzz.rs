@@ -1098,29 +1098,36 @@ fn check_wire_bytes(bytes: &[u8], rng: &mut Rng, tally: &mut Tally) -> Verdict {
     if let Ok(env) = &up {
         let again = wire_frame(env.seq, env.ack, &env.msg);
         assert_eq!(wire::decode::<Up>(&again).as_ref(), Ok(env));
-        if let Up::PixelsRle { len, data, .. } = env.msg {
+        type Codec = (
+            fn(&[u8], &mut [u8]) -> Result<(), wire::WireError>,
+            fn(&[u8], &mut [u8]) -> Option<usize>,
+            &'static str,
+        );
+        let codec: Option<(u16, &[u8], Codec)> = match env.msg {
+            Up::PixelsRle { len, data, .. } => Some((
+                len,
+                data,
+                (wire::rle_decode, wire::rle_encode, "rle round trips"),
+            )),
+            Up::PixelsDelta { len, data, .. } => Some((
+                len,
+                data,
+                (wire::delta_decode, wire::delta_encode, "delta round trips"),
+            )),
+            _ => None,
+        };
+        if let Some((len, data, (decode, encode, note))) = codec {
             let mut out = vec![0u8; 3 * len as usize];
-            if wire::rle_decode(data, &mut out).is_ok() {
-                // Decoded pixels code and decode back to themselves.
+            if decode(data, &mut out).is_ok() {
+                // Decoded pixels code and decode back to themselves, and the encoder's own
+                // coding is never longer than the data it decoded from.
                 let mut coded = vec![0u8; 4 * len as usize];
-                let n = wire::rle_encode(&out, &mut coded).expect("room for every pixel");
+                let n = encode(&out, &mut coded).expect("room for every pixel");
                 let mut back = vec![0u8; out.len()];
-                wire::rle_decode(&coded[..n], &mut back).expect("own coding decodes");
+                decode(&coded[..n], &mut back).expect("own coding decodes");
                 assert_eq!(back, out);
-                tally.note("rle round trips", 1);
-            }
-        }
-        if let Up::PixelsDelta { len, data, .. } = env.msg {
-            let mut out = vec![0u8; 3 * len as usize];
-            if wire::delta_decode(data, &mut out).is_ok() {
-                let mut coded = vec![0u8; 4 * len as usize];
-                let n = wire::delta_encode(&out, &mut coded).expect("room for every pixel");
-                let mut back = vec![0u8; out.len()];
-                wire::delta_decode(&coded[..n], &mut back).expect("own coding decodes");
-                assert_eq!(back, out);
-                // The encoder's own coding is never longer than the data it decoded from.
-                assert!(n <= data.len(), "{n} > {}", data.len());
-                tally.note("delta round trips", 1);
+                assert!(n <= data.len(), "{note}: {n} > {}", data.len());
+                tally.note(note, 1);
             }
         }
     }

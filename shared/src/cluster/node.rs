@@ -519,34 +519,16 @@ where
                 nc.push_slot(|seq, buf| wire::encode(seq, ack, &Up::Status { scene }, buf))
             } else if let Some(b) = nc.built.take() {
                 let rgb = pix[..b.len].as_flattened();
-                let up = match wire::code_pixels(cfg.coding, rgb, &mut coded) {
-                    wire::Coded::Rle(n) => Up::PixelsRle {
-                        job: b.job,
-                        frame: b.frame,
-                        y: b.y,
-                        x: b.x,
-                        len: b.len as u16,
-                        data: &coded[..n],
-                        done: b.done,
-                    },
-                    wire::Coded::Delta(n) => Up::PixelsDelta {
-                        job: b.job,
-                        frame: b.frame,
-                        y: b.y,
-                        x: b.x,
-                        len: b.len as u16,
-                        data: &coded[..n],
-                        done: b.done,
-                    },
-                    wire::Coded::Raw => Up::Pixels {
-                        job: b.job,
-                        frame: b.frame,
-                        y: b.y,
-                        x: b.x,
-                        rgb,
-                        done: b.done,
-                    },
+                let coding = wire::code_pixels(cfg.coding, rgb, &mut coded);
+                let run = wire::PixelRun {
+                    job: b.job,
+                    frame: b.frame,
+                    y: b.y,
+                    x: b.x,
+                    rgb,
+                    done: b.done,
                 };
+                let up = coding.message(run, &coded);
                 nc.push_slot(|seq, buf| wire::encode(seq, ack, &up, buf))
             } else {
                 None

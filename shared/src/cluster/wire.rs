@@ -356,6 +356,50 @@ pub enum Coded {
     Delta(usize),
 }
 
+impl Coded {
+    /// The message carrying `run`: its pixels raw, or the first bytes of `coded` (where
+    /// [`code_pixels`] put them) as this coding says.
+    pub fn message<'a>(self, run: PixelRun<'a>, coded: &'a [u8]) -> Up<'a> {
+        let PixelRun {
+            job,
+            frame,
+            y,
+            x,
+            rgb,
+            done,
+        } = run;
+        let len = (rgb.len() / 3) as u16;
+        match self {
+            Coded::Raw => Up::Pixels {
+                job,
+                frame,
+                y,
+                x,
+                rgb,
+                done,
+            },
+            Coded::Rle(n) => Up::PixelsRle {
+                job,
+                frame,
+                y,
+                x,
+                len,
+                data: &coded[..n.min(coded.len())],
+                done,
+            },
+            Coded::Delta(n) => Up::PixelsDelta {
+                job,
+                frame,
+                y,
+                x,
+                len,
+                data: &coded[..n.min(coded.len())],
+                done,
+            },
+        }
+    }
+}
+
 /// Code `rgb` as the shortest of raw and what `coding` allows, into `out` (ties go to the
 /// simpler coding).
 pub fn code_pixels(coding: PixelCoding, rgb: &[u8], out: &mut [u8]) -> Coded {

@@ -112,6 +112,35 @@ impl BusState {
         None
     }
 
+    /// Compose the next transfer into `tx`: the reply to `ready` (its ready line is up: the
+    /// node is alive), else the roll call `wake`, else the next piece of the scene; returns
+    /// what it is and its length.
+    fn compose<C: RootClock, S: SceneSource + ?Sized>(
+        &mut self,
+        ready: Option<NodeId>,
+        wake: Option<u16>,
+        tx: &mut [u8],
+        clock: &C,
+        root: &RefCell<RootState>,
+        scenes: &S,
+    ) -> Result<(Sent, usize), RootError> {
+        Ok(match (ready, wake) {
+            (Some(node), _) => {
+                let mut r = root.borrow_mut();
+                r.heard(node, clock.now_us());
+                (Sent::Exchange(node), r.reply(node, scenes, tx))
+            }
+            (None, Some(frame)) => (
+                Sent::Broadcast,
+                wire::encode(0, 0, &Down::Wake { frame }, tx).unwrap_or(0),
+            ),
+            (None, None) => (
+                Sent::Broadcast,
+                self.compose_scene(clock, root, scenes, tx)?,
+            ),
+        })
+    }
+
     /// Compose the next broadcast of the scene (a chunk, or `SceneEnd` after the last) into
     /// `tx`; returns its length.
     fn compose_scene<C: RootClock, S: SceneSource + ?Sized>(
@@ -293,30 +322,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                 continue;
             }
         }
-        let (next, n) = match ready {
-            Some(node) => {
-                // Its ready line is up: the node is alive.
-                let mut r = root.borrow_mut();
-                r.heard(node, clock.now_us());
-                (Sent::Exchange(node), r.reply(node, scenes, bus.tx_bank()))
-            }
-            None if wake.is_some() => (
-                Sent::Broadcast,
-                wire::encode(
-                    0,
-                    0,
-                    &Down::Wake {
-                        frame: wake.unwrap_or(0),
-                    },
-                    bus.tx_bank(),
-                )
-                .unwrap_or(0),
-            ),
-            None => (
-                Sent::Broadcast,
-                st.compose_scene(clock, root, scenes, bus.tx_bank())?,
-            ),
-        };
+        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes)?;
         let crc_bytes = root.borrow_mut().take_crc_work();
         if crc_bytes > 0 {
             clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;
@@ -419,29 +425,7 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
                 continue;
             }
         }
-        let (next, n) = match ready {
-            Some(node) => {
-                let mut r = root.borrow_mut();
-                r.heard(node, clock.now_us());
-                (Sent::Exchange(node), r.reply(node, scenes, bus.tx_bank()))
-            }
-            None if wake.is_some() => (
-                Sent::Broadcast,
-                wire::encode(
-                    0,
-                    0,
-                    &Down::Wake {
-                        frame: wake.unwrap_or(0),
-                    },
-                    bus.tx_bank(),
-                )
-                .unwrap_or(0),
-            ),
-            None => (
-                Sent::Broadcast,
-                st.compose_scene(clock, root, scenes, bus.tx_bank())?,
-            ),
-        };
+        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes)?;
         let crc_bytes = root.borrow_mut().take_crc_work();
         if crc_bytes > 0 {
             clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;
