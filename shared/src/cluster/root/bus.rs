@@ -112,6 +112,31 @@ impl BusState {
         None
     }
 
+    /// No node of `first..first + count` is ready: declare the silent ones dead (their
+    /// work goes elsewhere); returns the roll call to broadcast if one is due, whether the
+    /// root logic lets a scene broadcast go, and when the scene being handed out was sent.
+    fn idle<C: RootClock>(
+        &mut self,
+        first: NodeId,
+        count: u16,
+        clock: &C,
+        root: &RefCell<RootState>,
+    ) -> (Option<u16>, bool, Option<u64>) {
+        let now = clock.now_us();
+        let sent = self.scene_sent(root.borrow().handing_out());
+        root.borrow_mut().expire(first, count, now, sent);
+        let (waiting, orphaned, every) = {
+            let r = root.borrow();
+            (
+                r.roll_call(first, count, self.bframe),
+                r.orphaned(),
+                r.timeout_us(),
+            )
+        };
+        let wake = self.roll_call(waiting, orphaned, every, now);
+        (wake, root.borrow().may_broadcast(self.bframe), sent)
+    }
+
     /// Compose the next transfer into `tx`: the reply to `ready` (its ready line is up: the
     /// node is alive), else the roll call `wake`, else the next piece of the scene; returns
     /// what it is and its length.
@@ -279,19 +304,8 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
         let mut ready = bus.ready();
         let mut wake: Option<u16> = None;
         if ready.is_none() {
-            let now = clock.now_us();
-            let sent = st.scene_sent(root.borrow().handing_out());
-            root.borrow_mut().expire(first, count, now, sent);
-            let (waiting, orphaned, every) = {
-                let r = root.borrow();
-                (
-                    r.roll_call(first, count, st.bframe),
-                    r.orphaned(),
-                    r.timeout_us(),
-                )
-            };
-            wake = st.roll_call(waiting, orphaned, every, now);
-            let can_send = root.borrow().may_broadcast(st.bframe);
+            let (can_send, sent);
+            (wake, can_send, sent) = st.idle(first, count, clock, root);
             if wake.is_none() && !(can_send && scenes.produced(st.bframe)) {
                 // Nothing to send now. The frame on the wire may change that: take it first.
                 if let Some(sent) = st.inflight.take() {
@@ -401,19 +415,8 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
         let ready = bus.ready();
         let mut wake: Option<u16> = None;
         if ready.is_none() {
-            let now = clock.now_us();
-            let sent = st.scene_sent(root.borrow().handing_out());
-            root.borrow_mut().expire(first, count, now, sent);
-            let (waiting, orphaned, every) = {
-                let r = root.borrow();
-                (
-                    r.roll_call(first, count, st.bframe),
-                    r.orphaned(),
-                    r.timeout_us(),
-                )
-            };
-            wake = st.roll_call(waiting, orphaned, every, now);
-            let can_send = root.borrow().may_broadcast(st.bframe);
+            let (can_send, sent);
+            (wake, can_send, sent) = st.idle(first, count, clock, root);
             if wake.is_none() && !(can_send && scenes.produced(st.bframe)) {
                 if let Some(sent) = st.inflight.take() {
                     let got = bus.finish(&mut rx[..]).await?;
