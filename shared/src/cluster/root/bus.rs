@@ -365,6 +365,28 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
     }
 }
 
+/// Take node `node`'s frame of an exchange in flight (`RootBus::finish_node`) and hand it to
+/// the root logic.
+async fn take_node<B: RootBus, C: RootClock, P: PixelSink>(
+    node: NodeId,
+    bus: &mut B,
+    rx: &mut [u8],
+    clock: &C,
+    root: &RefCell<RootState>,
+    sink: &RefCell<P>,
+) -> Result<(), RootError> {
+    let got = bus.finish_node(node, rx).await?;
+    complete(
+        Sent::Exchange(node),
+        &rx[..got.min(rx.len())],
+        clock,
+        root,
+        sink,
+    )
+    .await;
+    Ok(())
+}
+
 /// [`run_bus`] on a bus that keeps several exchanges in flight ([`RootBus::in_flight`] > 1,
 /// a bus of relays): take every frame that came back ([`RootBus::arrived`]) first, then
 /// compose and start an exchange with every node the bus may begin one with
@@ -386,29 +408,13 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
         if root.borrow().finished() {
             // Take the exchanges still in flight (each ends, or times out), then `Stop`.
             while let Some(node) = bus.arrived().or(bus.pending()) {
-                let got = bus.finish_node(node, &mut rx[..]).await?;
-                complete(
-                    Sent::Exchange(node),
-                    &rx[..got.min(rx.len())],
-                    clock,
-                    root,
-                    sink,
-                )
-                .await;
+                take_node(node, bus, &mut rx[..], clock, root, sink).await?;
             }
             return stop(&mut st, &mut rx[..], bus, clock, root, sink).await;
         }
         // 1. A node's frame came back: take it.
         if let Some(node) = bus.arrived() {
-            let got = bus.finish_node(node, &mut rx[..]).await?;
-            complete(
-                Sent::Exchange(node),
-                &rx[..got.min(rx.len())],
-                clock,
-                root,
-                sink,
-            )
-            .await;
+            take_node(node, bus, &mut rx[..], clock, root, sink).await?;
             continue;
         }
         // 2. Choose the next transfer and compose it.
