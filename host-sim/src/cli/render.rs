@@ -98,7 +98,7 @@ pub struct ClusterArgs {
     /// How the nodes may code their pixel runs (cluster only): raw, rle (raw or run-length
     /// coded, whichever is shorter) or delta (raw, run-length or delta coded: shading steps
     /// in one or two bytes a pixel)
-    #[arg(long, default_value = "rle", value_parser = cli_cluster::parse_pixel_coding)]
+    #[arg(long, default_value = "delta", value_parser = cli_cluster::parse_pixel_coding)]
     pub pixel_coding: links_core::wire::PixelCoding,
     /// A relay that stops answering: RELAY@SECONDS or FIRST-LAST@SECONDS of virtual time
     /// (repeatable; --relay firmware only)

@@ -259,14 +259,14 @@ fn topology_table(
             },
         ),
         (
-            "(c) batched, delta-coded pixels (--pixel-coding delta)",
+            "(c) batched, RLE-coded pixels only (--pixel-coding rle)",
             SimConfig {
                 topology: Topology::RelayTree {
                     fanout: 8,
                     batch: true,
                 },
                 node: NodeConfig {
-                    coding: PixelCoding::Delta,
+                    coding: PixelCoding::Rle,
                 },
                 ..star(1)
             },

@@ -80,9 +80,11 @@ pub struct NodeConfig {
 }
 
 impl Default for NodeConfig {
+    /// Delta coding (which also tries RLE): the fewest bytes up the tree, where the root's
+    /// link is the bound of a 256-node frame (docs/cluster.md, "Delta-coded pixel runs").
     fn default() -> Self {
         Self {
-            coding: PixelCoding::Rle,
+            coding: PixelCoding::Delta,
         }
     }
 }
