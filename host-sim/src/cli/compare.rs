@@ -15,6 +15,7 @@ pub fn run(scene: &SceneArgs, backend: &str, threads: usize) -> Result<(), CliEr
         .num_threads(threads)
         .build()
         .map_err(CliError::failed)?;
+    links_core::math::overflow::reset();
     let a = pool
         .install(|| measure.compare_to_f64(&image))
         .map_err(CliError::failed)?;
@@ -30,5 +31,22 @@ pub fn run(scene: &SceneArgs, backend: &str, threads: usize) -> Result<(), CliEr
         a.hit_mismatches,
         a.hit_mismatches_off_silhouette
     );
+    report_overflows();
     Ok(())
+}
+
+/// The checked build's account of the fixed-point renders since the counters were reset
+/// (`--features fx-checked`; nothing otherwise): the counts and where they happened.
+pub fn report_overflows() {
+    use links_core::math::overflow;
+    if !overflow::ENABLED {
+        return;
+    }
+    let c = overflow::counts();
+    outln!("fixed-point overflows (checked build): {c}");
+    let mut sites = [None; overflow::SITES];
+    let n = overflow::sites(&mut sites);
+    for s in sites[..n].iter().flatten() {
+        outln!("  {}:{}: {} x{}", s.file, s.line, s.kind, s.count);
+    }
 }

@@ -296,6 +296,7 @@ fn host(a: &RenderArgs) -> Result<(), CliError> {
     let (image, precision) = image_to_render(&a.scene, a.image.as_deref(), asked)?;
     let view = SceneView::new(&image).map_err(CliError::failed)?;
     let bar = progress_bar(a.quiet, view.camera::<f32>().height)?;
+    links_core::math::overflow::reset();
     let frame =
         render_frame(&image, precision, a.threads, &|| bar.inc(1)).map_err(CliError::failed)?;
     bar.finish_and_clear();
@@ -321,6 +322,9 @@ fn host(a: &RenderArgs) -> Result<(), CliError> {
             counts.join(", "),
             image.len()
         );
+    }
+    if precision == Precision::Fixed {
+        super::compare::report_overflows();
     }
     Ok(())
 }

@@ -12,6 +12,7 @@
 //! Range: about +-32767.99998 with a step of 2^-16 (1.5e-5). The DM chooses the scale of a
 //! scene so that it fits this range with the most precision left (`fixed_image`).
 
+use super::overflow::{self, Kind};
 use crate::num::Real;
 use core::cmp::Ordering;
 use core::fmt;
@@ -82,6 +83,54 @@ impl Fx {
             Fx(lo.max(NEG_INF_RAW))
         } else {
             Fx::wide_overflow(v)
+        }
+    }
+
+    /// `r`, the result of a `kind` operation on `inputs`, as the checked build sees it: a
+    /// non-finite result from finite inputs is counted ([`overflow`]). Nothing without the
+    /// `fx-checked` feature.
+    #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
+    fn checked<const N: usize>(kind: Kind, inputs: [Fx; N], r: Fx) -> Fx {
+        if overflow::ENABLED && r.special() && !inputs.iter().any(|x| x.special()) {
+            overflow::record(if r.is_nan() { Kind::Invalid } else { kind });
+        }
+        r
+    }
+
+    /// A conversion's result as the checked build sees it: a finite input (`finite`) that
+    /// gave a non-finite value is counted.
+    #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
+    fn checked_conversion(finite: bool, r: Fx) -> Fx {
+        if overflow::ENABLED && finite && r.special() {
+            overflow::record(Kind::Conversion);
+        }
+        r
+    }
+
+    /// The product, saturated to an infinity beyond the range (not counted: see
+    /// [`Real::mul_beyond`]).
+    #[inline(always)]
+    fn mul_saturating(self, o: Fx) -> Fx {
+        if self.special() || o.special() {
+            self.mul_special(o)
+        } else if wide::HALVES {
+            Fx::mul_finite_halves(self.0, o.0)
+        } else {
+            Fx::from_wide(wide::mul_q16(self.0, o.0))
+        }
+    }
+
+    /// The reciprocal, an infinity for zero or beyond the range (not counted: see
+    /// [`Real::recip_beyond`]).
+    #[inline(always)]
+    fn recip_saturating(self) -> Fx {
+        if self.special() || self.0 == 0 {
+            Fx::ONE.div_special(self)
+        } else {
+            let q = wide::recip_q16(self.0.unsigned_abs()) as i32;
+            Fx(if self.0 < 0 { -q } else { q })
         }
     }
 
@@ -374,23 +423,29 @@ impl PartialOrd for Fx {
 impl Add for Fx {
     type Output = Fx;
     #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn add(self, o: Fx) -> Fx {
-        if self.special() || o.special() {
-            return self.add_special(o);
-        }
-        Fx::add_finite(self.0, o.0)
+        let r = if self.special() || o.special() {
+            self.add_special(o)
+        } else {
+            Fx::add_finite(self.0, o.0)
+        };
+        Fx::checked(Kind::Sum, [self, o], r)
     }
 }
 
 impl Sub for Fx {
     type Output = Fx;
     #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn sub(self, o: Fx) -> Fx {
         // The same as self + (-o): an i32 subtract instead of a negation and an add.
-        if self.special() || o.special() {
-            return self.add_special(-o);
-        }
-        Fx::sub_finite(self.0, o.0)
+        let r = if self.special() || o.special() {
+            self.add_special(-o)
+        } else {
+            Fx::sub_finite(self.0, o.0)
+        };
+        Fx::checked(Kind::Sum, [self, o], r)
     }
 }
 
@@ -410,29 +465,26 @@ impl Neg for Fx {
 impl Mul for Fx {
     type Output = Fx;
     #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn mul(self, o: Fx) -> Fx {
-        if self.special() || o.special() {
-            return self.mul_special(o);
-        }
-        if wide::HALVES {
-            Fx::mul_finite_halves(self.0, o.0)
-        } else {
-            Fx::from_wide(wide::mul_q16(self.0, o.0))
-        }
+        Fx::checked(Kind::Product, [self, o], self.mul_saturating(o))
     }
 }
 
 impl Div for Fx {
     type Output = Fx;
     #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn div(self, o: Fx) -> Fx {
-        if self.special() || o.special() || o.0 == 0 {
-            return self.div_special(o);
-        }
-        // Quotient of magnitudes, rounded to nearest, at most MAX_RAW + 1 (= INF_RAW, whose
-        // negation is NEG_INF_RAW), then the sign.
-        let q = wide::div_q16(self.0.unsigned_abs(), o.0.unsigned_abs()) as i32;
-        Fx(if (self.0 < 0) != (o.0 < 0) { -q } else { q })
+        let r = if self.special() || o.special() || o.0 == 0 {
+            self.div_special(o)
+        } else {
+            // Quotient of magnitudes, rounded to nearest, at most MAX_RAW + 1 (= INF_RAW,
+            // whose negation is NEG_INF_RAW), then the sign.
+            let q = wide::div_q16(self.0.unsigned_abs(), o.0.unsigned_abs()) as i32;
+            Fx(if (self.0 < 0) != (o.0 < 0) { -q } else { q })
+        };
+        Fx::checked(Kind::Quotient, [self, o], r)
     }
 }
 
@@ -468,6 +520,7 @@ impl Real for Fx {
         not(all(target_arch = "arm", not(target_has_atomic = "32"))),
         inline(always)
     )]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn dot3(a: [Fx; 3], b: [Fx; 3]) -> Fx {
         if a[0].special()
             || a[1].special()
@@ -478,12 +531,13 @@ impl Real for Fx {
         {
             return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         }
-        let (a, b) = (a.map(Fx::raw), b.map(Fx::raw));
-        if wide::HALVES {
-            Fx::dot3_finite_halves(a, b)
+        let (ra, rb) = (a.map(Fx::raw), b.map(Fx::raw));
+        let r = if wide::HALVES {
+            Fx::dot3_finite_halves(ra, rb)
         } else {
-            Fx::dot3_finite(a, b)
-        }
+            Fx::dot3_finite(ra, rb)
+        };
+        Fx::checked(Kind::Product, [a[0], a[1], a[2], b[0], b[1], b[2]], r)
     }
 
     /// `v / |v|` from the integers: the components shifted (exactly, or by at most one bit
@@ -563,18 +617,24 @@ impl Real for Fx {
     /// Exact products, their difference exact in 64 bits, one rounding from Q32 to Q23
     /// (Q16.16 raw times 2^7), saturated to an infinity beyond the range.
     #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn cross_fine(a: Fx, b: Fx, c: Fx, d: Fx) -> Fx {
         if a.special() || b.special() || c.special() || d.special() {
             return a * b - c * d;
         }
         let v = wide::mul_i32(a.0, b.0) - wide::mul_i32(c.0, d.0);
-        Fx::from_wide((v + (1 << 8)) >> 9)
+        Fx::checked(
+            Kind::Product,
+            [a, b, c, d],
+            Fx::from_wide((v + (1 << 8)) >> 9),
+        )
     }
 
     /// The point in Q24 (`rel` exact, `dir tc` rounded from Q32), the products with `m` in
     /// Q40, summed and rounded once, saturated to an infinity beyond the range. In 64 bits
     /// while the point is under 128 and the row under 4096 (each product below 2^59), else
     /// in 128 bits.
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn local_dot(m: [Fx; 3], rel: [Fx; 3], dir: [Fx; 3], tc: Fx) -> Fx {
         if rel.iter().chain(&dir).chain(&m).any(|v| v.special()) || tc.special() {
             return Fx::dot3(
@@ -599,10 +659,17 @@ impl Real for Fx {
             (0..3).map(|i| m[i].0 as i128 * p[i] as i128).sum()
         };
         let r = (s + (1 << 23)) >> 24;
-        match i64::try_from(r) {
+        let out = match i64::try_from(r) {
             Ok(v) => Fx::from_wide(v),
             Err(_) => Fx::wide_overflow(if r < 0 { -1 } else { 1 }),
-        }
+        };
+        Fx::checked(
+            Kind::Product,
+            [
+                m[0], m[1], m[2], rel[0], rel[1], rel[2], dir[0], dir[1], dir[2], tc,
+            ],
+            out,
+        )
     }
 
     /// In 64-bit integers: `q = c + d s` in Q32 (exact), the residual in Q48 as
@@ -646,20 +713,23 @@ impl Real for Fx {
     }
 
     /// `self * 2^k`, rounded to nearest, saturated to an infinity beyond the range.
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn mul_pow2(self, k: i32) -> Fx {
         if self.special() || k == 0 {
             return self;
         }
         let v = self.0 as i64;
         if k > 0 {
-            if k >= 32 {
-                return if v > 0 {
+            let r = if k >= 32 {
+                if v > 0 {
                     Fx::INFINITY
                 } else {
                     Fx::NEG_INFINITY
-                };
-            }
-            Fx::from_wide(v << k)
+                }
+            } else {
+                Fx::from_wide(v << k)
+            };
+            Fx::checked(Kind::Conversion, [self], r)
         } else if k <= -33 {
             Fx(0)
         } else {
@@ -681,6 +751,7 @@ impl Real for Fx {
     /// Exactly `from_f64(v as f64)`, from the f32's bits (no float arithmetic: the M3
     /// and M0 have no FPU).
     #[inline]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn from_f32(v: f32) -> Fx {
         let bits = v.to_bits();
         let exp = (bits >> 23) & 0xff;
@@ -702,12 +773,13 @@ impl Real for Fx {
             let k = 134 - exp;
             ((frac | 1 << 23) + (1 << (k - 1))) >> k
         };
-        Fx::from_sign_magnitude(bits >> 31 != 0, mag)
+        Fx::checked_conversion(exp != 0xff, Fx::from_sign_magnitude(bits >> 31 != 0, mag))
     }
     /// `v * 2^16` rounded half away from zero, saturated to an infinity; from the f64's
     /// bits (the same result as that float arithmetic, including the one input where the
     /// float sum `s + 0.5` rounds up to 1: see below).
     #[inline]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn from_f64(v: f64) -> Fx {
         let bits = v.to_bits();
         let exp = ((bits >> 52) & 0x7ff) as u32;
@@ -732,11 +804,12 @@ impl Real for Fx {
                 (k == 54 && m == (1 << 53) - 1) as u32
             }
         };
-        Fx::from_sign_magnitude(bits >> 63 != 0, mag)
+        Fx::checked_conversion(exp != 0x7ff, Fx::from_sign_magnitude(bits >> 63 != 0, mag))
     }
     #[inline(always)]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn from_i32(v: i32) -> Fx {
-        Fx::from_wide((v as i64) << FRAC_BITS)
+        Fx::checked_conversion(true, Fx::from_wide((v as i64) << FRAC_BITS))
     }
     #[inline(always)]
     fn from_stored(bits: u32) -> Fx {
@@ -787,12 +860,17 @@ impl Real for Fx {
     /// primary ray takes four reciprocals (its length, its direction's three for the slab
     /// tests).
     #[inline]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn recip(self) -> Fx {
-        if self.special() || self.0 == 0 {
-            return Fx::ONE.div_special(self);
-        }
-        let q = wide::recip_q16(self.0.unsigned_abs()) as i32;
-        Fx(if self.0 < 0 { -q } else { q })
+        Fx::checked(Kind::Quotient, [self], self.recip_saturating())
+    }
+    #[inline(always)]
+    fn mul_beyond(self, o: Fx) -> Fx {
+        self.mul_saturating(o)
+    }
+    #[inline(always)]
+    fn recip_beyond(self) -> Fx {
+        self.recip_saturating()
     }
     /// One step relative to 1.0. Fixed-point rounding is absolute (half a step per
     /// operation), so relative error bounds built from this hold near magnitude 1 and above.
@@ -801,10 +879,11 @@ impl Real for Fx {
         Fx(1)
     }
     #[inline]
+    #[cfg_attr(feature = "fx-checked", track_caller)]
     fn sqrt(self) -> Fx {
         // Negative numbers, -inf and NaN (its raw value is negative too).
         if self.0 < 0 {
-            return Fx::NAN;
+            return Fx::checked(Kind::Invalid, [self], Fx::NAN);
         }
         if self.0 == INF_RAW {
             return self;

@@ -230,7 +230,11 @@ impl<T: Real> RayInv<T> {
     #[inline]
     pub fn new(dir: Vec3<T>) -> Self {
         Self {
-            inv_dir: Vec3::new(dir.x.recip(), dir.y.recip(), dir.z.recip()),
+            inv_dir: Vec3::new(
+                dir.x.recip_beyond(),
+                dir.y.recip_beyond(),
+                dir.z.recip_beyond(),
+            ),
         }
     }
 }
@@ -327,8 +331,9 @@ impl<T: Real> SlabSpan<T> {
     #[inline(always)]
     pub fn clip(&mut self, lo: T, hi: T, o: T, id: T) -> bool {
         let widen = T::ONE + T::TWO * T::err_gamma(3);
-        let mut tn = (lo - o) * id;
-        let mut tf = (hi - o) * id;
+        // Beyond the range (a ray nearly parallel to the slab) is an infinity, as intended.
+        let mut tn = (lo - o).mul_beyond(id);
+        let mut tf = (hi - o).mul_beyond(id);
         if tn > tf {
             core::mem::swap(&mut tn, &mut tf);
         }
@@ -356,8 +361,8 @@ impl<T: Real> SlabSpan<T> {
     #[inline(always)]
     pub fn clip_entering(&mut self, near: T, far: T, o: T, id: T) -> bool {
         let widen = T::ONE + T::TWO * T::err_gamma(3);
-        let tn = (near - o) * id;
-        let tf = (far - o) * id * widen;
+        let tn = (near - o).mul_beyond(id);
+        let tf = (far - o).mul_beyond(id) * widen;
         if tn > self.t0 {
             self.t0 = tn;
         }

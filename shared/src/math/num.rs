@@ -165,6 +165,21 @@ pub trait Real:
             ],
         )
     }
+    /// `self * o` where a result beyond the format's range is meant to become an infinity:
+    /// a slab test's distance `(bound - origin) / d` for a direction `d` nearly parallel to
+    /// the slab (no scene is that far). Floats: the product. Fixed point computes the same
+    /// saturating product, and its checked build (`fx-checked`, [`crate::math::overflow`])
+    /// does not count it as an overflow.
+    #[inline(always)]
+    fn mul_beyond(self, o: Self) -> Self {
+        self * o
+    }
+    /// `1 / self` where an infinity is the intended result for a tiny `self` (a slab test's
+    /// reciprocal direction); see [`Self::mul_beyond`].
+    #[inline(always)]
+    fn recip_beyond(self) -> Self {
+        self.recip()
+    }
     /// `self * 2^k` (saturating in fixed point).
     #[inline]
     fn mul_pow2(self, k: i32) -> Self {

@@ -42,9 +42,11 @@ impl<T: Real> BoxShape<T> {
                     return None;
                 }
             } else {
-                let inv = di.recip();
-                let mut tn = (-T::ONE - oi) * inv;
-                let mut tf = (T::ONE - oi) * inv;
+                // The slab test in the unit frame: beyond the range is an infinity, as
+                // intended (`Real::mul_beyond`).
+                let inv = di.recip_beyond();
+                let mut tn = (-T::ONE - oi).mul_beyond(inv);
+                let mut tf = (T::ONE - oi).mul_beyond(inv);
                 if T::ABSOLUTE_ROUNDING {
                     tn = tc + tn;
                     tf = tc + tf;
