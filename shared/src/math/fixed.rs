@@ -122,18 +122,6 @@ impl Fx {
         }
     }
 
-    /// The reciprocal, an infinity for zero or beyond the range (not counted: see
-    /// [`Real::recip_beyond`]).
-    #[inline(always)]
-    fn recip_saturating(self) -> Fx {
-        if self.special() || self.0 == 0 {
-            Fx::ONE.div_special(self)
-        } else {
-            let q = wide::recip_q16(self.0.unsigned_abs()) as i32;
-            Fx(if self.0 < 0 { -q } else { q })
-        }
-    }
-
     /// The dot product of finite raw values, rounded once. Three exact products below
     /// 2^62 each; their sum fits an i64 unless it is far beyond the format (then an
     /// infinity).
@@ -531,7 +519,8 @@ impl Real for Fx {
         {
             return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         }
-        let (ra, rb) = (a.map(Fx::raw), b.map(Fx::raw));
+        // Element by element, not `map`: LLVM kept array maps out of line (`try_map`).
+        let (ra, rb) = ([a[0].0, a[1].0, a[2].0], [b[0].0, b[1].0, b[2].0]);
         let r = if wide::HALVES {
             Fx::dot3_finite_halves(ra, rb)
         } else {
@@ -559,7 +548,7 @@ impl Real for Fx {
         // Top bit of m at 22: shift left by up to 22, or right by up to 9 (rounded; the
         // direction changes by at most 2^-23 relative).
         let top = 31 - m.leading_zeros() as i32;
-        let w = v.map(|c| {
+        let shift = |c: Fx| {
             let r = c.0 as i64;
             if top <= 22 {
                 r << (22 - top)
@@ -567,7 +556,9 @@ impl Real for Fx {
                 let sh = top - 22;
                 (r + (1 << (sh - 1))) >> sh
             }
-        });
+        };
+        // Element by element, not `map` (see `dot3`).
+        let w = [shift(v[0]), shift(v[1]), shift(v[2])];
         // |w| < 2^23: 32-bit factors (no 64-bit multiply call on ARMv6-M).
         let sum: u64 = w
             .iter()
@@ -575,11 +566,12 @@ impl Real for Fx {
             .sum();
         let l = wide::isqrt_rounded(sum) as u64; // in [2^22, 2^24)
         let r = ((1u64 << 53) / l.max(1)) as u32; // at most 2^31
-        Some(w.map(|x| {
+        let unit = |x: i64| {
             let mag = (wide::mul_u32(x.unsigned_abs() as u32, r) + (1 << 36)) >> 37; // <= 2^16 + 1
             let mag = mag.min(ONE_RAW as u64) as i32;
             Fx(if x < 0 { -mag } else { mag })
-        }))
+        };
+        Some([unit(w[0]), unit(w[1]), unit(w[2])])
     }
 
     /// The three 2x2 determinants exactly (each product of two raw values is below 2^62,
@@ -602,7 +594,7 @@ impl Real for Fx {
         }
         // e (Q32) = e' (Q16 raw) * 2^sh, so e in real units is e' * 2^(sh - 16).
         let sh = (63 - m.leading_zeros() as i32) - 21;
-        let scaled = e.map(|v| {
+        let scale = |v: i64| {
             let r = if sh > 0 {
                 (v + (1 << (sh - 1))) >> sh
             } else {
@@ -610,8 +602,12 @@ impl Real for Fx {
             };
             let r = if r == 0 { v.signum() } else { r };
             Fx(r as i32)
-        });
-        (scaled, sh - FRAC_BITS as i32)
+        };
+        // Element by element, not `map` (see `dot3`).
+        (
+            [scale(e[0]), scale(e[1]), scale(e[2])],
+            sh - FRAC_BITS as i32,
+        )
     }
 
     /// Exact products, their difference exact in 64 bits, one rounding from Q32 to Q23
@@ -647,8 +643,10 @@ impl Real for Fx {
             );
         }
         // Below 2^39 + 2^54: fits an i64.
-        let p = [0, 1, 2]
-            .map(|i| ((rel[i].0 as i64) << 8) + ((wide::mul_i32(dir[i].0, tc.0) + (1 << 7)) >> 8));
+        let point =
+            |i: usize| ((rel[i].0 as i64) << 8) + ((wide::mul_i32(dir[i].0, tc.0) + (1 << 7)) >> 8);
+        // Element by element, not `map` (see `dot3`).
+        let p = [point(0), point(1), point(2)];
         let small = m.iter().all(|v| v.0.unsigned_abs() < 1 << 28)
             && p.iter().all(|v| v.unsigned_abs() < 1 << 31);
         let s: i128 = if small {
@@ -862,15 +860,20 @@ impl Real for Fx {
     #[inline]
     #[cfg_attr(feature = "fx-checked", track_caller)]
     fn recip(self) -> Fx {
-        Fx::checked(Kind::Quotient, [self], self.recip_saturating())
+        Fx::checked(Kind::Quotient, [self], self.recip_beyond())
     }
     #[inline(always)]
     fn mul_beyond(self, o: Fx) -> Fx {
         self.mul_saturating(o)
     }
-    #[inline(always)]
+    /// The reciprocal, an infinity for zero or beyond the range (not counted).
+    #[inline]
     fn recip_beyond(self) -> Fx {
-        self.recip_saturating()
+        if self.special() || self.0 == 0 {
+            return Fx::ONE.div_special(self);
+        }
+        let q = wide::recip_q16(self.0.unsigned_abs()) as i32;
+        Fx(if self.0 < 0 { -q } else { q })
     }
     /// One step relative to 1.0. Fixed-point rounding is absolute (half a step per
     /// operation), so relative error bounds built from this hold near magnitude 1 and above.
