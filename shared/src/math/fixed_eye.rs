@@ -5,28 +5,31 @@
 //! of two coordinates leave the format's range, so they are formed here from the raw
 //! integers instead: `n = a x (b - a)` (which equals `a x b` exactly in integers) in 64
 //! bits, the lower vertex index first and negated for the other direction, exactly as the
-//! floats orient them, then shifted by one power of two for every plane
-//! ([`EYE_PLANE_SHIFT`]) and rounded symmetrically (`round(-v) = -round(v)`), so the planes
-//! of a shared edge stay exact negations of each other.
+//! floats orient them, then shifted by a power of two into [`EYE_PLANE_BITS`] bits and
+//! rounded symmetrically (`round(-v) = -round(v)`). The power is the plane's own, chosen
+//! from the exact plane, so the two triangles of a shared edge choose the same one and their
+//! planes stay exact negations of each other.
 //!
 //! The range proof: the DM scales a fixed-point scene so its largest view-space coordinate
 //! is at most [`crate::fixed_image::TARGET_EXTENT`] = 32 units = 2^21 raw
 //! ([`EYE_VERTEX_LIMIT`]); a component `a_j b_k - a_k b_j` of two such vertices is below
-//! 2^43, and the shift by 13 leaves it below 2^30. A triangle with a vertex beyond the limit
-//! (a hand-made image, or a non-finite value) gets planes that decide nothing: every ray
-//! goes to the sheared test.
+//! 2^43 (shifted by at most 13), the face normal's below 2^45 and the triple product's
+//! parts fit 64 bits (checked). A triangle with a vertex beyond the limit (a hand-made
+//! image, or a non-finite value) gets planes that decide nothing: every ray goes to the
+//! sheared test.
 //!
 //! The test takes the ray's unit direction `u` (the Q16.16 direction every later step of the
-//! ray uses, so the edge planes and the sheared fallback classify the same ray).
-//! `e_k = n_k . u` is three exact i32 x i32 products summed in an i64 (SMLAL on the M3).
-//! Every plane has the same scale, so the rounding of the planes moves each `e_k` by at most
-//! `(|u_x| + |u_y| + |u_z|) / 2` raw units: one bound per ray, not per plane. A sign within
-//! it is uncertain and the triangle goes to the exact sheared test
+//! ray uses, so the edge planes and the sheared fallback classify the same ray, and
+//! distances need no length). `e_k = n_k . u` is three exact i32 x i32 products summed in an
+//! i64 (SMULL/SMLAL on the M3; two 32-bit MULS per product on ARMv6-M, [`dot_unit`]). Each
+//! plane's rounding moves its `e_k` by at most `(|u_x| + |u_y| + |u_z|) / 2` raw units of its
+//! own scale, whatever the scale: one bound per ray, not per plane. A sign within it is
+//! uncertain and the triangle goes to the exact sheared test
 //! ([`crate::shape::triangle::EyeTest::Uncertain`]); a shared edge's `e` is exactly negated
 //! between its two triangles, so both are decided by the same test (watertight). A hit
-//! costs one reciprocal (a 128-entry table and two Newton steps, multiplies only: no
-//! division at all), from which come the distance (compared against `t_max` as a
-//! product) and the barycentrics.
+//! costs two reciprocals (a 128-entry table and two Newton steps, multiplies only: no
+//! division at all): the distance `det / f.u` (compared against `t_max` as an integer)
+//! and the barycentrics `e_k / sum e`.
 
 use super::{wide, Fx, MAX_RAW};
 use crate::geom::Vec3;
@@ -40,16 +43,24 @@ pub const EYE_VERTEX_LIMIT: u32 = 1 << 21;
 /// `[2^29, 2^30]` (or kept exact when below).
 pub const EYE_PLANE_BITS: u32 = 30;
 
-/// A triangle's three edge planes through the eye in integers: `n_k` (raw units of Q32)
-/// divided by `2^s_k`, its own power of two (`n[k]`; `down[k] = max s - s_k` brings plane
-/// k's `e` to the largest scale of the three), and the face normal `f = (p_1 - p_0) x (p_2 -
-/// p_0)` and the triple product `det = p_0 . f` (Q48), both divided by one power of two.
+/// Bits the face normal keeps (`f`'s largest component in `[2^25, 2^26]`).
+const FACE_BITS: u32 = 26;
+/// The triple product is kept divided by 2^19 (below 2^30: `|f| <= 2^26`, `|p_0| <= 2^21`).
+const DET_SHIFT: u32 = 19;
+
+/// A triangle's three edge planes through the eye in integers (52 bytes, as the f32
+/// planes: a node's tracer state holds 256 of either): `n_k` (raw units of Q32) divided by
+/// `2^s_k`, its own power of two; the face normal `f = (p_1 - p_0) x (p_2 - p_0)` scaled
+/// by a power of two to [`FACE_BITS`] bits, each component shifted left by 4 with
+/// `down[k] = max s - s_k` (which brings plane k's `e` to the largest scale of the three)
+/// in its low 4 bits; and `det = f . p_0` (exact with the scaled f) divided by
+/// 2^[`DET_SHIFT`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct FxEyePlanes {
-    pub n: [[i32; 3]; 3],
-    pub f: [i32; 3],
-    pub det: i64,
-    pub down: [u8; 3],
+    // Private: `new` keeps every component of n within 2^30 ([`dot_unit`] needs it).
+    n: [[i32; 3]; 3],
+    f: [i32; 3],
+    det: i32,
 }
 
 /// `v / 2^s` rounded to nearest, ties away from zero: symmetric, so the negated plane of a
@@ -73,7 +84,25 @@ fn round_shift(v: i64, s: u32) -> i32 {
 /// `n . u` exactly: three products below 2^61 each (|n| <= 2^30), their sum below 2^63.
 #[inline(always)]
 fn dot(n: &[i32; 3], u: [i32; 3]) -> i64 {
-    wide::mul_i32(n[0], u[0]) + wide::mul_i32(n[1], u[1]) + wide::mul_i32(n[2], u[2])
+    if wide::HALVES && u.iter().all(|c| c.unsigned_abs() < 1 << 16) {
+        dot_unit(n, u)
+    } else {
+        wide::mul_i32(n[0], u[0]) + wide::mul_i32(n[1], u[1]) + wide::mul_i32(n[2], u[2])
+    }
+}
+
+/// [`dot`] for `|n_i| <= 2^30` and `|u_i| < 2^16` (a unit direction's components) with
+/// two 32-bit multiplies per term, for ARMv6-M (no 32x32->64 multiply: the general
+/// product takes four and the 64-bit sums of their halves): `n = h 2^15 + l` with
+/// `|h| <= 2^15`, `l` in `[0, 2^15)`, so `h u` and `l u` are below 2^31 each.
+#[inline(always)]
+fn dot_unit(n: &[i32; 3], u: [i32; 3]) -> i64 {
+    let (mut hi, mut lo) = (0i64, 0i64);
+    for i in 0..3 {
+        hi += ((n[i] >> 15) * u[i]) as i64;
+        lo += ((n[i] & 0x7fff) * u[i]) as i64;
+    }
+    (hi << 15) + lo
 }
 
 impl FxEyePlanes {
@@ -83,7 +112,6 @@ impl FxEyePlanes {
         n: [[0; 3]; 3],
         f: [0; 3],
         det: 0,
-        down: [0; 3],
     };
 
     /// The planes of `tri`, whose vertices have indices `index` (shared vertices share an
@@ -119,34 +147,37 @@ impl FxEyePlanes {
         let (n0, s0) = edge(1, 2);
         let (n1, s1) = edge(2, 0);
         let (n2, s2) = edge(0, 1);
-        let top = s0.max(s1).max(s2);
-        // det = p_0 . ((p_1 - p_0) x (p_2 - p_0)) exactly: the face normal f below 2^45,
-        // split as f = h 2^16 + l so both dot products fit 64 bits, det = H 2^16 + L, and
-        // floor(det / 2^sf) = H 2^(16 - sf) + floor(L / 2^sf) (checked: a huge, thin
-        // triangle could leave 64 bits; it decides nothing then). The distance is det / f.u:
-        // f.u (the sum of the e, without their cancellation near an edge: the planes' 30
-        // bits gave distances off by 5 steps on small far triangles, f's 30 bits by 1).
+        let top = s0.max(s1).max(s2); // at most 13
+                                      // The face normal exactly (edges below 2^22, components below 2^45), then scaled
+                                      // to FACE_BITS bits (up exactly, or down rounded): the distance is det / f.u with
+                                      // det = f . p_0 for this f, the plane through p_0 with a normal turned by at most
+                                      // 2^-25. (Not the sum of the e: near an edge their cancellation left the
+                                      // distances of small far triangles 5 steps off; f's bits keep them within 0.5.)
         let sub = |a: [i32; 3], b: [i32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
         let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
         let c = |j: usize, k: usize| wide::mul_i32(e1[j], e2[k]) - wide::mul_i32(e1[k], e2[j]);
         let f = [c(1, 2), c(2, 0), c(0, 1)];
-        let hi = dot(&f.map(|v| (v >> 16) as i32), p[0]);
-        let lo = dot(&f.map(|v| (v & 0xffff) as i32), p[0]);
         let fm = f.iter().map(|v| v.unsigned_abs()).max().unwrap_or(0);
-        let sf = (64 - fm.leading_zeros()).saturating_sub(EYE_PLANE_BITS); // at most 15
-        let det = hi
-            .checked_mul(1 << (16 - sf))
-            .and_then(|h| h.checked_add(lo >> sf));
-        match det {
-            // det = 0: the plane passes through the eye (sign(det) is exact otherwise:
-            // floor keeps a negative value negative, and a positive one is at least 2^sf).
-            Some(det) if det != 0 => FxEyePlanes {
-                n: [n0, n1, n2],
-                f: f.map(|v| round_shift(v, sf)),
-                det,
-                down: [top - s0, top - s1, top - s2].map(|d| d as u8),
-            },
-            _ => Self::UNDECIDED,
+        let bits = 64 - fm.leading_zeros();
+        let f = if bits > FACE_BITS {
+            f.map(|v| round_shift(v, bits - FACE_BITS))
+        } else {
+            f.map(|v| (v << (FACE_BITS - bits)) as i32)
+        };
+        // Below 2^49; off from the exact triple product (times f's scale) by at most
+        // sum|p_0| / 2 (f's rounding): within that, or below det's own step, the plane
+        // passes (nearly) through the eye and which side the eye is on is uncertain; the
+        // sheared test decides those triangles. Otherwise its sign is exact.
+        let det = dot(&f, p[0]);
+        let bound = (p[0].iter().map(|c| c.unsigned_abs() as i64).sum::<i64>() + 1) >> 1;
+        if fm == 0 || det.abs() <= bound.max(1 << DET_SHIFT) {
+            return Self::UNDECIDED;
+        }
+        let down = [top - s0, top - s1, top - s2];
+        FxEyePlanes {
+            n: [n0, n1, n2],
+            f: [0, 1, 2].map(|k| (f[k] << 4) | down[k] as i32),
+            det: round_shift(det, DET_SHIFT),
         }
     }
 
@@ -180,14 +211,14 @@ impl FxEyePlanes {
             return EyeTest::Miss;
         }
         // f.u is the exact sum of the e (f to 30 bits): same sign, unless grazing.
-        let fu = dot(&self.f, u);
+        let fu = dot(&self.f.map(|v| v >> 4), u);
         if fu == 0 || (fu > 0) != (e0 > 0) {
             return EyeTest::Uncertain;
         }
         self.hit(
             [e0, e1, e2].map(i64::unsigned_abs),
             fu.unsigned_abs(),
-            self.det.unsigned_abs(),
+            (self.det.unsigned_abs() as u64) << DET_SHIFT,
             len,
             t_max,
         )
@@ -230,9 +261,9 @@ impl FxEyePlanes {
         // e_k = ek 2^(32 - z) (e_k <= sum, so the shift keeps it), rounded once; the third
         // from the sum of one.
         let e = [
-            e[0] >> self.down[0],
-            e[1] >> self.down[1],
-            e[2] >> self.down[2],
+            e[0] >> (self.f[0] & 15),
+            e[1] >> (self.f[1] & 15),
+            e[2] >> (self.f[2] & 15),
         ];
         let sum = e[0] + e[1] + e[2];
         if sum == 0 {
@@ -284,6 +315,35 @@ mod tests {
         planes
             .test(u, Fx::ONE, t_max)
             .or_sheared(|| *tri, &shear, t_max)
+    }
+
+    /// A node's tracer state holds either kernel's plane cache (an enum of both): the
+    /// integer planes take no more room than the f32 ones.
+    #[test]
+    fn the_planes_are_as_small_as_the_f32_ones() {
+        let f32_planes = core::mem::size_of::<crate::shape::triangle::EdgePlanes<f32>>();
+        assert_eq!(core::mem::size_of::<FxEyePlanes>(), f32_planes);
+    }
+
+    #[test]
+    fn the_two_multiply_dot_product_is_exact() {
+        let mut st = 77u64;
+        let mut raw = |bits: u32| {
+            let v = (lcg(&mut st) * 2.0 - 1.0) * (1u64 << bits) as f64;
+            v as i64 as i32
+        };
+        let ends = [-(1 << 30), (1 << 30), 0, -1, 1, (1 << 15) - 1, -(1 << 15)];
+        for k in 0..100_000 {
+            let mut n = [raw(30), raw(30), raw(30)];
+            let mut u = [raw(16), raw(16), raw(16)].map(|c| c.clamp(-65535, 65535));
+            if k < 49 {
+                n = [ends[k % 7], ends[k / 7], ends[(k + 3) % 7]];
+                u = [65535, -65535, [65535, -65535, 0, 1, -1, 7, 3][k % 7]];
+            }
+            let want: i64 = (0..3).map(|i| n[i] as i64 * u[i] as i64).sum();
+            assert_eq!(dot_unit(&n, u), want, "{n:?} . {u:?}");
+            assert_eq!(dot(&n, u), want);
+        }
     }
 
     #[test]
