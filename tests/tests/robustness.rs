@@ -5,7 +5,7 @@ use links_core::geom::{Ray, Vec3};
 use links_core::image::{SceneView, Section};
 use links_core::num::Real;
 use links_core::render::Tracer;
-use links_core::shape::triangle::{EdgePlanes, Shear};
+use links_core::shape::triangle::Shear;
 use links_tests::*;
 
 fn closed_mesh_image() -> Vec<u8> {
@@ -106,18 +106,23 @@ fn rays_through_shared_edges_and_vertices_cross_a_closed_mesh_exactly_twice_q16_
 /// through the eye, falling back to the sheared test where a sign is uncertain (what the
 /// tracer does for primary rays): every ray crosses an even number of triangles, and one
 /// facing the eye exactly two.
+///
+/// Fixed point tests its integer planes ([`Real::eye_planes`]) with the ray's unit direction,
+/// as the tracer does.
 fn eye_rays_through_edges_and_vertices<T: Real>(n: usize, seed: u64) -> usize {
-    let img = closed_mesh_image();
+    let img = for_backend::<T>(closed_mesh_image());
     let view = SceneView::new(&img).unwrap();
     let ntri = view.count(Section::Triangles);
+    let ls = length_scale(&img);
     let planes: Vec<_> = (0..ntri)
         .map(|i| {
             let (index, tri) = view.triangle_corners::<T>(i);
             // Every ray below aims at a point of the sphere: |d|_1 < 20.
-            (EdgePlanes::new(&tri, index, T::from_i32(20)), tri)
+            (T::eye_planes(&tri, index, T::from_f64(20.0 * ls)), tri)
         })
         .collect();
-    let center = [0.3, -0.2, 12.0]; // view coordinates of the sphere centre
+    // View coordinates of the sphere centre.
+    let center = [0.3 * ls, -0.2 * ls, 12.0 * ls];
     let mut rng = Rng(seed);
     let mut facing_rays = 0;
     for k in 0..n {
@@ -132,12 +137,17 @@ fn eye_rays_through_edges_and_vertices<T: Real>(n: usize, seed: u64) -> usize {
             let s = T::from_f64(rng.f64());
             p[a] * (T::ONE - s) + p[(a + 1) % 3] * s
         };
-        let len = d.length();
-        let shear = Shear::new(&Ray::new(Vec3::zero(), d * len.recip()));
+        let (unit, along, len) = if T::ABSOLUTE_ROUNDING {
+            (d.normalize(), d.normalize(), T::ONE)
+        } else {
+            let len = d.length();
+            (d * len.recip(), d, len)
+        };
+        let shear = Shear::new(&Ray::new(Vec3::zero(), unit));
         let c = planes
             .iter()
             .filter(|(pl, tri)| {
-                pl.intersect_from_eye(d, len, T::MAX)
+                T::eye_test(pl, along, len, T::MAX)
                     .or_sheared(|| *tri, &shear, T::MAX)
                     .is_some()
             })
@@ -166,6 +176,13 @@ fn eye_rays_through_shared_edges_and_vertices_cross_a_closed_mesh_in_and_out() {
     // About 28% of the rays (1,127 in f32) meet a point facing the eye by cos > 0.2.
     assert!(eye_rays_through_edges_and_vertices::<f32>(4000, 0x243f6a8885a308d3) > 1000);
     assert!(eye_rays_through_edges_and_vertices::<f64>(4000, 0x13198a2e03707344) > 1000);
+}
+
+#[test]
+fn eye_rays_through_shared_edges_and_vertices_cross_a_closed_mesh_in_and_out_q16_16() {
+    assert!(
+        eye_rays_through_edges_and_vertices::<links_core::num::Fx>(8000, 0xa4093822299f31d0) > 2000
+    );
 }
 
 /// Convex test objects, each alone in a scene, with a size for distance checks.

@@ -22,6 +22,10 @@ use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 #[path = "fixed_reference.rs"]
 mod reference;
 
+#[path = "fixed_eye.rs"]
+mod eye;
+pub use eye::{FxEyePlanes, EYE_PLANE_BITS, EYE_VERTEX_LIMIT};
+
 /// Fraction bits.
 pub const FRAC_BITS: u32 = 16;
 const ONE_RAW: i32 = 1 << FRAC_BITS;
@@ -501,6 +505,25 @@ impl Real for Fx {
     const PI: Fx = Fx(205_887);
     const STORAGE: crate::num::Storage = crate::num::Storage::Q16_16;
     const ABSOLUTE_ROUNDING: bool = true;
+    /// Integer planes ([`FxEyePlanes`]): exact products of the raw vertices, one scale for
+    /// every plane, one rounding bound per ray.
+    type EyePlanes = FxEyePlanes;
+    const EYE_PLANES_EMPTY: FxEyePlanes = FxEyePlanes::UNDECIDED;
+
+    #[inline]
+    fn eye_planes(tri: &crate::math::solid::Triangle<Fx>, index: [u32; 3], _l1: Fx) -> FxEyePlanes {
+        FxEyePlanes::new(tri, index)
+    }
+
+    #[inline(always)]
+    fn eye_test(
+        planes: &FxEyePlanes,
+        d: crate::geom::Vec3<Fx>,
+        len: Fx,
+        t_max: Fx,
+    ) -> crate::shape::triangle::EyeTest<Fx> {
+        planes.test(d, len, t_max)
+    }
 
     // Always inlined as `Vec3::sub` is (see there): 2% of the M3's photo1 frame.
     #[cfg_attr(all(target_arch = "arm", not(target_has_atomic = "32")), inline)]
@@ -1123,6 +1146,36 @@ mod wide {
         let r = u32::MAX - q * d.get();
         let bump = u64::from(r + 1 + (d.get() >> 1) >= d.get());
         (q as u64 + bump).min(i32::MAX as u64) as u32
+    }
+
+    /// Initial `1/σ` for `σ = s / 2^32` in `[0.5 + i/256, 0.5 + (i + 1)/256)`, `i` in
+    /// `0..128`, at the interval's middle, in Q15: `round(2^24 / (257 + 2i))`.
+    const RECIP_SEED: [u16; 128] = {
+        let mut t = [0u16; 128];
+        let mut i = 0;
+        while i < 128 {
+            let d = 257 + 2 * i as u32;
+            t[i] = (((1u32 << 24) + d / 2) / d) as u16;
+            i += 1;
+        }
+        t
+    };
+
+    /// `r ~ 2^62 / s` for `s` in `[2^31, 2^32)` (so `r` in `(2^30, 2^31)`), within a few
+    /// units, without a division: a 128-entry seed (`1/σ` to 2^-8) and two Newton steps
+    /// `r += r (1 - σ r)`, each squaring the relative error (2^-16, then the format's
+    /// 2^-30). Multiplies only (two 32x32->64 products per step).
+    #[inline]
+    pub(super) fn recip_q62(s: u32) -> u32 {
+        let mut r = (RECIP_SEED[((s >> 24) & 127) as usize] as u32) << 15;
+        for _ in 0..2 {
+            // s r ~ 2^62 (1 - δ), below 2^63; δ 2^32 is below 2^25 in magnitude.
+            let p = mul_u32(s, r) as i64;
+            let d = ((1i64 << 62) - p) >> 30;
+            let step = mul_i32(r as i32, d as i32) >> 32;
+            r = (r as i64 + step).clamp(1 << 30, i32::MAX as i64) as u32;
+        }
+        r
     }
 
     /// Initial `1/sqrt(x)` for `x = (i + 0.5) / 64`, `i` in `16..64` (x in [1/4, 1)), in

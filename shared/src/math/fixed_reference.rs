@@ -360,6 +360,24 @@ impl Real for RefFx {
     const PI: RefFx = RefFx(205_887);
     const STORAGE: crate::num::Storage = crate::num::Storage::Q16_16;
     const ABSOLUTE_ROUNDING: bool = true;
+    // Never renders (operations only): the generic planes.
+    type EyePlanes = crate::shape::triangle::EdgePlanes<RefFx>;
+    const EYE_PLANES_EMPTY: Self::EyePlanes = crate::shape::triangle::EdgePlanes::ZERO;
+    fn eye_planes(
+        tri: &crate::math::solid::Triangle<RefFx>,
+        index: [u32; 3],
+        l1: RefFx,
+    ) -> Self::EyePlanes {
+        crate::shape::triangle::EdgePlanes::new(tri, index, l1)
+    }
+    fn eye_test(
+        p: &Self::EyePlanes,
+        d: crate::geom::Vec3<RefFx>,
+        len: RefFx,
+        t_max: RefFx,
+    ) -> crate::shape::triangle::EyeTest<RefFx> {
+        p.intersect_from_eye(d, len, t_max)
+    }
 
     #[inline]
     fn dot3(a: [RefFx; 3], b: [RefFx; 3]) -> RefFx {

@@ -9,6 +9,9 @@
 //! Transcendental functions go through `libm`, a pure-Rust implementation, so a render is
 //! bit-identical on the host and on a node for the same number type.
 
+use crate::geom::Vec3;
+use crate::math::solid::Triangle;
+use crate::shape::triangle::{EdgePlanes, EyeTest};
 use core::fmt::Debug;
 use core::ops::{Add, AddAssign, Div, Mul, MulAssign, Neg, Sub, SubAssign};
 
@@ -78,6 +81,19 @@ pub trait Real:
     /// relative (floating point). Short vectors then keep few significant bits, so
     /// normalisation and cross products scale them up by [`Real::unit_scale`] first.
     const ABSOLUTE_ROUNDING: bool = false;
+    /// What the primary-ray test keeps of a triangle ([`crate::trace::primary::PlaneCache`]):
+    /// its planes through the eye. Floats: [`EdgePlanes`] with a rounding bound per plane;
+    /// fixed point: integer planes ([`crate::fixed::FxEyePlanes`]).
+    type EyePlanes: Copy + Debug + PartialEq + Send + Sync + 'static;
+    /// The planes of an empty cache slot.
+    const EYE_PLANES_EMPTY: Self::EyePlanes;
+    /// The planes of `tri`, whose vertices have indices `index` (shared vertices share an
+    /// index, which fixes each edge's orientation), for primary rays whose `|d|_1` is at
+    /// most `l1`.
+    fn eye_planes(tri: &Triangle<Self>, index: [u32; 3], l1: Self) -> Self::EyePlanes;
+    /// The ray from the eye along `d` (`len` = |d|) against `planes` for distances (along
+    /// the unit direction) in (0, t_max); [`EyeTest::Uncertain`] asks the sheared test.
+    fn eye_test(planes: &Self::EyePlanes, d: Vec3<Self>, len: Self, t_max: Self) -> EyeTest<Self>;
 
     fn from_f32(v: f32) -> Self;
     fn from_f64(v: f64) -> Self;
@@ -286,6 +302,16 @@ macro_rules! impl_float_real {
             const TWO: Self = 2.0;
             const MAX: Self = <$t>::MAX;
             const PI: Self = core::f64::consts::PI as $t;
+            type EyePlanes = EdgePlanes<$t>;
+            const EYE_PLANES_EMPTY: EdgePlanes<$t> = EdgePlanes::ZERO;
+            #[inline]
+            fn eye_planes(tri: &Triangle<$t>, index: [u32; 3], l1: $t) -> EdgePlanes<$t> {
+                EdgePlanes::new(tri, index, l1)
+            }
+            #[inline(always)]
+            fn eye_test(p: &EdgePlanes<$t>, d: Vec3<$t>, len: $t, t_max: $t) -> EyeTest<$t> {
+                p.intersect_from_eye(d, len, t_max)
+            }
 
             #[inline]
             fn from_f32(v: f32) -> Self {
@@ -539,6 +565,21 @@ impl Real for FastF32 {
     const TWO: Self = FastF32(2.0);
     const MAX: Self = FastF32(f32::MAX);
     const PI: Self = FastF32(core::f32::consts::PI);
+    type EyePlanes = EdgePlanes<FastF32>;
+    const EYE_PLANES_EMPTY: EdgePlanes<FastF32> = EdgePlanes::ZERO;
+    #[inline]
+    fn eye_planes(tri: &Triangle<FastF32>, index: [u32; 3], l1: FastF32) -> EdgePlanes<FastF32> {
+        EdgePlanes::new(tri, index, l1)
+    }
+    #[inline(always)]
+    fn eye_test(
+        p: &EdgePlanes<FastF32>,
+        d: Vec3<FastF32>,
+        len: FastF32,
+        t_max: FastF32,
+    ) -> EyeTest<FastF32> {
+        p.intersect_from_eye(d, len, t_max)
+    }
 
     #[inline(always)]
     fn from_f32(v: f32) -> Self {

@@ -11,7 +11,6 @@
 use crate::geom::Vec3;
 use crate::image::SceneView;
 use crate::num::Real;
-use crate::shape::triangle::EdgePlanes;
 
 /// Triangles whose planes the cache holds at once (a power of two: the slot is the low bits
 /// of the triangle index).
@@ -25,10 +24,10 @@ pub(super) struct EyeRay<T> {
 }
 
 /// The edge planes of recently tested triangles, by triangle index.
-pub struct PlaneCache<T> {
+pub struct PlaneCache<T: Real> {
     /// Triangle index + 1 of each slot's planes (0: empty).
     tags: [u32; PLANE_SLOTS],
-    planes: [EdgePlanes<T>; PLANE_SLOTS],
+    planes: [T::EyePlanes; PLANE_SLOTS],
     /// The largest `|d|_1` of the frame's primary rays, which the planes' error bounds
     /// scale with.
     l1: T,
@@ -41,7 +40,7 @@ impl<T: Real> PlaneCache<T> {
     pub fn new(l1: T) -> Self {
         Self {
             tags: [0; PLANE_SLOTS],
-            planes: [EdgePlanes::ZERO; PLANE_SLOTS],
+            planes: [T::EYE_PLANES_EMPTY; PLANE_SLOTS],
             l1,
             made: 0,
         }
@@ -65,7 +64,7 @@ impl<T: Real> PlaneCache<T> {
 
     /// The planes of triangle `i` of `scene`, made now unless the cache holds them.
     #[inline(always)]
-    pub(super) fn get(&mut self, scene: &SceneView<'_>, i: u32) -> &EdgePlanes<T> {
+    pub(super) fn get(&mut self, scene: &SceneView<'_>, i: u32) -> &T::EyePlanes {
         let slot = i as usize % PLANE_SLOTS;
         if self.tags[slot] != i.wrapping_add(1) {
             self.make(scene, i, slot);
@@ -77,7 +76,7 @@ impl<T: Real> PlaneCache<T> {
     #[inline(never)]
     fn make(&mut self, scene: &SceneView<'_>, i: u32, slot: usize) {
         let (index, tri) = scene.triangle_corners::<T>(i);
-        self.planes[slot] = EdgePlanes::new(&tri, index, self.l1);
+        self.planes[slot] = T::eye_planes(&tri, index, self.l1);
         self.tags[slot] = i.wrapping_add(1);
         self.made += 1;
     }
@@ -87,6 +86,7 @@ impl<T: Real> PlaneCache<T> {
 mod tests {
     use super::*;
     use crate::math::solid::Triangle;
+    use crate::shape::triangle::EdgePlanes;
 
     /// More triangles than slots, asked for in an order that makes them evict each other:
     /// every answer is the triangle's own planes.

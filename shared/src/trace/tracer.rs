@@ -269,10 +269,18 @@ impl<'a, T: Real, S: BorrowMut<TracerState<T>>> Tracer<'a, T, S> {
         self.stats.primary_rays += 1;
         self.secondary_left = SECONDARY_RAYS_PER_PIXEL;
         let d = self.eye_direction(x, y, ox, oy);
-        // Fixed point keeps the sheared test (its products of two coordinates would leave
-        // the format's range in the edge planes).
         let (ray, eye) = if T::ABSOLUTE_ROUNDING {
-            (Ray::new(Vec3::zero(), d.normalize()), None)
+            // Fixed point tests its integer edge planes with the unit direction itself (the
+            // ray the sheared fallback and everything after it use): one ray for both tests,
+            // distances with no length to scale by.
+            let unit = d.normalize();
+            (
+                Ray::new(Vec3::zero(), unit),
+                Some(EyeRay {
+                    d: unit,
+                    len: T::ONE,
+                }),
+            )
         } else {
             // What `normalize` computes, with the length kept for the edge-plane test.
             let len = d.length();

@@ -387,12 +387,8 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         for k in 0..leaf.count {
             let index = leaf.first + k;
             let scene = &self.scene;
-            let test = self
-                .state
-                .borrow_mut()
-                .planes
-                .get(scene, index)
-                .intersect_from_eye(eye.d, eye.len, limit);
+            let planes = self.state.borrow_mut().planes.get(scene, index);
+            let test = T::eye_test(planes, eye.d, eye.len, limit);
             let tri = || scene.triangle::<T>(index).tri;
             if let Some(h) = test.or_sheared(tri, &probe.shear, limit) {
                 let hit = Hit {
@@ -586,13 +582,14 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 self.stats.triangle_tests += 1;
                 let tri = || s.triangle::<T>(shape.index).tri;
                 let h = match &probe.eye {
-                    Some(eye) => self
-                        .state
-                        .borrow_mut()
-                        .planes
-                        .get(s, shape.index)
-                        .intersect_from_eye(eye.d, eye.len, t_max)
-                        .or_sheared(tri, &probe.shear, t_max),
+                    Some(eye) => {
+                        let planes = self.state.borrow_mut().planes.get(s, shape.index);
+                        T::eye_test(planes, eye.d, eye.len, t_max).or_sheared(
+                            tri,
+                            &probe.shear,
+                            t_max,
+                        )
+                    }
                     None => tri().intersect_sheared(&probe.shear, t_max),
                 };
                 h.map(|h| Hit {
