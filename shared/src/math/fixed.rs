@@ -12,7 +12,9 @@
 //! Range: about +-32767.99998 with a step of 2^-16 (1.5e-5). The DM chooses the scale of a
 //! scene so that it fits this range with the most precision left (`fixed_image`).
 
-use super::overflow::{self, Kind};
+#[cfg(feature = "fx-checked")]
+use super::overflow;
+use super::overflow::Kind;
 use crate::num::Real;
 use core::cmp::Ordering;
 use core::fmt;
@@ -25,6 +27,30 @@ mod reference;
 #[path = "fixed_eye.rs"]
 mod eye;
 pub use eye::{FxEyePlanes, EYE_PLANE_BITS, EYE_VERTEX_LIMIT};
+
+/// `r`, the result of a `kind` operation on `inputs`, as the checked build counts it
+/// ([`Fx::checked`]); just `r` without the `fx-checked` feature, so the default build's
+/// operators are exactly what they were (not even a call for the inliner to weigh).
+macro_rules! checked {
+    ($kind:expr, $inputs:expr, $r:expr $(,)?) => {{
+        #[cfg(feature = "fx-checked")]
+        let r = Fx::checked($kind, $inputs, $r);
+        #[cfg(not(feature = "fx-checked"))]
+        let (_, r): (Kind, Fx) = ($kind, $r);
+        r
+    }};
+}
+
+/// A conversion's result as the checked build counts it ([`Fx::checked_conversion`]).
+macro_rules! checked_conversion {
+    ($finite:expr, $r:expr $(,)?) => {{
+        #[cfg(feature = "fx-checked")]
+        let r = Fx::checked_conversion($finite, $r);
+        #[cfg(not(feature = "fx-checked"))]
+        let r = $r;
+        r
+    }};
+}
 
 /// Fraction bits.
 pub const FRAC_BITS: u32 = 16;
@@ -93,10 +119,11 @@ impl Fx {
     /// `r`, the result of a `kind` operation on `inputs`, as the checked build sees it: a
     /// non-finite result from finite inputs is counted ([`overflow`]). Nothing without the
     /// `fx-checked` feature.
+    #[cfg(feature = "fx-checked")]
     #[inline(always)]
-    #[cfg_attr(feature = "fx-checked", track_caller)]
+    #[track_caller]
     fn checked<const N: usize>(kind: Kind, inputs: [Fx; N], r: Fx) -> Fx {
-        if overflow::ENABLED && r.special() && !inputs.iter().any(|x| x.special()) {
+        if r.special() && !inputs.iter().any(|x| x.special()) {
             overflow::record(if r.is_nan() { Kind::Invalid } else { kind });
         }
         r
@@ -104,10 +131,11 @@ impl Fx {
 
     /// A conversion's result as the checked build sees it: a finite input (`finite`) that
     /// gave a non-finite value is counted.
+    #[cfg(feature = "fx-checked")]
     #[inline(always)]
-    #[cfg_attr(feature = "fx-checked", track_caller)]
+    #[track_caller]
     fn checked_conversion(finite: bool, r: Fx) -> Fx {
-        if overflow::ENABLED && finite && r.special() {
+        if finite && r.special() {
             overflow::record(Kind::Conversion);
         }
         r
@@ -422,7 +450,7 @@ impl Add for Fx {
         } else {
             Fx::add_finite(self.0, o.0)
         };
-        Fx::checked(Kind::Sum, [self, o], r)
+        checked!(Kind::Sum, [self, o], r)
     }
 }
 
@@ -437,7 +465,7 @@ impl Sub for Fx {
         } else {
             Fx::sub_finite(self.0, o.0)
         };
-        Fx::checked(Kind::Sum, [self, o], r)
+        checked!(Kind::Sum, [self, o], r)
     }
 }
 
@@ -459,7 +487,7 @@ impl Mul for Fx {
     #[inline(always)]
     #[cfg_attr(feature = "fx-checked", track_caller)]
     fn mul(self, o: Fx) -> Fx {
-        Fx::checked(Kind::Product, [self, o], self.mul_saturating(o))
+        checked!(Kind::Product, [self, o], self.mul_saturating(o))
     }
 }
 
@@ -476,7 +504,7 @@ impl Div for Fx {
             let q = wide::div_q16(self.0.unsigned_abs(), o.0.unsigned_abs()) as i32;
             Fx(if (self.0 < 0) != (o.0 < 0) { -q } else { q })
         };
-        Fx::checked(Kind::Quotient, [self, o], r)
+        checked!(Kind::Quotient, [self, o], r)
     }
 }
 
@@ -542,14 +570,13 @@ impl Real for Fx {
         {
             return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         }
-        // Element by element, not `map`: LLVM kept array maps out of line (`try_map`).
-        let (ra, rb) = ([a[0].0, a[1].0, a[2].0], [b[0].0, b[1].0, b[2].0]);
+        let (ra, rb) = (a.map(Fx::raw), b.map(Fx::raw));
         let r = if wide::HALVES {
             Fx::dot3_finite_halves(ra, rb)
         } else {
             Fx::dot3_finite(ra, rb)
         };
-        Fx::checked(Kind::Product, [a[0], a[1], a[2], b[0], b[1], b[2]], r)
+        checked!(Kind::Product, [a[0], a[1], a[2], b[0], b[1], b[2]], r)
     }
 
     /// `v / |v|` from the integers: the components shifted (exactly, or by at most one bit
@@ -642,7 +669,7 @@ impl Real for Fx {
             return a * b - c * d;
         }
         let v = wide::mul_i32(a.0, b.0) - wide::mul_i32(c.0, d.0);
-        Fx::checked(
+        checked!(
             Kind::Product,
             [a, b, c, d],
             Fx::from_wide((v + (1 << 8)) >> 9),
@@ -684,11 +711,9 @@ impl Real for Fx {
             Ok(v) => Fx::from_wide(v),
             Err(_) => Fx::wide_overflow(if r < 0 { -1 } else { 1 }),
         };
-        Fx::checked(
+        checked!(
             Kind::Product,
-            [
-                m[0], m[1], m[2], rel[0], rel[1], rel[2], dir[0], dir[1], dir[2], tc,
-            ],
+            [m[0], m[1], m[2], rel[0], rel[1], rel[2], dir[0], dir[1], dir[2], tc,],
             out,
         )
     }
@@ -750,7 +775,7 @@ impl Real for Fx {
             } else {
                 Fx::from_wide(v << k)
             };
-            Fx::checked(Kind::Conversion, [self], r)
+            checked!(Kind::Conversion, [self], r)
         } else if k <= -33 {
             Fx(0)
         } else {
@@ -794,7 +819,7 @@ impl Real for Fx {
             let k = 134 - exp;
             ((frac | 1 << 23) + (1 << (k - 1))) >> k
         };
-        Fx::checked_conversion(exp != 0xff, Fx::from_sign_magnitude(bits >> 31 != 0, mag))
+        checked_conversion!(exp != 0xff, Fx::from_sign_magnitude(bits >> 31 != 0, mag))
     }
     /// `v * 2^16` rounded half away from zero, saturated to an infinity; from the f64's
     /// bits (the same result as that float arithmetic, including the one input where the
@@ -825,12 +850,12 @@ impl Real for Fx {
                 (k == 54 && m == (1 << 53) - 1) as u32
             }
         };
-        Fx::checked_conversion(exp != 0x7ff, Fx::from_sign_magnitude(bits >> 63 != 0, mag))
+        checked_conversion!(exp != 0x7ff, Fx::from_sign_magnitude(bits >> 63 != 0, mag))
     }
     #[inline(always)]
     #[cfg_attr(feature = "fx-checked", track_caller)]
     fn from_i32(v: i32) -> Fx {
-        Fx::checked_conversion(true, Fx::from_wide((v as i64) << FRAC_BITS))
+        checked_conversion!(true, Fx::from_wide((v as i64) << FRAC_BITS))
     }
     #[inline(always)]
     fn from_stored(bits: u32) -> Fx {
@@ -883,7 +908,7 @@ impl Real for Fx {
     #[inline]
     #[cfg_attr(feature = "fx-checked", track_caller)]
     fn recip(self) -> Fx {
-        Fx::checked(Kind::Quotient, [self], self.recip_beyond())
+        checked!(Kind::Quotient, [self], self.recip_beyond())
     }
     #[inline(always)]
     fn mul_beyond(self, o: Fx) -> Fx {
@@ -909,7 +934,7 @@ impl Real for Fx {
     fn sqrt(self) -> Fx {
         // Negative numbers, -inf and NaN (its raw value is negative too).
         if self.0 < 0 {
-            return Fx::checked(Kind::Invalid, [self], Fx::NAN);
+            return checked!(Kind::Invalid, [self], Fx::NAN);
         }
         if self.0 == INF_RAW {
             return self;

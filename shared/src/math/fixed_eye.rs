@@ -147,12 +147,13 @@ impl FxEyePlanes {
         let (n0, s0) = edge(1, 2);
         let (n1, s1) = edge(2, 0);
         let (n2, s2) = edge(0, 1);
-        let top = s0.max(s1).max(s2); // at most 13
-                                      // The face normal exactly (edges below 2^22, components below 2^45), then scaled
-                                      // to FACE_BITS bits (up exactly, or down rounded): the distance is det / f.u with
-                                      // det = f . p_0 for this f, the plane through p_0 with a normal turned by at most
-                                      // 2^-25. (Not the sum of the e: near an edge their cancellation left the
-                                      // distances of small far triangles 5 steps off; f's bits keep them within 0.5.)
+        // At most 13.
+        let top = s0.max(s1).max(s2);
+        // The face normal exactly (edges below 2^22, components below 2^45), then scaled
+        // to FACE_BITS bits (up exactly, or down rounded): the distance is det / f.u with
+        // det = f . p_0 for this f, the plane through p_0 with a normal turned by at most
+        // 2^-25. (Not the sum of the e: near an edge their cancellation left the
+        // distances of small far triangles 5 steps off; f's bits keep them within 0.5.)
         let sub = |a: [i32; 3], b: [i32; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
         let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
         let c = |j: usize, k: usize| wide::mul_i32(e1[j], e2[k]) - wide::mul_i32(e1[k], e2[j]);
