@@ -232,11 +232,8 @@ impl<T: Real> Triangle<T> {
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     #[inline(always)]
     fn intersect_exact_edges(p: [Vec3<T>; 3], d: Vec3<T>, t_max: T) -> Option<TriHit<T>> {
-        // Element by element, not `map`: LLVM kept array maps out of line (`try_map`).
-        let cx = |v: Vec3<T>| T::cross_fine(v.x, d.z, d.x, v.z);
-        let cy = |v: Vec3<T>| T::cross_fine(v.y, d.z, d.y, v.z);
-        let x = [cx(p[0]), cx(p[1]), cx(p[2])];
-        let y = [cy(p[0]), cy(p[1]), cy(p[2])];
+        let x = p.map(|v| T::cross_fine(v.x, d.z, d.x, v.z));
+        let y = p.map(|v| T::cross_fine(v.y, d.z, d.y, v.z));
         let (e, k) = T::edge_functions(x, y);
         // d_z < 0 mirrors the sheared plane, the same way for every triangle of the ray.
         let s0 = edge_positive(e[0], x[1], y[1], x[2], y[2]);
