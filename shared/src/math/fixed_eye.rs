@@ -294,21 +294,7 @@ mod tests {
     use crate::geom::Ray;
     use crate::num::Real;
     use crate::shape::triangle::Shear;
-
-    fn lcg(state: &mut u64) -> f64 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*state >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn fx(v: Vec3<f64>) -> Vec3<Fx> {
-        Vec3::new(Fx::from_f64(v.x), Fx::from_f64(v.y), Fx::from_f64(v.z))
-    }
-
-    fn back(v: Vec3<Fx>) -> Vec3<f64> {
-        Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64())
-    }
+    use crate::testkit::numbers::{back, fx, lcg};
 
     /// The planes' test, or the sheared test when it is uncertain (as the tracer asks).
     fn eye(planes: &FxEyePlanes, tri: &Triangle<Fx>, u: Vec3<Fx>, t_max: Fx) -> Option<TriHit<Fx>> {

@@ -500,21 +500,7 @@ mod tests {
 mod fixed_tests {
     use super::*;
     use crate::num::Fx;
-
-    fn lcg(state: &mut u64) -> f64 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*state >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn fx(v: Vec3<f64>) -> Vec3<Fx> {
-        Vec3::new(Fx::from_f64(v.x), Fx::from_f64(v.y), Fx::from_f64(v.z))
-    }
-
-    fn back(v: Vec3<Fx>) -> Vec3<f64> {
-        Vec3::new(v.x.to_f64(), v.y.to_f64(), v.z.to_f64())
-    }
+    use crate::testkit::numbers::{back, fx, lcg};
 
     /// Triangles 0.004 to 0.03 across (260 to 2,000 steps: photo2.ron's camera is made of
     /// such, scaled by 1/8) 20 units from the eye, rays aimed all over them: every ray more
@@ -625,14 +611,7 @@ mod fixed_tests {
 #[cfg(test)]
 mod edge_plane_tests {
     use super::*;
-
-    /// A small deterministic generator (tests need no crate for it).
-    fn lcg(state: &mut u64) -> f64 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*state >> 11) as f64 / (1u64 << 53) as f64
-    }
+    use crate::testkit::numbers::lcg;
 
     #[test]
     fn hits_centre_with_the_sheared_tests_distance_and_barycentrics() {

@@ -1,5 +1,6 @@
-//! Test doubles shared by every test: scene builders, SPI fakes.
+//! Test doubles shared by every test: scene builders, SPI fakes, numbers.
 
+pub mod numbers;
 pub mod scene;
 pub mod serial;
 pub mod spi;

@@ -84,6 +84,8 @@ impl<T: Real> PlaneCache<T> {
 
 #[cfg(test)]
 mod tests {
+    // The cache itself is exercised by the test that needs the DM (`std`).
+    #[cfg(feature = "std")]
     use super::*;
     use crate::math::solid::Triangle;
     use crate::shape::triangle::EdgePlanes;
