@@ -111,7 +111,9 @@ pub struct ClusterArgs {
     /// SPI bit rate in MHz, 0.001..=10000 (cluster only; default: the board's)
     #[arg(long, value_parser = limits::parse_bit_rate_mhz)]
     pub bit_rate_mhz: Option<f64>,
-    /// Sub-screen policy (cluster only): decreasing, static, fixed=N, fixed-rect=N
+    /// Sub-screen policy (cluster only): decreasing (= decreasing=6,128), decreasing=FACTOR,MIN
+    /// (each job the remaining pixels / (FACTOR x nodes), at least MIN), static, fixed=N,
+    /// fixed-rect=N
     #[arg(long, default_value = "decreasing")]
     pub policy: String,
     /// DM time per frame in ms: frame f's scene exists at (f+1) x this (cluster only)

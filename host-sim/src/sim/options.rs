@@ -11,7 +11,8 @@ use links_core::sched::{Policy, Split};
 use std::fmt;
 use std::str::FromStr;
 
-/// A `--policy` value: `decreasing`, `static`, `fixed=N` (runs) or `fixed-rect=N`.
+/// A `--policy` value: `decreasing` (= `decreasing=6,128`), `decreasing=FACTOR,MIN`, `static`,
+/// `fixed=N` (runs) or `fixed-rect=N`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PolicyArg(pub Policy);
 
@@ -32,6 +33,15 @@ impl FromStr for PolicyArg {
             _ => match s.split_once('=') {
                 Some(("fixed", n)) => fixed(n, Split::Span),
                 Some(("fixed-rect", n)) => fixed(n, Split::Rect),
+                Some(("decreasing", args)) => {
+                    // FACTOR,MIN: each job remaining / (FACTOR x nodes) pixels, at least MIN.
+                    let bad = || OptionError::BadDecreasing(s.into());
+                    let positive = |v: &str| v.trim().parse::<u32>().ok().filter(|&v| v > 0);
+                    let (f, m) = args.split_once(',').ok_or_else(bad)?;
+                    let factor = positive(f).ok_or_else(bad)?;
+                    let min_pixels = positive(m).ok_or_else(bad)?;
+                    Ok(PolicyArg(Policy::Decreasing { factor, min_pixels }))
+                }
                 _ => Err(OptionError::UnknownPolicy(s.into())),
             },
         }
@@ -308,6 +318,8 @@ pub enum OptionError {
     UnknownBoard(String),
     /// `fixed=N` / `fixed-rect=N` with N not a positive integer.
     BadDivisions(String),
+    /// `decreasing=FACTOR,MIN` without two positive integers.
+    BadDecreasing(String),
     BadKill(String),
     KillTime(String),
     EmptyRange {
@@ -333,7 +345,11 @@ impl fmt::Display for OptionError {
         match self {
             OptionError::UnknownPolicy(s) => write!(
                 f,
-                "unknown policy '{s}' (expected decreasing, static, fixed=N or fixed-rect=N)"
+                "unknown policy '{s}' (expected decreasing, decreasing=FACTOR,MIN, static, fixed=N or fixed-rect=N)"
+            ),
+            OptionError::BadDecreasing(s) => write!(
+                f,
+                "bad policy '{s}': decreasing=FACTOR,MIN takes two positive integers (each job is the remaining pixels / (FACTOR x nodes), at least MIN; the default is decreasing=6,128)"
             ),
             OptionError::UnknownTopology(s) => write!(
                 f,
@@ -600,6 +616,30 @@ mod tests {
             .unwrap_err()
             .to_string()
             .contains("positive"));
+        assert_eq!(
+            parse_policy("decreasing=4,256"),
+            Ok(Policy::Decreasing {
+                factor: 4,
+                min_pixels: 256
+            })
+        );
+        assert_eq!(
+            parse_policy("decreasing=6,128"),
+            Ok(Policy::DECREASING),
+            "the default spelled out"
+        );
+        for bad in [
+            "decreasing=0,128",
+            "decreasing=6,0",
+            "decreasing=6",
+            "decreasing=a,b",
+        ] {
+            let e = parse_policy(bad).unwrap_err().to_string();
+            assert!(
+                e.contains("decreasing=FACTOR,MIN takes two positive integers"),
+                "{bad}: {e}"
+            );
+        }
         assert!(parse_policy("round-robin")
             .unwrap_err()
             .to_string()
