@@ -60,13 +60,14 @@ pub(crate) fn local_origin<T: Real>(m: &Mat3<T>, center: Vec3<T>, ray: &Ray<T>) 
     } else {
         along / a
     };
-    // The point itself to 2^-24 (`Real::local_dot`). A ray that passes too far from the
-    // centre to hold the point overflows to a non-finite value, which every comparison
-    // below treats as a miss.
+    // The point itself to 2^-24 (`Real::local_mat_vec`). A ray that passes too far from
+    // the centre to hold the point overflows to a non-finite value, which every
+    // comparison below treats as a miss.
     let rel = ray.origin - center;
     let (rel, dir) = ([rel.x, rel.y, rel.z], [ray.dir.x, ray.dir.y, ray.dir.z]);
-    let row = |r: Vec3<T>| T::local_dot([r.x, r.y, r.z], rel, dir, tc);
-    (tc, Vec3::new(row(m.r[0]), row(m.r[1]), row(m.r[2])))
+    let row = |r: Vec3<T>| [r.x, r.y, r.z];
+    let [x, y, z] = T::local_mat_vec([row(m.r[0]), row(m.r[1]), row(m.r[2])], rel, dir, tc);
+    (tc, Vec3::new(x, y, z))
 }
 
 /// The bound on the rounding of [`local_origin`]'s unit-frame point in fixed point: the
