@@ -116,6 +116,37 @@ impl Fx {
         }
     }
 
+    /// One row of [`Real::local_mat_vec`]: `m · p` for the Q24 point `p` (finite `rel`,
+    /// `dir`, `tc`), summed in Q40 and rounded once, saturated to an infinity beyond the
+    /// range. In 64 bits while the point is under 128 (`p_small`) and the row under 4096
+    /// (each product below 2^59), else in 128 bits. A row with a special entry takes the
+    /// Q16.16 point.
+    #[inline(always)]
+    fn local_row(m: [Fx; 3], p: [i64; 3], p_small: bool, rel: [Fx; 3], dir: [Fx; 3], tc: Fx) -> Fx {
+        if m.iter().any(|v| v.special()) {
+            return Fx::dot3(
+                m,
+                [
+                    rel[0] + dir[0] * tc,
+                    rel[1] + dir[1] * tc,
+                    rel[2] + dir[2] * tc,
+                ],
+            );
+        }
+        let s: i128 = if p_small && m.iter().all(|v| v.0.unsigned_abs() < 1 << 28) {
+            // 32-bit factors (no 64-bit multiply call on ARMv6-M).
+            let mp = |i: usize| wide::mul_i32(m[i].0, p[i] as i32);
+            (mp(0) + mp(1) + mp(2)) as i128
+        } else {
+            (0..3).map(|i| m[i].0 as i128 * p[i] as i128).sum()
+        };
+        let r = (s + (1 << 23)) >> 24;
+        match i64::try_from(r) {
+            Ok(v) => Fx::from_wide(v),
+            Err(_) => Fx::wide_overflow(if r < 0 { -1 } else { 1 }),
+        }
+    }
+
     /// `r`, the result of a `kind` operation on `inputs`, as the checked build sees it: a
     /// non-finite result from finite inputs is counted ([`overflow`]). Nothing without the
     /// `fx-checked` feature.
@@ -582,7 +613,7 @@ impl Real for Fx {
     /// `v / |v|` from the integers: the components shifted (exactly, or by at most one bit
     /// from the top of the range) so the largest magnitude is in [2^22, 2^23), their exact
     /// sum of squares (below 2^48), its rounded square root `L` (23 to 24 significant bits),
-    /// a 32-bit reciprocal `R = floor(2^53 / L)` (one 64-bit division) and each quotient
+    /// a 32-bit reciprocal `R = floor(2^53 / L)` ([`wide::recip_2p53`]) and each quotient
     /// `w * R / 2^37` rounded once. Each component is then within half a step of the exact
     /// `v_i / |v|` plus 2^-6 step (2^-7 each from the shift's and the root's rounding),
     /// whatever `|v|` is: a vector of length 34 keeps its unit vector's length to 1.5e-5
@@ -615,7 +646,7 @@ impl Real for Fx {
             .map(|&x| wide::mul_i32(x as i32, x as i32) as u64)
             .sum();
         let l = wide::isqrt_rounded(sum) as u64; // in [2^22, 2^24)
-        let r = ((1u64 << 53) / l.max(1)) as u32; // at most 2^31
+        let r = wide::recip_2p53(l as u32); // at most 2^31
         let unit = |x: i64| {
             let mag = (wide::mul_u32(x.unsigned_abs() as u32, r) + (1 << 36)) >> 37; // <= 2^16 + 1
             let mag = mag.min(ONE_RAW as u64) as i32;
@@ -676,46 +707,33 @@ impl Real for Fx {
         )
     }
 
-    /// The point in Q24 (`rel` exact, `dir tc` rounded from Q32), the products with `m` in
-    /// Q40, summed and rounded once, saturated to an infinity beyond the range. In 64 bits
-    /// while the point is under 128 and the row under 4096 (each product below 2^59), else
-    /// in 128 bits.
+    /// The point in Q24 (`rel` exact, `dir tc` rounded from Q32), formed once; each row's
+    /// products with it in Q40, summed and rounded once ([`Fx::local_row`]).
     #[cfg_attr(feature = "fx-checked", track_caller)]
-    fn local_dot(m: [Fx; 3], rel: [Fx; 3], dir: [Fx; 3], tc: Fx) -> Fx {
-        if rel.iter().chain(&dir).chain(&m).any(|v| v.special()) || tc.special() {
-            return Fx::dot3(
-                m,
-                [
-                    rel[0] + dir[0] * tc,
-                    rel[1] + dir[1] * tc,
-                    rel[2] + dir[2] * tc,
-                ],
-            );
+    fn local_mat_vec(m: [[Fx; 3]; 3], rel: [Fx; 3], dir: [Fx; 3], tc: Fx) -> [Fx; 3] {
+        if rel.iter().chain(&dir).any(|v| v.special()) || tc.special() {
+            let p = [
+                rel[0] + dir[0] * tc,
+                rel[1] + dir[1] * tc,
+                rel[2] + dir[2] * tc,
+            ];
+            return [Fx::dot3(m[0], p), Fx::dot3(m[1], p), Fx::dot3(m[2], p)];
         }
         // Below 2^39 + 2^54: fits an i64.
         let point =
             |i: usize| ((rel[i].0 as i64) << 8) + ((wide::mul_i32(dir[i].0, tc.0) + (1 << 7)) >> 8);
         // Element by element, not `map` (see `dot3`).
         let p = [point(0), point(1), point(2)];
-        let small = m.iter().all(|v| v.0.unsigned_abs() < 1 << 28)
-            && p.iter().all(|v| v.unsigned_abs() < 1 << 31);
-        let s: i128 = if small {
-            // 32-bit factors (no 64-bit multiply call on ARMv6-M).
-            let mp = |i: usize| wide::mul_i32(m[i].0, p[i] as i32);
-            (mp(0) + mp(1) + mp(2)) as i128
-        } else {
-            (0..3).map(|i| m[i].0 as i128 * p[i] as i128).sum()
+        let p_small = p.iter().all(|v| v.unsigned_abs() < 1 << 31);
+        let row = |r: [Fx; 3]| {
+            let out = Fx::local_row(r, p, p_small, rel, dir, tc);
+            checked!(
+                Kind::Product,
+                [r[0], r[1], r[2], rel[0], rel[1], rel[2], dir[0], dir[1], dir[2], tc],
+                out,
+            )
         };
-        let r = (s + (1 << 23)) >> 24;
-        let out = match i64::try_from(r) {
-            Ok(v) => Fx::from_wide(v),
-            Err(_) => Fx::wide_overflow(if r < 0 { -1 } else { 1 }),
-        };
-        checked!(
-            Kind::Product,
-            [m[0], m[1], m[2], rel[0], rel[1], rel[2], dir[0], dir[1], dir[2], tc,],
-            out,
-        )
+        [row(m[0]), row(m[1]), row(m[2])]
     }
 
     /// In 64-bit integers: `q = c + d s` in Q32 (exact), the residual in Q48 as
@@ -1203,6 +1221,28 @@ mod wide {
         r
     }
 
+    /// `floor(2^53 / l)` for `l` in `[2^22, 2^24)` ([`Real::normalize3`]'s root), without
+    /// the 64-bit software division (`__aeabi_uldivmod`, about 100 instructions on the M3
+    /// and more on the M0): [`recip_q62`] of `l` shifted to `[2^31, 2^32)`, then the exact
+    /// remainder `2^53 - q l` moves `q` the few units to the floor.
+    #[inline]
+    pub(super) fn recip_2p53(l: u32) -> u32 {
+        let l = l.clamp(1 << 22, (1 << 24) - 1);
+        let z = l.leading_zeros(); // 8 or 9
+                                   // recip_q62(l 2^z) ~ 2^(62 - z) / l, which is 2^53 / l times 2^(9 - z).
+        let mut q = recip_q62(l << z) >> (9 - z);
+        let mut rem = (1i64 << 53) - mul_u32(q, l) as i64;
+        while rem < 0 {
+            q -= 1;
+            rem += l as i64;
+        }
+        while rem >= l as i64 {
+            q += 1;
+            rem -= l as i64;
+        }
+        q
+    }
+
     /// Initial `1/sqrt(x)` for `x = (i + 0.5) / 64`, `i` in `16..64` (x in [1/4, 1)), in
     /// Q2.30: `round(2^30 / sqrt((2i + 1) / 128))`, computed at compile time.
     const RSQRT_SEED: [u32; 48] = {
@@ -1298,6 +1338,15 @@ mod tests {
         .into_iter()
         .chain(-70_000..70_000)
         .chain(spread)
+    }
+
+    /// The division-free reciprocal of `normalize3` is the floor quotient for every length
+    /// its root can take.
+    #[test]
+    fn recip_2p53_is_the_floor_quotient() {
+        for l in (1u32 << 22)..(1 << 24) {
+            assert_eq!(wide::recip_2p53(l) as u64, (1u64 << 53) / l as u64, "{l}");
+        }
     }
 
     /// The shortcuts for integer cores give the generic definitions' bits.
@@ -1579,11 +1628,12 @@ mod tests {
         assert_eq!(Fx::sphere_newton(c, d, fx(100.0)).raw(), fx(100.0).raw());
     }
 
-    /// `m · (rel + dir tc)` within half a step and the point's 2^-25 per coordinate (times
-    /// the row) of the exact value, in both the 64-bit and the 128-bit range; where the
-    /// Q16.16 point `rel + dir * tc` carried half a step per coordinate times the row.
+    /// Each row of `m (rel + dir tc)` within half a step and the point's 2^-25 per
+    /// coordinate (times the row) of the exact value, in both the 64-bit and the 128-bit
+    /// range; where the Q16.16 point `rel + dir * tc` carried half a step per coordinate
+    /// times the row.
     #[test]
-    fn local_dot_keeps_the_point_to_2_pow_minus_24() {
+    fn local_mat_vec_keeps_the_point_to_2_pow_minus_24() {
         let mut seed = 99u64;
         let mut next = || {
             seed = seed
@@ -1593,35 +1643,42 @@ mod tests {
         };
         let (mut worst, mut worst_q16) = (0f64, 0f64);
         for k in 0..50_000 {
-            // Rows of 10,000 take the 128-bit path.
+            // Rows of 10,000 take the 128-bit path (one row in three here, the others
+            // stay small: each row picks its own path).
             let big = if k % 10 == 0 { 10_000.0 } else { 4.0 };
-            let m = [0; 3].map(|_| fx((next() - 0.5) * 2.0 * big));
+            let m = [0; 3].map(|r| {
+                let scale = if r == 1 { big } else { 4.0 };
+                [0; 3].map(|_| fx((next() - 0.5) * 2.0 * scale))
+            });
             let reach = if k % 10 == 0 { 0.02 } else { 60.0 };
             let rel = [0; 3].map(|_| fx((next() - 0.5) * reach));
             let dir = Fx::normalize3([0; 3].map(|_| fx(next() - 0.5))).unwrap();
             let tc = fx((next() - 0.5) * reach);
             let f = |v: Fx| v.to_f64();
-            let exact: f64 = (0..3)
-                .map(|i| f(m[i]) * (f(rel[i]) + f(dir[i]) * f(tc)))
-                .sum();
-            let got = Fx::local_dot(m, rel, dir, tc);
-            if !got.is_finite() {
-                assert!(exact.abs() > 32_000.0, "{exact}");
-                continue;
+            let got = Fx::local_mat_vec(m, rel, dir, tc);
+            for (r, got) in m.iter().zip(got) {
+                let exact: f64 = (0..3)
+                    .map(|i| f(r[i]) * (f(rel[i]) + f(dir[i]) * f(tc)))
+                    .sum();
+                if !got.is_finite() {
+                    assert!(exact.abs() > 32_000.0, "{exact}");
+                    continue;
+                }
+                let row: f64 = r.iter().map(|v| f(*v).abs()).sum();
+                let err = (got.to_f64() - exact).abs() * 65536.0;
+                assert!(err <= 0.5 + row / 512.0 + 1e-6, "{err} steps (row {row})");
+                worst = worst.max(err / (0.5 + row / 512.0));
+                let q16 = Fx::dot3(
+                    *r,
+                    [
+                        rel[0] + dir[0] * tc,
+                        rel[1] + dir[1] * tc,
+                        rel[2] + dir[2] * tc,
+                    ],
+                );
+                worst_q16 =
+                    worst_q16.max((q16.to_f64() - exact).abs() * 65536.0 / (0.5 + row / 512.0));
             }
-            let row: f64 = m.iter().map(|v| f(*v).abs()).sum();
-            let err = (got.to_f64() - exact).abs() * 65536.0;
-            assert!(err <= 0.5 + row / 512.0 + 1e-6, "{err} steps (row {row})");
-            worst = worst.max(err / (0.5 + row / 512.0));
-            let q16 = Fx::dot3(
-                m,
-                [
-                    rel[0] + dir[0] * tc,
-                    rel[1] + dir[1] * tc,
-                    rel[2] + dir[2] * tc,
-                ],
-            );
-            worst_q16 = worst_q16.max((q16.to_f64() - exact).abs() * 65536.0 / (0.5 + row / 512.0));
         }
         assert!(
             worst > 0.5 && worst_q16 > 10.0 * worst,

@@ -167,19 +167,22 @@ pub trait Real:
     fn sphere_newton(_c: [Self; 3], _d: [Self; 3], s: Self) -> Self {
         s
     }
-    /// `m · (rel + dir tc)`. Fixed point keeps the point `rel + dir tc` to 2^-24 (a Q16.16
-    /// point is off by half a step per coordinate, which `m` stretches: by 2 steps for a
-    /// row of 4, glass.ron's lens) and rounds the dot product once.
+    /// `m (rel + dir tc)`, `m` given by its rows. Fixed point keeps the point `rel + dir tc`
+    /// to 2^-24 (a Q16.16 point is off by half a step per coordinate, which `m` stretches:
+    /// by 2 steps for a row of 4, glass.ron's lens), forms it once for the three rows, and
+    /// rounds each row's dot product once.
     #[inline]
-    fn local_dot(m: [Self; 3], rel: [Self; 3], dir: [Self; 3], tc: Self) -> Self {
-        Self::dot3(
-            m,
-            [
-                rel[0] + dir[0] * tc,
-                rel[1] + dir[1] * tc,
-                rel[2] + dir[2] * tc,
-            ],
-        )
+    fn local_mat_vec(m: [[Self; 3]; 3], rel: [Self; 3], dir: [Self; 3], tc: Self) -> [Self; 3] {
+        let p = [
+            rel[0] + dir[0] * tc,
+            rel[1] + dir[1] * tc,
+            rel[2] + dir[2] * tc,
+        ];
+        [
+            Self::dot3(m[0], p),
+            Self::dot3(m[1], p),
+            Self::dot3(m[2], p),
+        ]
     }
     /// `self * o` where a result beyond the format's range is meant to become an infinity:
     /// a slab test's distance `(bound - origin) / d` for a direction `d` nearly parallel to

@@ -21,7 +21,7 @@
 pub enum Kind {
     /// A sum or difference.
     Sum,
-    /// A product, or a fused product (dot product, the point of `local_dot`, a cross term).
+    /// A product, or a fused product (dot product, the point of `local_mat_vec`, a cross term).
     Product,
     /// A quotient or reciprocal, division by zero included.
     Quotient,

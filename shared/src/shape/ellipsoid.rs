@@ -60,13 +60,14 @@ pub(crate) fn local_origin<T: Real>(m: &Mat3<T>, center: Vec3<T>, ray: &Ray<T>) 
     } else {
         along / a
     };
-    // The point itself to 2^-24 (`Real::local_dot`). A ray that passes too far from the
-    // centre to hold the point overflows to a non-finite value, which every comparison
-    // below treats as a miss.
+    // The point itself to 2^-24 (`Real::local_mat_vec`). A ray that passes too far from
+    // the centre to hold the point overflows to a non-finite value, which every
+    // comparison below treats as a miss.
     let rel = ray.origin - center;
     let (rel, dir) = ([rel.x, rel.y, rel.z], [ray.dir.x, ray.dir.y, ray.dir.z]);
-    let row = |r: Vec3<T>| T::local_dot([r.x, r.y, r.z], rel, dir, tc);
-    (tc, Vec3::new(row(m.r[0]), row(m.r[1]), row(m.r[2])))
+    let row = |r: Vec3<T>| [r.x, r.y, r.z];
+    let [x, y, z] = T::local_mat_vec([row(m.r[0]), row(m.r[1]), row(m.r[2])], rel, dir, tc);
+    (tc, Vec3::new(x, y, z))
 }
 
 /// The bound on the rounding of [`local_origin`]'s unit-frame point in fixed point: the
@@ -328,17 +329,24 @@ impl<T: Real> Ellipsoid<T> {
 /// `ΔL`, so `|L E q|` gains `step/2 (|L| Z(M) |L||q| + |L||M| Z(L) |q|)`, `Z(X)` the
 /// matrix of ones where `X` is nonzero.
 pub(crate) fn storage_error<T: Real>(m: &Mat3<T>, l: &Mat3<T>, q: Vec3<T>, eps: T) -> Vec3<T> {
+    if !T::ABSOLUTE_ROUNDING {
+        let lq = abs_mat_vec(l, q.abs());
+        return abs_mat_vec(l, abs_mat_vec(m, lq)) * (T::from_i32(3) * eps);
+    }
+    // One more step for the rounding of the bound itself.
+    (storage_steps(m, l, q) + Vec3::splat(T::ONE)) * T::epsilon()
+}
+
+/// Fixed point: [`storage_error`] before its last step and rounding, counted in steps
+/// (linear in `|q|`): 3 * 2^-24 = (3/256) steps of `|L||M||L||q|`, and the half steps of
+/// the entries counted as whole ones.
+pub(crate) fn storage_steps<T: Real>(m: &Mat3<T>, l: &Mat3<T>, q: Vec3<T>) -> Vec3<T> {
     let lq = abs_mat_vec(l, q.abs());
     let lml = abs_mat_vec(l, abs_mat_vec(m, lq));
-    if !T::ABSOLUTE_ROUNDING {
-        return lml * (T::from_i32(3) * eps);
-    }
-    // 3 * 2^-24 = (3/256) steps; the half steps of the entries counted as whole ones, and
-    // one more for the rounding of the bound itself.
     let f32_part = lml * T::from_f32(3.0 / 256.0);
     let entries = abs_mat_vec(l, nonzero_mat_vec(m, lq))
         + abs_mat_vec(l, abs_mat_vec(m, nonzero_mat_vec(l, q.abs())));
-    (f32_part + entries + Vec3::splat(T::ONE)) * T::epsilon()
+    f32_part + entries
 }
 
 /// `Z(M) v`, `Z(M)` having a one where `M` has a nonzero entry (`v >= 0`).

@@ -124,7 +124,12 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             }
             HitDetail::Box(h) => {
                 let rec = s.boxshape::<T>(shape.index);
-                let ls = rec.shape.surface(ray, &h, s.storage_epsilon());
+                let storage = self
+                    .state
+                    .borrow()
+                    .box_bounds(shape.index)
+                    .map(|b| b.storage);
+                let ls = rec.shape.surface_bounded(&h, s.storage_epsilon(), storage);
                 let q = ls.local;
                 // Planar mapping on each face from the two other local axes.
                 let (a, b) = match h.face & 3 {

@@ -15,6 +15,7 @@ use super::techniques::Techniques;
 use crate::geom::{Ray, Vec3};
 use crate::image::{Camera, SceneView};
 use crate::num::Real;
+use crate::shape::boxshape::BoxBounds;
 use crate::trace::clip::RowClip;
 use crate::trace::primary::{EyeRay, PlaneCache};
 use crate::trace::records::Records;
@@ -34,6 +35,10 @@ pub const MAX_CROSSINGS: u32 = 64;
 /// Lights whose last shadow-ray blocker the tracer remembers (further lights walk the
 /// tree every time).
 pub const BLOCKER_LIGHTS: usize = 8;
+
+/// Boxes whose [`BoxBounds`] a tracer keeps (the first ones of the scene; the others form
+/// theirs per test and per hit, the same values).
+pub const CACHED_BOXES: usize = 8;
 
 /// An 8-bit RGB pixel.
 pub type Rgb8 = [u8; 3];
@@ -74,6 +79,8 @@ pub struct TracerState<T: Real> {
     pub(super) blockers: [Option<Blocker>; BLOCKER_LIGHTS],
     /// Material and light records, decoded at first use.
     pub(super) records: Records<T>,
+    /// The first boxes' error-bound terms (fixed point; formed when the scene changes).
+    boxes: [Option<BoxBounds<T>>; CACHED_BOXES],
     /// The scene the caches were filled from.
     key: Option<SceneKey>,
 }
@@ -116,8 +123,15 @@ impl<T: Real> TracerState<T> {
             walk: WalkSpace::new(),
             blockers: [None; BLOCKER_LIGHTS],
             records: Records::new(),
+            boxes: [None; CACHED_BOXES],
             key: None,
         }
+    }
+
+    /// Box `i`'s [`BoxBounds`], if kept.
+    #[inline]
+    pub(super) fn box_bounds(&self, i: u32) -> Option<BoxBounds<T>> {
+        self.boxes.get(i as usize).copied().flatten()
     }
 
     /// Forget which scene the caches hold: the next run refills them (the bytes behind a
@@ -127,7 +141,7 @@ impl<T: Real> TracerState<T> {
     }
 
     /// Forget every cache unless they were filled from the scene `key` names.
-    fn prepare(&mut self, camera: &Camera<T>, key: Option<SceneKey>) {
+    fn prepare(&mut self, scene: &SceneView<'_>, camera: &Camera<T>, key: Option<SceneKey>) {
         if key.is_some() && self.key == key {
             return;
         }
@@ -135,6 +149,13 @@ impl<T: Real> TracerState<T> {
         self.planes.reset(PlaneCache::max_l1(camera));
         self.blockers = [None; BLOCKER_LIGHTS];
         self.records = Records::new();
+        self.boxes = [None; CACHED_BOXES];
+        if T::ABSOLUTE_ROUNDING {
+            let count = scene.count(crate::image::Section::Boxes) as usize;
+            for (i, slot) in self.boxes.iter_mut().enumerate().take(count) {
+                *slot = Some(scene.boxshape::<T>(i as u32).shape.bounds());
+            }
+        }
         self.key = key;
     }
 }
@@ -185,7 +206,7 @@ impl<'a, T: Real, S: BorrowMut<TracerState<T>>> Tracer<'a, T, S> {
         key: Option<SceneKey>,
     ) -> Self {
         let camera = scene.camera::<T>();
-        state.borrow_mut().prepare(&camera, key);
+        state.borrow_mut().prepare(&scene, &camera, key);
         Self {
             scene,
             camera,

@@ -613,11 +613,15 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             ShapeKind::Box => {
                 self.stats.box_shape_tests += 1;
                 let rec = s.boxshape::<T>(shape.index);
-                rec.shape.intersect(ray, t_max).map(|h| Hit {
-                    t: h.t,
-                    shape,
-                    detail: HitDetail::Box(h),
-                })
+                let bounds = self.state.borrow().box_bounds(shape.index);
+                let origin_error = bounds.map(|b| b.origin);
+                rec.shape
+                    .intersect_bounded(ray, t_max, origin_error)
+                    .map(|h| Hit {
+                        t: h.t,
+                        shape,
+                        detail: HitDetail::Box(h),
+                    })
             }
             ShapeKind::Blob => {
                 self.stats.blob_tests += 1;
