@@ -55,6 +55,11 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Light transmitted from `surf` towards a light `dist` away along `dir`: the product of
     /// the transmittances of every surface crossed (LINKS-1: transparent objects cast
     /// lighter shadows).
+    ///
+    /// Out of line: inlined, its walks filled the light loop of [`Self::local_shade`] and
+    /// made it keep every material constant on the stack, set up on each shading even
+    /// without shadows (photo1-noshadow on the M4F: local_shade 285 instructions per pixel).
+    #[inline(never)]
     pub(super) fn shadow(
         &mut self,
         light: u32,

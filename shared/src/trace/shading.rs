@@ -34,11 +34,15 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             if cos_t <= T::ZERO {
                 continue;
             }
-            let t = self.shadow(i, surf, ldir, dist);
-            if t.max_component() <= T::ZERO {
-                continue;
-            }
-            let ls = ls.mul_elem(t);
+            let ls = if self.camera.no_shadows {
+                ls
+            } else {
+                let t = self.shadow(i, surf, ldir, dist);
+                if t.max_component() <= T::ZERO {
+                    continue;
+                }
+                ls.mul_elem(t)
+            };
             c = c + m.diffuse.mul_elem(ls) * cos_t;
             let src = schlick(m.specular, m.specular_edge, cos_t);
             if src > T::ZERO {

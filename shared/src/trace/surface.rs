@@ -67,7 +67,7 @@ impl<T: Real> Surface<T> {
 
 impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// Complete a hit: position with error bound, normals, texture coordinates.
-    pub(super) fn surface(&self, ray: &Ray<T>, hit: &Hit<T>) -> Surface<T> {
+    pub(super) fn surface(&mut self, ray: &Ray<T>, hit: &Hit<T>) -> Surface<T> {
         let s = &self.scene;
         let shape = hit.shape;
         match hit.detail {
@@ -105,7 +105,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 }
             }
             HitDetail::Ellipsoid(h) => {
-                let rec = s.ellipsoid::<T>(shape.index);
+                let rec = self.state.borrow_mut().records.ellipsoid(s, shape.index);
                 let ls = rec.shape.surface(ray, &h, s.storage_epsilon());
                 let q = ls.local;
                 // Spherical mapping in the unit frame (v = 1 at the +Y pole, the image's top
@@ -123,12 +123,12 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                 Surface::local(ls, uv, rec.material, shape, edgeless)
             }
             HitDetail::Box(h) => {
-                let rec = s.boxshape::<T>(shape.index);
                 let storage = self
                     .state
                     .borrow()
                     .box_bounds(shape.index)
                     .map(|b| b.storage);
+                let rec = self.state.borrow_mut().records.boxshape(s, shape.index);
                 let ls = rec.shape.surface_bounded(&h, s.storage_epsilon(), storage);
                 let q = ls.local;
                 // Planar mapping on each face from the two other local axes.

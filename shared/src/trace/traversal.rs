@@ -603,7 +603,7 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             }
             ShapeKind::Ellipsoid => {
                 self.stats.ellipsoid_tests += 1;
-                let rec = s.ellipsoid::<T>(shape.index);
+                let rec = self.state.borrow_mut().records.ellipsoid(s, shape.index);
                 rec.shape.intersect(ray, t_max).map(|h| Hit {
                     t: h.t,
                     shape,
@@ -612,8 +612,8 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             }
             ShapeKind::Box => {
                 self.stats.box_shape_tests += 1;
-                let rec = s.boxshape::<T>(shape.index);
                 let bounds = self.state.borrow().box_bounds(shape.index);
+                let rec = self.state.borrow_mut().records.boxshape(s, shape.index);
                 let origin_error = bounds.map(|b| b.origin);
                 rec.shape
                     .intersect_bounded(ray, t_max, origin_error)
