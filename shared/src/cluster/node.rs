@@ -27,7 +27,7 @@ use core::fmt;
 mod bank;
 mod kernel;
 use bank::Bank;
-pub use kernel::{Kernels, Tracing, TracingByImage};
+pub use kernel::{KernelNumber, Kernels, Tracing, TracingByImage};
 
 /// Where compute time goes.
 #[allow(async_fn_in_trait)]

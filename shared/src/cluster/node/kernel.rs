@@ -83,6 +83,46 @@ impl<T: Real> Tracing<T> {
     }
 }
 
+/// A number type a node kernel runs in, with its run entry instantiated here, in links-core:
+/// [`Tracing`]`<T>` calls it instead of instantiating the tracer in the firmware's crate. Two
+/// crates that both instantiate `Tracer<Fx, _>` (the firmware through `Tracing<Fx>`, this one
+/// through [`TracingByImage`]) each carry a copy of the kernel, and LLVM linked calls across
+/// the two: the G0B1 node's flash held the shading, shadow and shape code twice (two
+/// `intersect_shape` of ~40 KB each).
+pub trait KernelNumber: Real {
+    fn trace_run(
+        state: &mut TracerState<Self>,
+        scene: SceneView<'_>,
+        frame: u16,
+        at: (u32, u32),
+        out: &mut [Rgb8],
+    ) -> Result<Stats, RenderError>;
+}
+
+impl KernelNumber for f32 {
+    fn trace_run(
+        state: &mut TracerState<f32>,
+        scene: SceneView<'_>,
+        frame: u16,
+        at: (u32, u32),
+        out: &mut [Rgb8],
+    ) -> Result<Stats, RenderError> {
+        trace_run(state, scene, frame, at, out)
+    }
+}
+
+impl KernelNumber for Fx {
+    fn trace_run(
+        state: &mut TracerState<Fx>,
+        scene: SceneView<'_>,
+        frame: u16,
+        at: (u32, u32),
+        out: &mut [Rgb8],
+    ) -> Result<Stats, RenderError> {
+        trace_run(state, scene, frame, at, out)
+    }
+}
+
 /// One run with `state`'s tracer (all techniques).
 fn trace_run<T: Real>(
     state: &mut TracerState<T>,
@@ -97,7 +137,7 @@ fn trace_run<T: Real>(
     Ok(t.stats)
 }
 
-impl<T: Real> RunRenderer for Tracing<T> {
+impl<T: KernelNumber> RunRenderer for Tracing<T> {
     fn render(
         &mut self,
         scene: SceneView<'_>,
@@ -106,7 +146,7 @@ impl<T: Real> RunRenderer for Tracing<T> {
         x: u32,
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError> {
-        trace_run(&mut self.state, scene, frame, (y, x), out)
+        T::trace_run(&mut self.state, scene, frame, (y, x), out)
     }
 
     fn kernels(&self) -> Kernels {
@@ -142,8 +182,10 @@ impl RunRenderer for TracingByImage {
         out: &mut [Rgb8],
     ) -> Result<Stats, RenderError> {
         match (scene.storage(), &mut *self) {
-            (Storage::F32, TracingByImage::F32(s)) => trace_run(s, scene, frame, (y, x), out),
-            (Storage::Q16_16, TracingByImage::Fixed(s)) => trace_run(s, scene, frame, (y, x), out),
+            (Storage::F32, TracingByImage::F32(s)) => f32::trace_run(s, scene, frame, (y, x), out),
+            (Storage::Q16_16, TracingByImage::Fixed(s)) => {
+                Fx::trace_run(s, scene, frame, (y, x), out)
+            }
             (Storage::F32, TracingByImage::Fixed(_)) => {
                 *self = TracingByImage::F32(TracerState::new());
                 self.render(scene, frame, y, x, out)
