@@ -5,20 +5,34 @@
 //!
 //! ```sh
 //! cargo run --release -p links-host --example relay_speedup -- 16 32 64
+//! cargo run --release -p links-host --example relay_speedup -- --buses 1 --policy 6,192 64
 //! ```
 
 use links_core::board::BoardProfile;
+use links_core::sched::Policy;
 use links_host::cluster::relay::RelayCode;
 use links_host::cluster::{simulate_frame, SimConfig};
 use links_host::studies::cluster_sweep::steady_state_interval;
 
 fn main() {
-    let mut counts: Vec<u16> = std::env::args()
-        .skip(1)
-        .map(|a| a.parse().expect("node counts"))
-        .collect();
-    if counts.is_empty() {
-        counts = vec![16, 32, 64];
+    // Node counts, and optionally `--buses B` (the root's links; the board's by default)
+    // and `--policy FACTOR,MIN` (decreasing sizes; 6,128 by default).
+    let mut counts: Vec<u16> = Vec::new();
+    let (mut buses, mut policy) = (None, Policy::DECREASING);
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--buses" => buses = args.next().and_then(|b| b.parse().ok()),
+            "--policy" => {
+                let v = args.next().unwrap_or_default();
+                let (f, m) = v.split_once(',').expect("--policy FACTOR,MIN");
+                policy = Policy::Decreasing {
+                    factor: f.parse().expect("a factor"),
+                    min_pixels: m.parse().expect("a smallest job"),
+                };
+            }
+            n => counts.push(n.parse().expect("node counts")),
+        }
     }
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenes/photo1.ron");
     let img = links_host::scene_file::compile_at(&path, 512, 480).expect("photo1 compiles");
@@ -28,9 +42,12 @@ fn main() {
     println!("1 node: {one:.4} s, steady {one_steady:.4} s/frame");
     for &n in &counts {
         for relay in [RelayCode::Model, RelayCode::Firmware] {
+            let board = SimConfig::buildable(BoardProfile::F407, n);
             let cfg = SimConfig {
                 relay,
-                ..SimConfig::buildable(BoardProfile::F407, n)
+                policy,
+                buses: buses.unwrap_or(board.buses),
+                ..board
             };
             let r = simulate_frame(&img, &cfg).expect("runs");
             let steady = steady_state_interval(&img, &cfg, 8).expect("runs");

@@ -32,9 +32,24 @@ pub mod link {
     pub const CS_SETUP_US: u64 = LINK.cs_setup_ns as u64 / 1000;
     /// Chip-select high before the next selection: the node stops its DMA and re-arms.
     pub const CS_HOLD_US: u64 = LINK.cs_hold_ns as u64 / 1000;
-    /// Nodes on the one bus this firmware drives (as the root of a relay tree, feature
-    /// `relay-root`: its relays, each a node on this bus).
+    /// Nodes on the chip-selects this firmware drives (as the root of a relay tree, feature
+    /// `relay-root`: its relays, each a node on one of its links).
     pub const NODES: usize = LINK.nodes_per_bus as usize;
+    /// SPI buses the root logic's nodes are on: one, or as the root of a relay tree the
+    /// profile's root links (the F407: SPI1 and SPI2, half the relays on each, joined by
+    /// `links_core::relay::TwoLinks`).
+    pub const ROOT_LINKS: usize = if cfg!(feature = "relay-root") {
+        LINK.root_links as usize
+    } else {
+        1
+    };
+    /// Nodes (relays, as the root of a relay tree) on each of those buses.
+    pub const LINK_NODES: usize = NODES / ROOT_LINKS;
+    const _: () = assert!(ROOT_LINKS == 1 || ROOT_LINKS == 2);
+    // `main` wires a second link (SPI2) on the F407's root of relays only.
+    const _: () =
+        assert!((ROOT_LINKS == 2) == cfg!(all(feature = "relay-root", feature = "board-f407")));
+    const _: () = assert!(LINK_NODES * ROOT_LINKS == NODES);
     /// The NCs the root logic hands work to: those on its bus, or, as the root of a relay
     /// tree (`relay-root`), the nodes behind its relays (one level: each relay's bus holds
     /// as many as the root's).
@@ -62,18 +77,23 @@ pub mod plan {
 
     /// SRAM1 + SRAM2 (DMA-reachable) and CCM data RAM (CPU only): the board's.
     pub use links_board::{CCM, SRAM};
-    /// The bus's DMA banks: two TX (double-buffered: the RC composes into one while the
+    /// Each bus's DMA banks: two TX (double-buffered: the RC composes into one while the
     /// other waits for or crosses the bus) and one RX (in SRAM), each the board profile's
-    /// bank size (`links_core::spi::BANK`).
-    pub const LINK_BANKS: usize = 3 * BANK;
-    /// As the root of a relay tree (feature `relay-root`): the buffers of
-    /// `links_core::relay::RelayedBus` (a frame buffer per node exchange in flight,
-    /// `links_core::relay::SLOTS`, one for the broadcast waiting to go, one to compose in,
-    /// the relay's batch), in SRAM (the CCM has no room), taken from the scene's share.
-    pub const RELAYED: usize = if cfg!(feature = "relay-root") {
-        core::mem::size_of::<links_core::relay::RelayedBuffers>()
-    } else {
-        0
+    /// bank size (`links_core::spi::BANK`); one set per bus (`link::ROOT_LINKS`).
+    pub const LINK_BANKS: usize = 3 * BANK * crate::link::ROOT_LINKS;
+    /// One root link's `links_core::relay::RelayedBus` buffers when the root drives its
+    /// relays on two (`links_core::relay::TWO_LINK_SLOTS` exchanges in flight on each).
+    pub type TwoLinkFrames =
+        links_core::relay::RelayedFrames<{ links_core::relay::TWO_LINK_SLOTS + 2 }>;
+    /// As the root of a relay tree (feature `relay-root`): the buffers of each link's
+    /// `links_core::relay::RelayedBus` (a frame buffer per node exchange in flight, one for
+    /// the broadcast waiting to go, one to compose in, the relay's batch;
+    /// `links_core::relay::SLOTS` exchanges in flight on one link, `TWO_LINK_SLOTS` on each
+    /// of two), in SRAM (the CCM has no room), taken from the scene's share.
+    pub const RELAYED: usize = match (cfg!(feature = "relay-root"), crate::link::ROOT_LINKS) {
+        (false, _) => 0,
+        (true, 1) => core::mem::size_of::<links_core::relay::RelayedBuffers>(),
+        (true, links) => links * core::mem::size_of::<TwoLinkFrames>(),
     };
     /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
     /// through the TX bank): what the DMA banks (and the relay buffers) leave, in whole KB.
@@ -130,7 +150,9 @@ macro_rules! with_pins {
             cs: [PE8, PE9, PE10, PE11, PE12, PE13, PE14, PE15],
             ready: [PD0 / EXTI0, PD1 / EXTI1, PD2 / EXTI2, PD3 / EXTI3,
                     PD6 / EXTI6, PD7 / EXTI7, PD8 / EXTI8, PD9 / EXTI9],
-            miso_sel: [PE4, PE5, PE6]
+            miso_sel: [PE4, PE5, PE6],
+            spi2: [PB13, PB14, PB15],
+            miso_sel2: [PD10, PD11]
         }
     };
 }
@@ -181,7 +203,13 @@ macro_rules! with_pins {
 macro_rules! pin_names {
     (; spi1: [$($spi:ident),*], usb: [$($usb:ident),*], $(accel_cs: $acc:ident,)?
        cs: [$($cs:ident),*], ready: [$($rdy:ident / $exti:ident),*],
-       miso_sel: [$($sel:ident),*]) => {
+       miso_sel: [$($sel:ident),*]
+       $(, spi2: [$($spi2:ident),*], miso_sel2: [$($sel2:ident),*])?) => {
+        /// SPI2 (master): SCK, MISO, MOSI: the second root link of a root of relays
+        /// (`relay-root` on the F407: relays 4..7); empty on boards whose root drives one.
+        pub const SPI2: &[&str] = &[$($(stringify!($spi2)),*)?];
+        /// Select lines S0, S1 of the second link's 74LVC251 (its S2 tied low: 4 relays).
+        pub const MISO_SEL2: &[&str] = &[$($(stringify!($sel2)),*)?];
         /// SPI1 (master): SCK, MISO, MOSI.
         pub const SPI1: [&str; 3] = [$(stringify!($spi)),*];
         /// Chip-select outputs, node 0..7 (active low).
@@ -329,12 +357,25 @@ mod tests {
             (links_core::relay::SLOTS + 3) * links_core::wire::MAX_MESSAGE
         );
         if cfg!(feature = "relay-root") {
-            assert_eq!((RENDER_NODES, RELAYED), (NODES * per_bus, relayed));
+            let links = PROFILE.link.root_links as usize;
+            let two = core::mem::size_of::<super::plan::TwoLinkFrames>();
+            assert_eq!(
+                two,
+                (links_core::relay::TWO_LINK_SLOTS + 3) * links_core::wire::MAX_MESSAGE
+            );
+            let expected = if links == 2 { 2 * two } else { relayed };
+            assert_eq!((RENDER_NODES, RELAYED), (NODES * per_bus, expected));
+            assert_eq!(
+                super::plan::LINK_BANKS,
+                3 * links * PROFILE.dma_bank_bytes()
+            );
             if cfg!(feature = "board-f407") {
-                // 128 KB - 3 DMA banks - 29,944 B (16 node exchanges in flight), in whole
-                // KB; a film's second bank is what the first (a node's 61,440-byte bank)
-                // leaves: 34,816 B (58,368 with one exchange in flight, 6,304 B of buffers).
-                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 96_256, 61_440));
+                // Two root links (SPI1, SPI2): 128 KB - 2 x 3 DMA banks - 2 x 17,336 B (8
+                // node exchanges in flight on each), in whole KB; a film's second bank is
+                // what the first (a node's 61,440-byte bank) leaves: 24,576 B (34,816 with
+                // one link of 16 exchanges in flight, 58,368 with one exchange in flight).
+                assert_eq!(links, 2);
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 86_016, 61_440));
             }
             if cfg!(feature = "board-g0b1") {
                 // 80 KB - 3 DMA banks - 29,944 B = 47,212 -> 46 KB; the first film bank is a
@@ -390,7 +431,10 @@ mod tests {
             );
         }
         assert_eq!(super::pins::CS.len(), super::pins::NODES);
-        assert_eq!(super::plan::LINK_BANKS, 3 * p.dma_bank_bytes());
+        assert_eq!(
+            super::plan::LINK_BANKS,
+            3 * super::link::ROOT_LINKS * p.dma_bank_bytes()
+        );
         assert_eq!(links_core::spi::HEADER, p.link.header_bytes as usize);
         assert_eq!(links_core::spi::TRAILER, p.link.trailer_bytes as usize);
         assert_eq!(links_core::spi::RC_OVERLAPS, p.link.rc_overlaps);
@@ -454,6 +498,14 @@ mod tests {
         all.extend(super::pins::MISO_SEL);
         all.extend(super::pins::ACCEL_CS);
         all.extend(super::pins::BACKUP);
+        all.extend(super::pins::SPI2);
+        all.extend(super::pins::MISO_SEL2);
+        // A second root link (the F407's) has its SPI and the selects for its relays.
+        if super::link::PROFILE.link.root_links == 2 {
+            assert_eq!(super::pins::SPI2, ["PB13", "PB14", "PB15"]);
+            let relays = super::link::PROFILE.link.nodes_per_bus as usize / 2;
+            assert!(1 << super::pins::MISO_SEL2.len() >= relays);
+        }
         let n = all.len();
         all.sort();
         all.dedup();

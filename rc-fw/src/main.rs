@@ -31,6 +31,8 @@ mod fw {
     use embassy_stm32::interrupt::{InterruptExt, Priority};
     #[cfg(feature = "board-g0b1")]
     use embassy_stm32::peripherals::{DMA1_CH1, DMA1_CH2, DMA1_CH4, DMA1_CH5, USART1, USB};
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    use embassy_stm32::peripherals::{DMA1_CH3, DMA1_CH4};
     #[cfg(not(feature = "board-g0b1"))]
     use embassy_stm32::peripherals::{DMA1_CH5, DMA1_CH6, DMA2_CH0, DMA2_CH3, USART2, USB_OTG_FS};
     use embassy_stm32::spi::{self, Spi};
@@ -45,15 +47,22 @@ mod fw {
     use embassy_usb::{Builder, UsbDevice};
     use links_board::rs485::Rs485;
     use links_core::backup::{self, PortLine};
+    #[cfg(all(feature = "relay-root", not(feature = "board-f407")))]
+    use links_core::relay::RelayedBuffers;
     #[cfg(feature = "relay-root")]
-    use links_core::relay::{RelayedBuffers, RelayedBus};
+    use links_core::relay::RelayedBus;
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    use links_core::relay::TwoLinks;
     use links_core::serial::film::bank_of;
     use links_core::serial::readback::ByteQueue;
     use links_core::serial::throttle::Room;
     use links_core::serial::{Encoder, FrameStreamer};
     use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
     use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS, SERVE};
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    use rc_fw::link::LINK_NODES;
     use rc_fw::link::{RENDER_NODES, RENDER_NODE_SET};
+    #[cfg(not(all(feature = "relay-root", feature = "board-f407")))]
     use rc_fw::pins::NODES;
     use rc_fw::plan::{FILM_BANK, SCENE};
     use rc_fw::port::{Clock, PipeQueue, RcPort, UsbPipe};
@@ -68,11 +77,15 @@ mod fw {
     #[cfg(feature = "board-g0b1")]
     type UsbDriver = usb::Driver<'static, USB>;
     /// The root logic's bus: the NCs on SPI1, or (feature `relay-root`) the nodes behind
-    /// the relay RCs on SPI1.
+    /// the relay RCs on SPI1 (and, on the F407, SPI2: relays 4..7, `TwoLinks`).
     #[cfg(not(feature = "relay-root"))]
     type Link = MasterFront<'static, 'static>;
     #[cfg(feature = "relay-root")]
-    type Link = RelayedBus<'static, MasterFront<'static, 'static>, Clock>;
+    type Relayed = RelayedBus<'static, MasterFront<'static, 'static>, Clock>;
+    #[cfg(all(feature = "relay-root", not(feature = "board-f407")))]
+    type Link = Relayed;
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    type Link = TwoLinks<Relayed, Relayed>;
 
     #[cfg(not(feature = "board-g0b1"))]
     bind_interrupts!(struct Irqs {
@@ -89,6 +102,10 @@ mod fw {
         USART2 => uart::InterruptHandler<USART2>;
         DMA1_STREAM5 => dma::InterruptHandler<DMA1_CH5>;
         DMA1_STREAM6 => dma::InterruptHandler<DMA1_CH6>;
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        DMA1_STREAM3 => dma::InterruptHandler<DMA1_CH3>;
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        DMA1_STREAM4 => dma::InterruptHandler<DMA1_CH4>;
     });
     // The G0B1: USB (its interrupt shared with the unused UCPD), SPI1 on DMA1 channels 2
     // (TX) and 1 (RX), the handshake lines' EXTI 0-2 and 10-14 (three interrupt lines on the
@@ -109,8 +126,13 @@ mod fw {
     /// DMA banks and the uploaded scene, in SRAM (`.sram`, see memory.x).
     struct Sram {
         link: [Bank; 3],
-        #[cfg(feature = "relay-root")]
+        /// The second root link's banks (SPI2).
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        link2: [Bank; 3],
+        #[cfg(all(feature = "relay-root", not(feature = "board-f407")))]
         relayed: RelayedBuffers,
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        relayed: [rc_fw::plan::TwoLinkFrames; 2],
         scene: [u8; SCENE],
     }
 
@@ -129,6 +151,9 @@ mod fw {
     /// The bus link's two halves share this: the front (`serial_task`, thread mode) hands
     /// transfers over, the bus task clocks them.
     static BUS: MasterShared<'static> = MasterShared::new();
+    /// The second root link's (SPI2; the F407's root of relays).
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    static BUS2: MasterShared<'static> = MasterShared::new();
     /// The bus task's executor: UART4's interrupt (unused on this board; on the G0B1 the
     /// line USART3-6 and LPUART1 share, none of them used) at a priority above thread mode,
     /// so each DMA completion resumes the clocking at once while the root logic composes
@@ -158,11 +183,25 @@ mod fw {
     #[cfg(feature = "board-g0b1")]
     const BUS_PRIORITY: Priority = Priority::P2;
 
+    /// The chip-selects and handshake lines on SPI1: every one, or the first link's half.
+    #[cfg(not(all(feature = "relay-root", feature = "board-f407")))]
+    type Port1 = RcPort<NODES>;
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    type Port1 = RcPort<LINK_NODES>;
+
     /// Clock every transfer the root logic hands over (`links_core::spi::MasterTask`).
     #[embassy_executor::task]
-    async fn bus_task(port: RcPort<NODES>) {
+    async fn bus_task(port: Port1) {
         let mut port = port;
         MasterTask::new().run(&mut port, &BUS).await
+    }
+
+    /// The same for the second root link (SPI2, its multiplexer on two select lines).
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    #[embassy_executor::task]
+    async fn bus2_task(port: RcPort<LINK_NODES, 2>) {
+        let mut port = port;
+        MasterTask::new().run(&mut port, &BUS2).await
     }
 
     #[embassy_executor::task]
@@ -209,14 +248,20 @@ mod fw {
         }
     }
 
-    /// The SPI link's counters after a render (as the root of relays: the relay link's).
+    /// The SPI link's counters after a render (as the root of relays: the relay link's;
+    /// on two links, the sum).
     #[cfg(not(feature = "relay-root"))]
     fn link_counters(link: &Link) -> links_core::spi::MasterCounters {
         link.counters()
     }
-    #[cfg(feature = "relay-root")]
+    #[cfg(all(feature = "relay-root", not(feature = "board-f407")))]
     fn link_counters(link: &Link) -> links_core::spi::MasterCounters {
         link.link().counters()
+    }
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    fn link_counters(link: &Link) -> links_core::spi::MasterCounters {
+        let (a, b) = link.links();
+        a.link().counters().plus(&b.link().counters())
     }
 
     async fn queue(bytes: &[u8]) {
@@ -398,7 +443,8 @@ mod fw {
         ($p:ident, $spi_cfg:ident;
          spi1: [$sck:ident, $miso:ident, $mosi:ident], usb: [$dm:ident, $dp:ident],
          $(accel_cs: $acc:ident,)? cs: [$($cs:ident),*],
-         ready: [$($rdy:ident / $exti:ident),*], miso_sel: [$($sel:ident),*]) => {{
+         ready: [$($rdy:ident / $exti:ident),*], miso_sel: [$($sel:ident),*]
+         $(, spi2: [$sck2:ident, $miso2:ident, $mosi2:ident], miso_sel2: [$($sel2:ident),*])?) => {{
             // The OTG core without VBUS sensing (the G0's USB device peripheral has none to
             // turn off).
             #[cfg(not(feature = "board-g0b1"))]
@@ -420,7 +466,32 @@ mod fw {
             let cs = [$(Output::new($p.$cs, Level::High, Speed::VeryHigh)),*];
             let ready = [$(ExtiInput::new($p.$rdy, $p.$exti, Pull::Down, Irqs)),*];
             let miso_sel = [$(Output::new($p.$sel, Level::Low, Speed::VeryHigh)),*];
+            #[cfg(not(all(feature = "relay-root", feature = "board-f407")))]
             let port = RcPort { spi, cs, ready, miso_sel };
+            // The root of relays on two links: relays 0..3 on SPI1 (its multiplexer's S2
+            // stays low), relays 4..7 on SPI2 (DMA1 streams 4 and 3) behind a second
+            // multiplexer; the chip-selects and handshake lines split the same way.
+            #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+            let port = {
+                let [c0, c1, c2, c3, c4, c5, c6, c7] = cs;
+                let [r0, r1, r2, r3, r4, r5, r6, r7] = ready;
+                $(
+                let spi2 = Spi::new(
+                    $p.SPI2, $p.$sck2, $p.$mosi2, $p.$miso2, $p.DMA1_CH4, $p.DMA1_CH3, Irqs,
+                    $spi_cfg,
+                );
+                let miso_sel2 = [$(Output::new($p.$sel2, Level::Low, Speed::VeryHigh)),*];
+                )?
+                (
+                    RcPort { spi, cs: [c0, c1, c2, c3], ready: [r0, r1, r2, r3], miso_sel },
+                    RcPort {
+                        spi: spi2,
+                        cs: [c4, c5, c6, c7],
+                        ready: [r4, r5, r6, r7],
+                        miso_sel: miso_sel2,
+                    },
+                )
+            };
             (driver, port)
         }};
     }
@@ -456,10 +527,11 @@ mod fw {
         let (tx, rx) = class.split();
 
         let [btx0, btx1, brx] = &mut sram.link;
+        #[cfg(not(all(feature = "relay-root", feature = "board-f407")))]
         let front = MasterFront::new(&BUS, 0, NODES as u16, [btx0, btx1], brx);
         #[cfg(not(feature = "relay-root"))]
         let link = front;
-        #[cfg(feature = "relay-root")]
+        #[cfg(all(feature = "relay-root", not(feature = "board-f407")))]
         let link = unwrap!(RelayedBus::new(
             front,
             &mut sram.relayed,
@@ -467,6 +539,23 @@ mod fw {
             rc_fw::link::PROFILE.link.nodes_per_bus
         ))
         .with_timeout(Clock, rc_fw::link::RELAY_TIMEOUT_US);
+        // Two root links: relays 0..3 (their nodes 0..32) on SPI1, relays 4..7 (nodes
+        // 32..64) on SPI2, one `RelayedBus` each, joined into the root logic's one bus.
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        let (link, port, port2) = {
+            let (port, port2) = port;
+            let per = rc_fw::link::PROFILE.link.nodes_per_bus;
+            let half = LINK_NODES as u16;
+            let front = MasterFront::new(&BUS, 0, half, [btx0, btx1], brx);
+            let [ctx0, ctx1, crx] = &mut sram.link2;
+            let front2 = MasterFront::new(&BUS2, half, half, [ctx0, ctx1], crx);
+            let [f0, f1] = &mut sram.relayed;
+            let timeout = rc_fw::link::RELAY_TIMEOUT_US;
+            let a = unwrap!(RelayedBus::new(front, f0, 0, per)).with_timeout(Clock, timeout);
+            let b =
+                unwrap!(RelayedBus::new(front2, f1, half * per, per)).with_timeout(Clock, timeout);
+            (unwrap!(TwoLinks::new(a, b)), port, port2)
+        };
 
         // The serial backup line: its USART and driver enable (rc_fw::pins::BACKUP).
         #[cfg(feature = "board-f407")]
@@ -496,6 +585,8 @@ mod fw {
         BUS_IRQ.set_priority(BUS_PRIORITY);
         let bus_spawner = EXECUTOR_BUS.start(BUS_IRQ);
         bus_spawner.spawn(unwrap!(bus_task(port)));
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        bus_spawner.spawn(unwrap!(bus2_task(port2)));
         let line: &'static Line = LINE.init(Mutex::new(line));
         spawner.spawn(unwrap!(backup_task(line)));
         spawner.spawn(unwrap!(usb_task(device)));

@@ -20,17 +20,17 @@ pub use crate::link::{CS_HOLD_US, CS_SETUP_US};
 /// A lost handshake edge costs at most this long (the lines are polled as well).
 pub const READY_POLL_US: u64 = 500;
 
-/// The bus hardware for `N` nodes.
-pub struct RcPort<const N: usize> {
+/// The bus hardware for `N` nodes behind a MISO multiplexer with `S` select lines.
+pub struct RcPort<const N: usize, const S: usize = 3> {
     pub spi: Spi<'static, Async, Master>,
     pub cs: [Output<'static>; N],
     pub ready: [ExtiInput<'static, Async>; N],
     /// Select lines (bit 0 first) of the MISO multiplexer: each node's MISO has its own wire
     /// to the mux, so the nodes selected together by a broadcast never drive one line.
-    pub miso_sel: [Output<'static>; 3],
+    pub miso_sel: [Output<'static>; S],
 }
 
-impl<const N: usize> MasterPort for RcPort<N> {
+impl<const N: usize, const S: usize> MasterPort for RcPort<N, S> {
     fn count(&self) -> u16 {
         N as u16
     }

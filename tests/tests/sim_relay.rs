@@ -74,11 +74,14 @@ fn check_clean(what: &str, r: &SimReport, relays: usize) {
         f.root
     );
     let tree = r.tree.as_ref().expect("the root link's report");
-    assert_eq!(
-        tree.links[0].exchanges, f.root.link_exchanges as u64,
-        "{what}"
-    );
-    assert_eq!(tree.links[0].exchanges, f.link.exchanges, "{what}");
+    let roots = tree.shape.roots as usize;
+    let on_links: u64 = tree.links[..roots].iter().map(|l| l.exchanges).sum();
+    assert_eq!(on_links, f.root.link_exchanges as u64, "{what}");
+    assert_eq!(on_links, f.link.exchanges, "{what}");
+    if roots == 2 {
+        // Both root links carried exchanges (each has relays).
+        assert!(tree.links[..2].iter().all(|l| l.exchanges > 0), "{what}");
+    }
     assert!(tree.root_busy_s > 0.0 && r.rc_busy_s > 0.0, "{what}");
 }
 
@@ -87,16 +90,20 @@ fn the_firmware_relay_code_renders_the_single_node_frame() {
     let img = image("photo1.ron", 64, 60);
     let want = reference(&img);
     let policies = [Policy::DECREASING, Policy::Static { shape: Split::Rect }];
-    for (nodes, relays) in [(16u16, 2usize), (24, 3), (64, 8)] {
+    // The F407's root drives its relays on two links (SPI1, SPI2: `TwoLinks`) unless told
+    // one.
+    assert_eq!(firmware(64).buses, 2);
+    for (nodes, relays, buses) in [(16u16, 2usize, 2u16), (24, 3, 2), (64, 8, 2), (64, 8, 1)] {
         for policy in policies {
             let r = run(
                 &img,
                 SimConfig {
                     policy,
+                    buses,
                     ..firmware(nodes)
                 },
             );
-            let what = format!("{nodes} nodes, {policy:?}");
+            let what = format!("{nodes} nodes, {buses} root link(s), {policy:?}");
             assert!(r.frames[0] == want, "{what}");
             assert_eq!(r.root.pixels, 64 * 60, "{what}");
             check_clean(&what, &r, relays);
@@ -212,7 +219,7 @@ fn what_the_firmware_root_cannot_drive_is_refused_with_the_reason() {
         buses: 3,
         ..firmware(64)
     });
-    assert!(e.contains("one SPI bus"), "{e}");
+    assert!(e.contains("1 to 2 SPI buses, not 3"), "{e}");
     let e = err(SimConfig {
         link: LinkModel::Ideal,
         ..firmware(16)

@@ -104,10 +104,11 @@ pub struct ClusterArgs {
     /// (repeatable; --relay firmware only)
     #[arg(long = "kill-relay", value_name = "RELAY@SECONDS")]
     pub kill_relays: Vec<String>,
-    /// SPI buses from the root computer (cluster only): a star's node buses, or under a
-    /// relay tree the root's buses to its children (the F407 has SPI1/2/3)
-    #[arg(long, default_value_t = 1)]
-    pub buses: u16,
+    /// SPI buses from the root computer (cluster only): a star's node buses (default 1),
+    /// or under a relay tree the root's buses to its children (default: the board's root
+    /// links, 2 on the F407: SPI1 and SPI2)
+    #[arg(long)]
+    pub buses: Option<u16>,
     /// SPI bit rate in MHz, 0.001..=10000 (cluster only; default: the board's)
     #[arg(long, value_parser = limits::parse_bit_rate_mhz)]
     pub bit_rate_mhz: Option<f64>,

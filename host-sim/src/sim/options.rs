@@ -564,16 +564,17 @@ pub fn link_summary(r: &SimReport) -> String {
 pub fn config(
     board: BoardProfile,
     nodes: u16,
-    buses: u16,
+    buses: Option<u16>,
     bit_rate_mhz: Option<f64>,
     policy: Policy,
     topology: TopologyArg,
 ) -> SimConfig {
+    let topology = topology.topology(&board, nodes);
     let mut cfg = SimConfig {
         nodes,
-        buses,
+        buses: buses.unwrap_or(topology.default_buses(&board)),
         policy,
-        topology: topology.topology(&board, nodes),
+        topology,
         ..SimConfig::for_board(board)
     };
     if let Some(mhz) = bit_rate_mhz {
@@ -657,7 +658,14 @@ mod tests {
             "{e}"
         );
         let star = TopologyArg::Star;
-        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING, star);
+        let f = config(
+            BoardProfile::F407,
+            64,
+            Some(1),
+            None,
+            Policy::DECREASING,
+            star,
+        );
         assert_eq!(f.timing.bit_rate_hz, 21e6);
         assert_eq!((f.timing.header_bytes, f.timing.trailer_bytes), (8, 1));
         assert_eq!(f.timing.overhead_ns, 23_000.0);
@@ -676,7 +684,7 @@ mod tests {
         let i = config(
             BoardProfile::IDEAL,
             256,
-            1,
+            Some(1),
             Some(10.0),
             Policy::DECREASING,
             star,
@@ -689,7 +697,14 @@ mod tests {
         let e = parse_link("fast").unwrap_err().to_string();
         assert!(e.contains("unknown link 'fast'"), "{e}");
         assert_eq!(topology_note(&i), "");
-        let eight = config(BoardProfile::F407, 64, 8, None, Policy::DECREASING, star);
+        let eight = config(
+            BoardProfile::F407,
+            64,
+            Some(8),
+            None,
+            Policy::DECREASING,
+            star,
+        );
         assert_eq!(eight.overloaded_bus(), None);
     }
 
@@ -724,7 +739,7 @@ mod tests {
         let mut f = config(
             BoardProfile::F407,
             64,
-            1,
+            None,
             None,
             Policy::DECREASING,
             TopologyArg::Buildable,
@@ -732,7 +747,7 @@ mod tests {
         f.relay = RelayCode::Firmware;
         assert_eq!(
             topology_text(&f),
-            "relay tree: 8 relays x 8 nodes, 1 level(s), the firmware's relay code"
+            "relay tree: 8 relays x 8 nodes, 1 level(s) (the root on 2 buses), the firmware's relay code"
         );
     }
 
@@ -742,21 +757,27 @@ mod tests {
         let e = "ring".parse::<TopologyArg>().unwrap_err().to_string();
         assert!(e.contains("unknown topology 'ring'"), "{e}");
         let b = TopologyArg::Buildable;
-        let f = config(BoardProfile::F407, 64, 1, None, Policy::DECREASING, b);
+        let f = config(BoardProfile::F407, 64, None, None, Policy::DECREASING, b);
         assert_eq!(f.overloaded_bus(), None);
         assert_eq!(topology_note(&f), "");
+        // The root drives its relays on the board's two root links unless told.
+        assert_eq!(
+            topology_text(&f),
+            "relay tree: 8 relays x 8 nodes, 1 level(s) (the root on 2 buses), modelled relays (--relay firmware runs their code)"
+        );
+        let f = config(BoardProfile::F407, 64, Some(1), None, Policy::DECREASING, b);
         assert_eq!(
             topology_text(&f),
             "relay tree: 8 relays x 8 nodes, 1 level(s), modelled relays (--relay firmware runs their code)"
         );
-        let f = config(BoardProfile::F407, 256, 1, None, Policy::DECREASING, b);
+        let f = config(BoardProfile::F407, 256, None, None, Policy::DECREASING, b);
         assert_eq!(
             topology_text(&f),
-            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays), modelled relays (--relay firmware runs their code)"
+            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays, the root on 2 buses), modelled relays (--relay firmware runs their code)"
         );
-        let f = config(BoardProfile::F407, 8, 1, None, Policy::DECREASING, b);
+        let f = config(BoardProfile::F407, 8, None, None, Policy::DECREASING, b);
         assert_eq!(topology_text(&f), "star, 1 bus(es)");
-        let i = config(BoardProfile::IDEAL, 256, 1, None, Policy::DECREASING, b);
+        let i = config(BoardProfile::IDEAL, 256, None, None, Policy::DECREASING, b);
         assert_eq!(i.topology, Topology::Star);
     }
 
@@ -796,7 +817,7 @@ mod tests {
         let mut cfg = config(
             BoardProfile::IDEAL,
             8,
-            1,
+            Some(1),
             Some(42.0),
             Policy::DECREASING,
             star,

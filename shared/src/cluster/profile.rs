@@ -67,6 +67,10 @@ pub struct LinkProfile {
     /// Whether the RC clocks the wire while it composes the next transfer and decodes the
     /// last one (DMA double buffering on the RC); `false`: one at a time.
     pub rc_overlaps: bool,
+    /// SPI buses the root of a relay tree drives its relays on (`rc-fw --features
+    /// relay-root`; `links_core::relay::TwoLinks` for two): the simulator's default root
+    /// buses under a relay tree.
+    pub root_links: u16,
 }
 
 impl LinkProfile {
@@ -76,7 +80,9 @@ impl LinkProfile {
     /// after the transfer it stops and re-arms its DMA), the 8-byte header (magic, kind,
     /// length, body CRC-16, header CRC-16) and the 1-byte ACK/NAK trailer, 8 nodes per bus
     /// (`rc-fw`'s pin table), and an RC whose bus task clocks the wire on an interrupt
-    /// executor while the root logic composes the next transfer ([`spi::RC_OVERLAPS`]).
+    /// executor while the root logic composes the next transfer ([`spi::RC_OVERLAPS`]). A
+    /// root of relays drives them on SPI1 and SPI2 (SPI2 on APB1, 42 MHz / 2: the same
+    /// 21 MHz), half the relays on each (`docs/hardware.md`).
     pub const F407: LinkProfile = LinkProfile {
         bit_rate_hz: 21_000_000,
         cs_setup_ns: 8_000,
@@ -85,6 +91,7 @@ impl LinkProfile {
         trailer_bytes: 1,
         nodes_per_bus: 8,
         rc_overlaps: spi::RC_OVERLAPS,
+        root_links: 2,
     };
 
     /// The F207 boards' link: the F407's protocol (header, trailer, 8 nodes per bus, an RC
@@ -99,6 +106,7 @@ impl LinkProfile {
         bit_rate_hz: 15_000_000,
         cs_setup_ns: 12_000,
         cs_hold_ns: 21_000,
+        root_links: 1,
         ..Self::F407
     };
 
@@ -113,6 +121,7 @@ impl LinkProfile {
         bit_rate_hz: 16_000_000,
         cs_setup_ns: 21_000,
         cs_hold_ns: 40_000,
+        root_links: 1,
         ..Self::F407
     };
 
@@ -128,6 +137,7 @@ impl LinkProfile {
         trailer_bytes: 0,
         nodes_per_bus: MAX_NODES as u16,
         rc_overlaps: true,
+        root_links: 1,
     };
 
     /// Size of one DMA bank: header, the largest frame, trailer, rounded up to a word.
@@ -438,5 +448,7 @@ mod tests {
             [1, 1, 1, 2, 8, 32]
         );
         assert_eq!(BoardProfile::IDEAL.buses_for(256), 1);
+        // The F407's root of relays drives them on SPI1 and SPI2; the others on one bus.
+        assert_eq!(BoardProfile::ALL.map(|b| b.link.root_links), [2, 1, 1, 1]);
     }
 }

@@ -223,11 +223,15 @@ impl SimConfig {
     }
 
     /// `nodes` nodes on `profile` as the board can be built: a star of one bus while it
-    /// holds them all, a relay tree otherwise ([`Topology::buildable`]).
+    /// holds them all, a relay tree otherwise ([`Topology::buildable`]) whose root drives
+    /// its relays on the profile's root links
+    /// ([`links_core::board::LinkProfile::root_links`]).
     pub fn buildable(profile: BoardProfile, nodes: u16) -> Self {
+        let topology = Topology::buildable(&profile, nodes);
         Self {
             nodes,
-            topology: Topology::buildable(&profile, nodes),
+            topology,
+            buses: topology.default_buses(&profile),
             ..Self::for_board(profile)
         }
     }

@@ -49,6 +49,15 @@ pub enum Topology {
 }
 
 impl Topology {
+    /// The root's buses when none are asked for: one for a star, the profile's root links
+    /// ([`links_core::board::LinkProfile::root_links`]) under a relay tree.
+    pub const fn default_buses(&self, profile: &BoardProfile) -> u16 {
+        match self {
+            Topology::Star => 1,
+            Topology::RelayTree { .. } => profile.link.root_links,
+        }
+    }
+
     /// The topology `profile` can be built as for `nodes` nodes: a star while one bus holds
     /// them all, a relay tree of `nodes_per_bus` relays per parent otherwise.
     pub const fn buildable(profile: &BoardProfile, nodes: u16) -> Topology {

@@ -24,12 +24,12 @@ use super::rccost::{LinkCpu, LinkRole, RcClock};
 use super::relay::{FirmwareRelays, RelayCode, Topology, TreeLink, TreeReport, TreeShape};
 use super::run::{on_master_bus, on_slave_link, LinkReport, MasterEnd, RootShared};
 use super::spi_bus::{LinkModel, SharedWire, Wire, WireTiming};
-use super::star::{Faults, Noise, SharedStar, Star};
+use super::star::{BusCounters, Faults, Noise, SharedStar, Star};
 use super::timeline::SharedTimeline;
 use super::{Collect, SimConfig, SimError};
 use links_core::relay::{
     run_relay, RelayBuffers, RelayError, RelayReport, RelayedBuffers, RelayedBus, RelayedCounters,
-    MAX_RELAYS, MAX_RELAY_NODES, RELAY_TIMEOUT_US,
+    RelayedFrames, TwoLinks, MAX_RELAYS, MAX_RELAY_NODES, RELAY_TIMEOUT_US, TWO_LINK_SLOTS,
 };
 use links_core::root::{run_bus, RootError};
 use links_core::spi::{Bank, BANK};
@@ -40,14 +40,18 @@ use std::rc::Rc;
 /// The root link's noise generator is seeded apart from the leaf buses' (same rates).
 const ROOT_LINK_SEED: u64 = 0x9e37_79b9_7f4a_7c15;
 
+/// Most SPI buses the firmware's root of relays drives its relays on (`rc-fw --features
+/// relay-root`: SPI1 and SPI2 of the F407).
+pub(super) const ROOT_LINKS: usize = 2;
+
 /// The relays and nodes per relay of the firmware's relay tree `cfg` asks for, if it asks
 /// for one (checked by [`check`]).
-pub(super) fn firmware_tree(cfg: &SimConfig) -> Option<(u16, u16)> {
+pub(super) fn firmware_tree(cfg: &SimConfig) -> Option<(u16, u16, u16)> {
     if cfg.relay != RelayCode::Firmware || cfg.topology == Topology::Star {
         return None;
     }
     let shape = cfg.tree()?.ok()?;
-    Some((shape.leaves, cfg.nodes / shape.leaves.max(1)))
+    Some((shape.leaves, cfg.nodes / shape.leaves.max(1), shape.roots))
 }
 
 /// Refuse what the firmware's relay code cannot run, saying why.
@@ -75,9 +79,11 @@ pub(super) fn check(cfg: &SimConfig) -> Result<(), SimError> {
             cfg.profile.name
         ));
     }
-    if tree.roots > 1 {
+    if tree.roots as usize > ROOT_LINKS || tree.roots > tree.leaves {
         return no(format!(
-            "the firmware's root of relays drives its relays on one SPI bus, not {} (--buses 1, or --relay model)",
+            "the firmware's root of relays drives its {} relays on 1 to {} SPI buses, not {} (--buses)",
+            tree.leaves,
+            ROOT_LINKS.min(tree.leaves as usize),
             tree.roots
         ));
     }
@@ -121,8 +127,9 @@ pub(super) fn check(cfg: &SimConfig) -> Result<(), SimError> {
     Ok(())
 }
 
-/// The root's link to its relays (an emulated SPI bus whose "nodes" are the relays), what
-/// its two ends counted, and what the relay code reported.
+/// The root's links to its relays (emulated SPI buses whose "nodes" are the relays, relay
+/// `r` on link `r * links / relays`), what their two ends counted, and what the relay code
+/// reported.
 pub(super) struct RelayLink {
     pub(super) star: SharedStar,
     wire: SharedWire,
@@ -136,9 +143,13 @@ pub(super) struct RelayLink {
 }
 
 impl RelayLink {
-    /// `relays` relays of `per_relay` nodes on the root's link at `cfg`'s timing.
-    pub(super) fn new(clock: &SharedClock, cfg: &SimConfig, relays: u16, per_relay: u16) -> Self {
-        let star = Star::new(clock, relays, 1, cfg.timing, Faults::default(), None);
+    /// `relays` relays of `per_relay` nodes on `links` root links at `cfg`'s timing.
+    pub(super) fn new(
+        clock: &SharedClock,
+        cfg: &SimConfig,
+        (relays, per_relay, links): (u16, u16, u16),
+    ) -> Self {
+        let star = Star::new(clock, relays, links, cfg.timing, Faults::default(), None);
         star.borrow_mut().set_noise(Noise {
             seed: cfg.noise.seed ^ ROOT_LINK_SEED,
             ..cfg.noise
@@ -152,7 +163,7 @@ impl RelayLink {
         Self {
             star,
             wire,
-            counters: LinkReport::new(1, relays),
+            counters: LinkReport::new(links.clamp(1, relays.max(1)) as usize, relays),
             relays,
             per_relay,
             root_busy: Rc::new(Cell::new(0)),
@@ -171,22 +182,35 @@ impl RelayLink {
             .all(|(r, rep)| rep.is_some() || star.is_dead(r))
     }
 
-    /// The root link's traffic and the root's CPU, as the relay model reports them;
-    /// `frames_up`: the node frames the relays clocked.
+    /// The root links' traffic and the root's CPU, as the relay model reports them;
+    /// `frames_up`: the node frames the relays clocked (each link's share by its relays'
+    /// nodes' transfers is not known here: all are put on the first link).
     pub(super) fn report(&self, shape: TreeShape, frames_up: u64) -> TreeReport {
-        let c = self.star.borrow().counters()[0];
-        TreeReport {
-            shape,
-            links: vec![TreeLink {
+        let links = self
+            .star
+            .borrow()
+            .counters()
+            .iter()
+            .enumerate()
+            .map(|(k, c)| TreeLink {
                 busy_until: 0,
                 busy_ps: c.busy_ps,
                 broadcasts: c.broadcasts,
                 exchanges: c.exchanges,
-                frames_up,
+                frames_up: if k == 0 { frames_up } else { 0 },
                 clocked_bytes: c.clocked_bytes,
-            }],
+            })
+            .collect();
+        TreeReport {
+            shape,
+            links,
             root_busy_s: self.root_busy.get() as f64 * 1e-12,
         }
+    }
+
+    /// The root's links.
+    pub(super) fn links(&self) -> usize {
+        self.star.borrow().bus_count()
     }
 
     /// What the relay code reported (a relay's error is the run's).
@@ -199,16 +223,21 @@ impl RelayLink {
                 None => relays.push(None),
             }
         }
+        let star = self.star.borrow();
+        let mut link = BusCounters::default();
+        for c in star.counters() {
+            link.add(&c);
+        }
         Ok(FirmwareRelays {
             root: *self.relayed.borrow(),
             relays,
-            link: self.star.borrow().counters()[0],
+            link,
         })
     }
 }
 
-/// The tasks of a firmware relay tree: the root (`run_bus` over `RelayedBus` on its link),
-/// then one per relay (`run_relay` between its slave link on the root's bus and the master
+/// The tasks of a firmware relay tree: the root (`run_bus` over `RelayedBus` on each of its
+/// links), then one per relay (`run_relay` between its slave link on the root's bus and the master
 /// of leaf bus `r` of `wire`). The leaf relays' CPU time adds up in `rc_busy`.
 pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
     cfg: &SimConfig,
@@ -226,40 +255,76 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
         busy: busy.clone(),
     };
     let root_cpu_free = Rc::new(Cell::new(0 as Ps));
-    let rc_clock = RcClock {
+    let rc_clock = Rc::new(RcClock {
         clock: clock.clone(),
         cost: cfg.rc_cost,
         sink_pixels: cfg.collect == Collect::ViaRoot,
         cpu_free: root_cpu_free.clone(),
         busy: link.root_busy.clone(),
         timeline: log.clone(),
-    };
-    let end = MasterEnd {
+    });
+    let per = link.per_relay;
+    let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
+    // Each root link's master end; the root's one CPU is shared.
+    let [end0, end1] = [0, 1].map(|_| MasterEnd {
         split: true,
         report: link.counters.master.clone(),
-        cpu: Some(cpu(LinkRole::Root, &link.root_busy, root_cpu_free)),
-    };
-    let (root_wire, per) = (link.wire.clone(), link.per_relay);
-    let timeout_clock = VirtualClock(clock.clone());
-    let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
+        cpu: Some(cpu(LinkRole::Root, &link.root_busy, root_cpu_free.clone())),
+    });
+    let (root_wire, wire1) = (link.wire.clone(), link.wire.clone());
+    let (timeout_clock, clock2) = (VirtualClock(clock.clone()), VirtualClock(clock.clone()));
     tasks.push(Some(Box::pin(async move {
-        let rc_clock = &rc_clock;
-        on_master_bus(&root_wire, 0, end, async move |bus| {
-            let mut bufs = Box::new(RelayedBuffers::new());
-            let r = match RelayedBus::new(bus, &mut bufs, 0, per) {
-                Ok(relayed) => {
-                    let mut relayed = relayed.with_timeout(timeout_clock, RELAY_TIMEOUT_US);
-                    let r = run_bus(0, &mut relayed, rc_clock, root, dm, sink).await;
-                    *link.relayed.borrow_mut() = relayed.counters;
+        let rc_clock = &*rc_clock;
+        let failed = RootError::TooManyNodes {
+            nodes: link.relays.saturating_mul(per),
+        };
+        let r = if link.links() == 1 {
+            // One link: `RelayedBus` with SLOTS exchanges in flight.
+            on_master_bus(&root_wire, 0, end0, async move |bus| {
+                let mut bufs = Box::new(RelayedBuffers::new());
+                let Ok(relayed) = RelayedBus::new(bus, &mut *bufs, 0, per) else {
+                    return Err(failed);
+                };
+                let mut relayed = relayed.with_timeout(timeout_clock, RELAY_TIMEOUT_US);
+                let r = run_bus(0, &mut relayed, rc_clock, root, dm, sink).await;
+                add_counters(&mut link.relayed.borrow_mut(), &relayed.counters);
+                r
+            })
+            .await
+        } else {
+            // Two links, as `rc-fw --features relay-root` drives them: `TwoLinks` over a
+            // `RelayedBus` on each (TWO_LINK_SLOTS exchanges in flight on each).
+            let second_first = link.star.borrow().bus_nodes(1).0.saturating_mul(per);
+            on_master_bus(&root_wire, 0, end0, async move |bus0| {
+                on_master_bus(&wire1, 1, end1, async move |bus1| {
+                    let mut bufs = Box::new([
+                        RelayedFrames::<{ TWO_LINK_SLOTS + 2 }>::new(),
+                        RelayedFrames::new(),
+                    ]);
+                    let [b0, b1] = &mut *bufs;
+                    let (Ok(r0), Ok(r1)) = (
+                        RelayedBus::new(bus0, b0, 0, per),
+                        RelayedBus::new(bus1, b1, second_first, per),
+                    ) else {
+                        return Err(failed);
+                    };
+                    let Ok(mut two) = TwoLinks::new(
+                        r0.with_timeout(timeout_clock, RELAY_TIMEOUT_US),
+                        r1.with_timeout(clock2, RELAY_TIMEOUT_US),
+                    ) else {
+                        return Err(failed);
+                    };
+                    let r = run_bus(0, &mut two, rc_clock, root, dm, sink).await;
+                    let (l0, l1) = two.links();
+                    add_counters(&mut link.relayed.borrow_mut(), &l0.counters);
+                    add_counters(&mut link.relayed.borrow_mut(), &l1.counters);
                     r
-                }
-                Err(_) => Err(RootError::TooManyNodes {
-                    nodes: link.relays.saturating_mul(per),
-                }),
-            };
-            bus_results.borrow_mut()[0] = Some(r);
-        })
-        .await
+                })
+                .await
+            })
+            .await
+        };
+        bus_results.borrow_mut()[0] = Some(r);
     })));
     for r in 0..link.relays {
         let (root_wire, slots) = (link.wire.clone(), link.counters.slaves.clone());
@@ -285,4 +350,14 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
         })));
     }
     tasks
+}
+
+/// `b`'s counts added to `a`'s (the most in flight: the larger).
+fn add_counters(a: &mut RelayedCounters, b: &RelayedCounters) {
+    a.link_exchanges += b.link_exchanges;
+    a.gathering += b.gathering;
+    a.bad_batches += b.bad_batches;
+    a.stray_frames += b.stray_frames;
+    a.timeouts += b.timeouts;
+    a.most_in_flight = a.most_in_flight.max(b.most_in_flight);
 }

@@ -226,8 +226,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     if let Some(log) = &log {
         star.borrow_mut().set_timeline(log.clone());
     }
-    let relay_link =
-        firmware_tree(cfg).map(|(relays, per)| RelayLink::new(&clock, cfg, relays, per));
+    let relay_link = firmware_tree(cfg).map(|tree| RelayLink::new(&clock, cfg, tree));
     if let (Some(link), Some(log)) = (&relay_link, &log) {
         link.star.borrow_mut().set_root_link_timeline(log.clone());
     }
@@ -237,7 +236,7 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     });
     let busy = Rc::new(RefCell::new(vec![0 as Ps; cfg.nodes as usize]));
     let mut node_reports: Vec<NodeReport> = vec![NodeReport::default(); cfg.nodes as usize];
-    // One `run_bus` per bus, or the root's one over its relays.
+    // One `run_bus` per bus, or the root's one over its relays (on one or two links).
     let root_buses = if relay_link.is_some() { 1 } else { buses };
     let bus_results: RefCell<Vec<Option<Result<RootReport, RootError>>>> =
         RefCell::new(vec![None; root_buses]);

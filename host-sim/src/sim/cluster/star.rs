@@ -271,6 +271,21 @@ impl BusCounters {
     pub fn corrupted(&self) -> u64 {
         self.corrupted_up + self.corrupted_down + self.corrupted_broadcast
     }
+
+    /// Add another bus's counts (busy time too: the sum over buses).
+    pub fn add(&mut self, o: &BusCounters) {
+        self.exchanges += o.exchanges;
+        self.broadcasts += o.broadcasts;
+        self.clocked_bytes += o.clocked_bytes;
+        self.down_bytes += o.down_bytes;
+        self.up_bytes += o.up_bytes;
+        self.broadcast_bytes += o.broadcast_bytes;
+        self.busy_ps += o.busy_ps;
+        self.corrupted_up += o.corrupted_up;
+        self.corrupted_down += o.corrupted_down;
+        self.corrupted_broadcast += o.corrupted_broadcast;
+        self.dropped_broadcast += o.dropped_broadcast;
+    }
 }
 
 struct NodeState {

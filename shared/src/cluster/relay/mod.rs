@@ -46,13 +46,18 @@
 mod batch;
 mod node;
 mod root;
+mod two;
 
 pub use batch::{
     forward, parse, BatchWriter, Kind, Record, Records, Relayed, BATCH_BYTES, BATCH_HEADER,
     MAX_RELAY_NODES, MAX_ROUTED, RECORD, TAG_BATCH, TAG_FORWARD,
 };
 pub use node::{run_relay, RelayBuffers, RelayReport};
-pub use root::{RelayedBuffers, RelayedBus, RelayedCounters, DEPTH, MAX_RELAYS, SLOTS};
+pub use root::{
+    RelayedBuffers, RelayedBus, RelayedCounters, RelayedFrames, DEPTH, MAX_RELAYS, SLOTS,
+    TWO_LINK_SLOTS,
+};
+pub use two::TwoLinks;
 
 #[cfg(doc)]
 use crate::cluster::link::RootBus;

@@ -17,6 +17,11 @@ pub const MAX_RELAYS: usize = 32;
 /// buffer of [`RelayedBuffers`]: its reply until the node's frame comes back into it).
 pub const SLOTS: usize = 16;
 
+/// Node exchanges in flight on each link when the root drives its relays on two links
+/// ([`super::TwoLinks`]): the one link's [`SLOTS`] shared out, each link's buffers
+/// `RelayedFrames<{ TWO_LINK_SLOTS + 2 }>`.
+pub const TWO_LINK_SLOTS: usize = SLOTS / 2;
+
 /// Node exchanges in flight per relay unless told otherwise ([`RelayedBus::with_depth`]):
 /// one being clocked on the relay's bus, one more whose reply is already down (or goes
 /// down in the exchange that brings the first one's frame up).
@@ -42,28 +47,33 @@ pub struct RelayedCounters {
     pub most_in_flight: u32,
 }
 
-/// The buffers of a [`RelayedBus`] (`SLOTS + 3` frames of [`MAX_MESSAGE`]: 29,944 bytes
-/// with [`SLOTS`] = 16, 6,304 with one exchange in flight before; the firmware places them
-/// in SRAM beside the scene, since all-zero bytes are a valid value).
-pub struct RelayedBuffers {
+/// The buffers of a [`RelayedBus`]: `FRAMES` frame buffers and the link's receive buffer,
+/// all of [`MAX_MESSAGE`] bytes (the firmware places them in SRAM beside the scene, since
+/// all-zero bytes are a valid value). `FRAMES - 2` node exchanges may be in flight at once
+/// (at most [`SLOTS`]).
+pub struct RelayedFrames<const FRAMES: usize> {
     /// One frame buffer per node exchange in flight, one for the broadcast waiting to go
     /// and one to compose the next frame in: an exchange's buffer holds its reply until the
     /// node's frame comes back into it.
-    pub frames: [[u8; MAX_MESSAGE]; SLOTS + 2],
+    pub frames: [[u8; MAX_MESSAGE]; FRAMES],
     /// What the link's last relay exchange brought.
     pub rx: [u8; MAX_MESSAGE],
 }
 
-impl RelayedBuffers {
+/// The buffers of a [`RelayedBus`] with [`SLOTS`] node exchanges in flight (`SLOTS + 3`
+/// frames: 29,944 bytes with [`SLOTS`] = 16, 6,304 with one exchange in flight before).
+pub type RelayedBuffers = RelayedFrames<{ SLOTS + 2 }>;
+
+impl<const FRAMES: usize> RelayedFrames<FRAMES> {
     pub const fn new() -> Self {
-        RelayedBuffers {
-            frames: [[0; MAX_MESSAGE]; SLOTS + 2],
+        RelayedFrames {
+            frames: [[0; MAX_MESSAGE]; FRAMES],
             rx: [0; MAX_MESSAGE],
         }
     }
 }
 
-impl Default for RelayedBuffers {
+impl<const FRAMES: usize> Default for RelayedFrames<FRAMES> {
     fn default() -> Self {
         Self::new()
     }
@@ -119,7 +129,11 @@ enum Cast {
 /// ([`crate::spi::MasterFront`]) is; a dropped exchange is taken before the next one.
 pub struct RelayedBus<'m, L, C = NoClock> {
     link: L,
-    buf: &'m mut RelayedBuffers,
+    /// The frame buffers (`slots + 2` of them are used) and the receive buffer.
+    frames: &'m mut [[u8; MAX_MESSAGE]],
+    rx: &'m mut [u8; MAX_MESSAGE],
+    /// Node exchanges in flight at most, over all relays (the buffers': at most [`SLOTS`]).
+    slot_count: u16,
     /// How long a node exchange may wait for its frame (µs; 0: for ever), by `clock`.
     clock: C,
     timeout_us: u64,
@@ -154,13 +168,22 @@ pub struct RelayedBus<'m, L, C = NoClock> {
 }
 
 impl<'m, L: RootBus> RelayedBus<'m, L> {
-    /// The nodes `first..first + relays * per_relay` behind every relay on `link`.
-    pub fn new(
+    /// The nodes `first..first + relays * per_relay` behind every relay on `link`, with
+    /// `FRAMES - 2` node exchanges in flight at most (3 to `SLOTS + 2` frames; more are
+    /// not used).
+    pub fn new<const FRAMES: usize>(
         link: L,
-        buf: &'m mut RelayedBuffers,
+        buf: &'m mut RelayedFrames<FRAMES>,
         first: NodeId,
         per_relay: u16,
     ) -> Result<Self, RelayError> {
+        const {
+            assert!(
+                FRAMES >= 3,
+                "a relayed bus needs a slot and two spare frames"
+            )
+        };
+        let slot_count = (FRAMES - 2).min(SLOTS) as u16;
         let relays = link.nodes().1;
         let total = relays as u32 * per_relay as u32;
         if relays as usize > MAX_RELAYS || per_relay > MAX_RELAY_NODES {
@@ -175,9 +198,12 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
                 most: u16::MAX as u32,
             });
         }
+        let RelayedFrames { frames, rx } = buf;
         Ok(RelayedBus {
             link,
-            buf,
+            frames: &mut frames[..slot_count as usize + 2],
+            rx,
+            slot_count,
             clock: NoClock,
             timeout_us: 0,
             first,
@@ -206,7 +232,9 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
     pub fn with_timeout<C: RootClock>(self, clock: C, timeout_us: u64) -> RelayedBus<'m, L, C> {
         RelayedBus {
             link: self.link,
-            buf: self.buf,
+            frames: self.frames,
+            rx: self.rx,
+            slot_count: self.slot_count,
             clock,
             timeout_us,
             first: self.first,
@@ -234,10 +262,10 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
         &self.link
     }
 
-    /// At most `depth` node exchanges in flight per relay (1 to [`SLOTS`]; [`DEPTH`] unless
-    /// told).
+    /// At most `depth` node exchanges in flight per relay (1 to the buffers' slots;
+    /// [`DEPTH`] unless told).
     pub fn with_depth(mut self, depth: u16) -> Self {
-        self.depth = depth.clamp(1, SLOTS as u16);
+        self.depth = depth.clamp(1, self.slot_count);
         self
     }
 
@@ -250,6 +278,14 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
 
     fn relay_of(&self, node: NodeId) -> Option<u16> {
         self.place(node).map(|(r, _)| r)
+    }
+
+    /// A slot no exchange holds, among the buffers' `slot_count`.
+    fn free_slot(&self) -> Option<usize> {
+        self.slots
+            .iter()
+            .take(self.slot_count as usize)
+            .position(Option::is_none)
     }
 
     /// The slot of `node`'s exchange in flight.
@@ -288,9 +324,7 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
     /// A node an exchange may begin with now: waiting, none in flight with it, its relay
     /// below `depth`, a slot free.
     fn ready_in(&self) -> Option<NodeId> {
-        if self.slots.iter().all(Option::is_some) {
-            return None;
-        }
+        self.free_slot()?;
         let total = self.relays * self.per_relay;
         (0..total)
             .map(|k| (self.next_scan + k) % total)
@@ -384,7 +418,7 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
         match op {
             LinkOp::Broadcast => {
                 if let Some(Cast::Queued { buf, len }) = self.cast {
-                    let frame = self.buf.frames[buf as usize].get(..len).unwrap_or(&[]);
+                    let frame = self.frames[buf as usize].get(..len).unwrap_or(&[]);
                     let n =
                         forward(frame, self.link.tx_bank()).map_err(|_| LinkError::TooLong {
                             len: len as u32 + 1,
@@ -428,9 +462,7 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                         if sent != pass_sent || node < base || local >= per {
                             continue;
                         }
-                        let data = self.buf.frames[buf as usize]
-                            .get(..len as usize)
-                            .unwrap_or(&[]);
+                        let data = self.frames[buf as usize].get(..len as usize).unwrap_or(&[]);
                         if w.push(Record {
                             kind: Kind::Request,
                             node: local,
@@ -484,7 +516,7 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
         let Some(op) = self.dangling else {
             return Ok(());
         };
-        let got = self.link.finish(&mut self.buf.rx).await;
+        let got = self.link.finish(&mut self.rx[..]).await;
         self.landed(op, got)
     }
 
@@ -520,7 +552,7 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
         // Records name a relay's nodes by their index on its bus.
         let per = self.per_relay;
         let base = self.first.wrapping_add(r.wrapping_mul(per));
-        let RelayedBuffers { frames, rx } = &mut *self.buf;
+        let (frames, rx) = (&mut *self.frames, &*self.rx);
         let Ok(Relayed::Batch { waiting, records }) = parse(rx.get(..got).unwrap_or(&[])) else {
             self.counters.bad_batches += 1;
             return;
@@ -607,7 +639,7 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
     }
 
     fn tx_bank(&mut self) -> &mut [u8] {
-        &mut self.buf.frames[self.compose as usize][..MAX_ROUTED]
+        &mut self.frames[self.compose as usize][..MAX_ROUTED]
     }
 
     fn start(&mut self, transfer: Transfer, len: usize) -> Result<(), LinkError> {
@@ -623,7 +655,7 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
         match transfer {
             Transfer::Exchange(node) => {
                 let (r, b) = self.place(node).ok_or(LinkError::NoSuchNode { node })?;
-                let free = self.slots.iter().position(Option::is_none);
+                let free = self.free_slot();
                 let (Some(i), None) = (free, self.slot_of(node)) else {
                     return Err(LinkError::Busy);
                 };
@@ -653,13 +685,15 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
             }
         }
         // The next frame goes into a buffer no exchange or broadcast holds (there are
-        // SLOTS + 2).
+        // slot_count + 2).
         let cast = match self.cast {
             Some(Cast::Queued { buf, .. }) => Some(buf),
             _ => None,
         };
         let owned = |b: u8| Some(b) == cast || self.slots.iter().flatten().any(|s| s.buf == b);
-        self.compose = (0..=SLOTS as u8 + 1).find(|&b| !owned(b)).unwrap_or(0);
+        self.compose = (0..=self.slot_count as u8 + 1)
+            .find(|&b| !owned(b))
+            .unwrap_or(0);
         // Put it on the link now if the link is free.
         self.poll();
         Ok(())
@@ -711,7 +745,7 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
     fn in_flight(&self) -> u16 {
         self.depth
             .saturating_mul(self.relays)
-            .clamp(1, SLOTS as u16)
+            .clamp(1, self.slot_count)
     }
 
     fn arrived(&self) -> Option<NodeId> {
@@ -740,7 +774,7 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
                     let dst = rx
                         .get_mut(..n)
                         .ok_or(LinkError::TooLong { len: n as u32, max })?;
-                    dst.copy_from_slice(&self.buf.frames[slot.buf as usize][..n]);
+                    dst.copy_from_slice(&self.frames[slot.buf as usize][..n]);
                     return Ok(n);
                 }
                 Stage::Asked { deadline, .. }
@@ -757,7 +791,7 @@ impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
 
     fn poll(&mut self) {
         if let Some(op) = self.dangling {
-            match poll_once(self.link.finish(&mut self.buf.rx)) {
+            match poll_once(self.link.finish(&mut self.rx[..])) {
                 Poll::Pending => return,
                 Poll::Ready(got) => {
                     // A failed relay exchange is asked again; a failed broadcast is

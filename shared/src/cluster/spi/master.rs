@@ -54,6 +54,22 @@ pub struct MasterCounters {
     pub bytes: u64,
 }
 
+impl MasterCounters {
+    /// Both links' counts together (a root driving two links).
+    pub fn plus(&self, o: &MasterCounters) -> MasterCounters {
+        MasterCounters {
+            exchanges: self.exchanges.saturating_add(o.exchanges),
+            broadcasts: self.broadcasts.saturating_add(o.broadcasts),
+            naks: self.naks.saturating_add(o.naks),
+            bad_headers: self.bad_headers.saturating_add(o.bad_headers),
+            not_ready: self.not_ready.saturating_add(o.not_ready),
+            no_ack: self.no_ack.saturating_add(o.no_ack),
+            port_errors: self.port_errors.saturating_add(o.port_errors),
+            bytes: self.bytes.saturating_add(o.bytes),
+        }
+    }
+}
+
 /// Whether the firmware's RC clocks the wire while it composes and decodes: yes, `rc-fw`
 /// runs [`super::MasterTask`] on an interrupt executor above the thread executor where the
 /// root logic drives [`super::MasterFront`] (the inline [`MasterLink`] does not overlap).
