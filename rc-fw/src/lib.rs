@@ -114,12 +114,13 @@ pub mod plan {
             half
         }
     };
-    /// Bytes of serial frames queued for USB (in CCM). The root of a relay tree keeps 6 KB
-    /// (still above both bounds below): its serial task holds `RelayedBus`, whose state for
-    /// several node exchanges in flight took the CCM past its statics budget
-    /// (`scripts/fw-size f407-relay-root`: 50,208 bytes against 49,152).
+    /// Bytes of serial frames queued for USB (in CCM). The root of a relay tree keeps
+    /// 5.5 KB (still above both bounds below, the throttle's 5,586): its serial task holds
+    /// `RelayedBus`, whose state for several node exchanges in flight took the CCM past its
+    /// statics budget (`scripts/fw-size f407-relay-root`: 50,208 bytes against 49,152 at
+    /// 8 KB; 6 KB held one root link, two links' state needed the last half KB).
     pub const USB_QUEUE: usize = if cfg!(feature = "relay-root") {
-        6 * 1024
+        11 * 512
     } else {
         8 * 1024
     };

@@ -80,10 +80,16 @@ mod fw {
     /// the relay RCs on SPI1 (and, on the F407, SPI2: relays 4..7, `TwoLinks`).
     #[cfg(not(feature = "relay-root"))]
     type Link = MasterFront<'static, 'static>;
-    #[cfg(feature = "relay-root")]
-    type Relayed = RelayedBus<'static, MasterFront<'static, 'static>, Clock>;
     #[cfg(all(feature = "relay-root", not(feature = "board-f407")))]
-    type Link = Relayed;
+    type Link = RelayedBus<'static, MasterFront<'static, 'static>, Clock>;
+    /// Each link's state keeps `TWO_LINK_SLOTS` exchanges in flight (its buffers' count).
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    type Relayed = RelayedBus<
+        'static,
+        MasterFront<'static, 'static>,
+        Clock,
+        { links_core::relay::TWO_LINK_SLOTS },
+    >;
     #[cfg(all(feature = "relay-root", feature = "board-f407"))]
     type Link = TwoLinks<Relayed, Relayed>;
 
@@ -551,9 +557,10 @@ mod fw {
             let front2 = MasterFront::new(&BUS2, half, half, [ctx0, ctx1], crx);
             let [f0, f1] = &mut sram.relayed;
             let timeout = rc_fw::link::RELAY_TIMEOUT_US;
-            let a = unwrap!(RelayedBus::new(front, f0, 0, per)).with_timeout(Clock, timeout);
-            let b =
-                unwrap!(RelayedBus::new(front2, f1, half * per, per)).with_timeout(Clock, timeout);
+            let a = unwrap!(RelayedBus::new(front, f0, 0, per));
+            let a = a.with_slots().with_timeout(Clock, timeout);
+            let b = unwrap!(RelayedBus::new(front2, f1, half * per, per));
+            let b = b.with_slots().with_timeout(Clock, timeout);
             (unwrap!(TwoLinks::new(a, b)), port, port2)
         };
 

@@ -225,70 +225,64 @@ fn topology_table(
         link: with_link(&base, link),
         ..base.clone()
     };
+    let tree = |batch, buses| SimConfig {
+        topology: Topology::RelayTree { fanout: 8, batch },
+        ..star(buses)
+    };
+    // The root of relays drives them on the board's root links (SPI1 and SPI2 on the F407).
+    let root_links = BoardProfile::F407.link.root_links;
     let mut variants = vec![
         ("(a) one RC, SPI1/2/3 (3 buses)", star(3)),
         ("(b) one bus of buffered segments", star(1)),
         (
             "(c) relay tree, one exchange per node frame",
-            SimConfig {
-                topology: Topology::RelayTree {
-                    fanout: 8,
-                    batch: false,
-                },
-                ..star(1)
-            },
+            tree(false, root_links),
         ),
         (
-            "(c) relay tree, batched (buildable)",
-            SimConfig {
-                topology: Topology::RelayTree {
-                    fanout: 8,
-                    batch: true,
-                },
-                ..star(1)
-            },
+            "(c) relay tree, batched (buildable: the root on SPI1/2)",
+            tree(true, root_links),
         ),
+        ("(c) batched, the root on one bus (SPI1)", tree(true, 1)),
         (
             "(c) batched, the root's children on SPI1/2/3 (3 root buses)",
-            SimConfig {
-                topology: Topology::RelayTree {
-                    fanout: 8,
-                    batch: true,
-                },
-                ..star(3)
-            },
+            tree(true, 3),
         ),
         (
             "(c) batched, RLE-coded pixels only (--pixel-coding rle)",
             SimConfig {
-                topology: Topology::RelayTree {
-                    fanout: 8,
-                    batch: true,
-                },
                 node: NodeConfig {
                     coding: PixelCoding::Rle,
                 },
-                ..star(1)
+                ..tree(true, root_links)
             },
         ),
         ("one RC with 8 buses (not an F407)", star(8)),
     ];
-    // The firmware's relay code (links_core::relay) drives one level of relays, one root
-    // bus, on the firmware link: 64 nodes at most.
-    let firmware = SimConfig {
-        topology: Topology::RelayTree {
-            fanout: 8,
-            batch: true,
-        },
+    // The firmware's relay code (links_core::relay) drives one level of relays on the
+    // firmware link (64 nodes at most), on the root's two links (`TwoLinks`) or one.
+    let firmware = |buses| SimConfig {
         relay: RelayCode::Firmware,
         link: LinkModel::Firmware,
-        ..star(1)
+        ..tree(true, buses)
     };
-    if firmware
+    if firmware(1)
         .tree()
         .is_some_and(|t| t.is_ok_and(|t| t.levels() == 1))
     {
-        variants.insert(4, ("(c) relay tree, the firmware's relay code", firmware));
+        variants.insert(
+            5,
+            (
+                "(c) the firmware's relay code, the root on one bus (SPI1)",
+                firmware(1),
+            ),
+        );
+        variants.insert(
+            4,
+            (
+                "(c) the firmware's relay code (buildable: the root on SPI1/2)",
+                firmware(root_links),
+            ),
+        );
     }
     let mut t = table_head([
         "topology",

@@ -448,6 +448,10 @@ mod tests {
             [1, 1, 1, 2, 8, 32]
         );
         assert_eq!(BoardProfile::IDEAL.buses_for(256), 1);
+        // A root link holds no more relays than a relay root's `RelayedBus` keeps state for.
+        for b in [BoardProfile::F407, BoardProfile::F207, BoardProfile::G0B1] {
+            assert!(b.link.nodes_per_bus as usize <= crate::cluster::relay::MAX_RELAYS);
+        }
         // The F407's root of relays drives them on SPI1 and SPI2; the others on one bus.
         assert_eq!(BoardProfile::ALL.map(|b| b.link.root_links), [2, 1, 1, 1]);
     }

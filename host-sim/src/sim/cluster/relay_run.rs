@@ -303,8 +303,9 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                     ]);
                     let [b0, b1] = &mut *bufs;
                     let (Ok(r0), Ok(r1)) = (
-                        RelayedBus::new(bus0, b0, 0, per),
-                        RelayedBus::new(bus1, b1, second_first, per),
+                        RelayedBus::new(bus0, b0, 0, per).map(|b| b.with_slots::<TWO_LINK_SLOTS>()),
+                        RelayedBus::new(bus1, b1, second_first, per)
+                            .map(|b| b.with_slots::<TWO_LINK_SLOTS>()),
                     ) else {
                         return Err(failed);
                     };

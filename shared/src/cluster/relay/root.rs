@@ -10,8 +10,10 @@ use core::task::Poll;
 use embassy_futures::poll_once;
 use embassy_futures::select::{select, Either};
 
-/// Most relays on one link.
-pub const MAX_RELAYS: usize = 32;
+/// Most relays on one link: a bus drives 8 devices on every board (the profiles'
+/// `nodes_per_bus`, checked by a test), and the root of relays keeps this much per relay
+/// per link in its CCM.
+pub const MAX_RELAYS: usize = 8;
 
 /// Most node exchanges a [`RelayedBus`] keeps in flight at once (each holds one frame
 /// buffer of [`RelayedBuffers`]: its reply until the node's frame comes back into it).
@@ -127,7 +129,7 @@ enum Cast {
 /// `link`'s `finish` must be safe to drop while awaited (a relay exchange is started and
 /// finished inside `wait_ready`, which `run_bus` races against its timers): the split link
 /// ([`crate::spi::MasterFront`]) is; a dropped exchange is taken before the next one.
-pub struct RelayedBus<'m, L, C = NoClock> {
+pub struct RelayedBus<'m, L, C = NoClock, const S: usize = SLOTS> {
     link: L,
     /// The frame buffers (`slots + 2` of them are used) and the receive buffer.
     frames: &'m mut [[u8; MAX_MESSAGE]],
@@ -145,7 +147,7 @@ pub struct RelayedBus<'m, L, C = NoClock> {
     /// Per relay: its nodes waiting to be asked, as it last reported (bit `i`: its `i`-th).
     waiting: [u32; MAX_RELAYS],
     /// The node exchanges in flight.
-    slots: [Option<Slot>; SLOTS],
+    slots: [Option<Slot>; S],
     /// The frame buffer the next reply is composed in (no slot's).
     compose: u8,
     cast: Option<Cast>,
@@ -225,11 +227,44 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
         })
     }
 
+    /// The same bus keeping state for `T` node exchanges in flight instead of [`SLOTS`]
+    /// (fewer also bound what its buffers allow): the root of relays on two links keeps
+    /// [`TWO_LINK_SLOTS`] on each, in the CCM the state lives in. Before the first
+    /// exchange (it starts with none in flight).
+    pub fn with_slots<const T: usize>(self) -> RelayedBus<'m, L, NoClock, T> {
+        RelayedBus {
+            link: self.link,
+            frames: self.frames,
+            rx: self.rx,
+            slot_count: self.slot_count.min(T as u16),
+            clock: NoClock,
+            timeout_us: self.timeout_us,
+            first: self.first,
+            per_relay: self.per_relay,
+            relays: self.relays,
+            depth: self.depth,
+            waiting: self.waiting,
+            slots: [None; T],
+            compose: self.compose,
+            cast: self.cast,
+            dangling: self.dangling,
+            next_scan: self.next_scan,
+            next_link: self.next_link,
+            casts: self.casts,
+            acked: self.acked,
+            deaf: self.deaf,
+            cast_until: self.cast_until,
+            counters: self.counters,
+        }
+    }
+}
+
+impl<'m, L: RootBus, const S: usize> RelayedBus<'m, L, NoClock, S> {
     /// Give a node exchange up after `timeout_us` of `clock` without its frame: it ends
     /// with an empty frame (counted in `timeouts`), so a relay that stopped answering costs
     /// the root its nodes (their jobs time out and go elsewhere), not its bus. Without it an
     /// exchange waits for ever.
-    pub fn with_timeout<C: RootClock>(self, clock: C, timeout_us: u64) -> RelayedBus<'m, L, C> {
+    pub fn with_timeout<C: RootClock>(self, clock: C, timeout_us: u64) -> RelayedBus<'m, L, C, S> {
         RelayedBus {
             link: self.link,
             frames: self.frames,
@@ -257,7 +292,7 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
     }
 }
 
-impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
+impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     pub fn link(&self) -> &L {
         &self.link
     }
@@ -446,7 +481,7 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
                 let base = first.wrapping_add(r.wrapping_mul(per));
                 let mut w =
                     BatchWriter::new(self.link.tx_bank()).map_err(|_| LinkError::Aborted)?;
-                let mut carried = [false; SLOTS];
+                let mut carried = [false; S];
                 let mut requests = 0u32;
                 for pass_sent in [true, false] {
                     for (i, s) in self.slots.iter().enumerate() {
@@ -612,7 +647,7 @@ impl<L: RootBus, C: RootClock> RelayedBus<'_, L, C> {
     }
 }
 
-impl<L: RootBus, C: RootClock> RootBus for RelayedBus<'_, L, C> {
+impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, S> {
     fn nodes(&self) -> (NodeId, u16) {
         (self.first, self.relays * self.per_relay)
     }
