@@ -84,6 +84,9 @@ pub struct Scheduler {
     given: [u32; 8],
     /// Next pixel (decreasing).
     next_pixel: u32,
+    /// Pixels of the frames that follow this one in the same run (decreasing): the job
+    /// sizes shrink towards the end of all the work, not of each frame.
+    later: u32,
     /// Regions handed out so far.
     issued: u32,
 }
@@ -155,8 +158,30 @@ impl Scheduler {
             next: 0,
             given: [0; 8],
             next_pixel: 0,
+            later: 0,
             issued: 0,
         })
+    }
+
+    /// This frame followed by `frames` more of the same size in the run (a film, or a
+    /// still repeated): under [`Policy::Decreasing`] a job is `remaining / (factor · nodes)`
+    /// of all the pixels still to come, never more than the frame's first job, so the jobs
+    /// shrink only at the end of the run's last frame. The next frame's jobs are handed out
+    /// as soon as this one's are all issued, so the end of a frame that another follows is
+    /// no barrier and its small jobs would cost exchanges for nothing. Guided
+    /// self-scheduling over the whole run; the other policies are unchanged.
+    pub fn followed_by(mut self, frames: u32) -> Self {
+        self.later = (self.width * self.height).saturating_mul(frames);
+        self
+    }
+
+    /// The next job's length under the decreasing policy, `remaining` pixels left in this
+    /// frame (> 0).
+    fn decreasing_len(&self, remaining: u32, factor: u32, min_pixels: u32) -> u32 {
+        let per = factor.saturating_mul(self.nodes);
+        let cap = (self.width * self.height).div_ceil(per);
+        let share = remaining.saturating_add(self.later).div_ceil(per).min(cap);
+        share.max(min_pixels).min(remaining)
     }
 
     pub fn policy(&self) -> Policy {
@@ -226,8 +251,7 @@ impl Scheduler {
                 if remaining == 0 {
                     return None;
                 }
-                let share = remaining.div_ceil(factor.saturating_mul(self.nodes));
-                let len = share.max(min_pixels).min(remaining);
+                let len = self.decreasing_len(remaining, factor, min_pixels);
                 let start = self.next_pixel;
                 self.next_pixel += len;
                 Region::Span { start, len }
@@ -262,10 +286,11 @@ impl Scheduler {
             Policy::Fixed { divisions, .. } => divisions - self.next,
             Policy::Decreasing { factor, min_pixels } => {
                 let remaining = self.width * self.height - self.next_pixel;
-                let share = remaining
-                    .div_ceil(factor.saturating_mul(self.nodes))
-                    .max(min_pixels);
-                remaining.div_ceil(share.max(1))
+                if remaining == 0 {
+                    return 0;
+                }
+                let len = self.decreasing_len(remaining, factor, min_pixels);
+                remaining.div_ceil(len.max(1))
             }
         }
     }
@@ -333,10 +358,43 @@ mod tests {
             },
         ];
         for p in policies {
-            let s = Scheduler::new(p, 64, 60, 6).unwrap();
-            let (_, seen) = coverage(s, 64, 60, 6);
-            assert!(seen.iter().all(|&c| c == 1), "{p:?}");
+            for later in [0, 1, 7] {
+                let s = Scheduler::new(p, 64, 60, 6).unwrap().followed_by(later);
+                let (_, seen) = coverage(s, 64, 60, 6);
+                assert!(seen.iter().all(|&c| c == 1), "{p:?}, {later} frames after");
+            }
         }
+    }
+
+    /// With frames after it, a frame's decreasing jobs keep the size of its first one (the
+    /// run's remaining work is large) instead of shrinking to the floor at its end; the
+    /// run's last frame shrinks as a single frame does.
+    #[test]
+    fn a_followed_frames_jobs_shrink_only_with_the_runs_work() {
+        let p = Policy::Decreasing {
+            factor: 2,
+            min_pixels: 64,
+        };
+        let lens = |later| {
+            let mut s = Scheduler::new(p, 64, 60, 4).unwrap().followed_by(later);
+            let mut v = Vec::new();
+            while let Some(r) = s.next_for(0) {
+                v.push(r.pixels());
+            }
+            v
+        };
+        // Alone: 480, 420, ... down to the 64-pixel floor (3840 pixels, factor 2, 4 nodes).
+        let alone = lens(0);
+        assert_eq!(alone[..2], [480, 420]);
+        assert!(alone.len() > 8 && *alone.last().unwrap() <= 64);
+        // Followed by one frame or more: the run's remaining work never drops below a
+        // frame's, so every job is the first one's 480 pixels (3840 / 8).
+        assert_eq!(lens(1), [480; 8]);
+        assert_eq!(lens(3), [480; 8]);
+        // The count of regions still to come follows the same sizes.
+        let s = Scheduler::new(p, 64, 60, 4).unwrap().followed_by(3);
+        assert_eq!(s.remaining(), 8);
+        assert_eq!(Scheduler::new(p, 64, 60, 4).unwrap().remaining(), 8);
     }
 
     #[test]

@@ -75,7 +75,8 @@ impl RootState {
             self.height,
             self.cfg.nodes as u32,
         ) {
-            self.sched = s;
+            let later = self.cfg.frames.saturating_sub(next + 1);
+            self.sched = s.followed_by(later as u32);
             self.sched_frame = next;
         }
     }

@@ -175,7 +175,8 @@ impl RootState {
         }
         let (width, height) = dims.ok_or(RootError::BadScene { frame: 0 })?;
         let sched = Scheduler::new(cfg.policy, width, height, cfg.nodes as u32)
-            .map_err(RootError::Sched)?;
+            .map_err(RootError::Sched)?
+            .followed_by(cfg.frames.saturating_sub(1) as u32);
         Ok(Self {
             cfg,
             width,
