@@ -603,7 +603,7 @@ mod tests {
         for k in 0..20_000 {
             let mut coord = |i: usize| {
                 let r = next();
-                if (k + i) % 13 == 0 {
+                if (k + i).is_multiple_of(13) {
                     edges[(r as u32 % edges.len() as u32) as usize]
                 } else {
                     Fx::from_raw(r >> (r as u32 % 12))
