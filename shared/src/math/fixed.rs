@@ -133,13 +133,14 @@ impl Fx {
                 ],
             );
         }
-        let s: i128 = if p_small && m.iter().all(|v| v.0.unsigned_abs() < 1 << 28) {
-            // 32-bit factors (no 64-bit multiply call on ARMv6-M).
+        if p_small && m.iter().all(|v| v.0.unsigned_abs() < 1 << 28) {
+            // 32-bit factors (no 64-bit multiply call on ARMv6-M), and the sum (below
+            // 2^61) rounded in 64 bits: the same value as the 128-bit path, without its
+            // four-word adds and shifts.
             let mp = |i: usize| wide::mul_i32(m[i].0, p[i] as i32);
-            (mp(0) + mp(1) + mp(2)) as i128
-        } else {
-            (0..3).map(|i| m[i].0 as i128 * p[i] as i128).sum()
-        };
+            return Fx::from_wide((mp(0) + mp(1) + mp(2) + (1 << 23)) >> 24);
+        }
+        let s: i128 = (0..3).map(|i| m[i].0 as i128 * p[i] as i128).sum();
         let r = (s + (1 << 23)) >> 24;
         match i64::try_from(r) {
             Ok(v) => Fx::from_wide(v),

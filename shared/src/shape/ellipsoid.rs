@@ -53,7 +53,16 @@ pub(crate) fn local_origin<T: Real>(m: &Mat3<T>, center: Vec3<T>, ray: &Ray<T>) 
     if !T::ABSOLUTE_ROUNDING {
         return (T::ZERO, m.mul_vec(ray.origin - center));
     }
-    let along = (center - ray.origin).dot(ray.dir);
+    // From the eye (view space's origin: every primary ray) `center - origin` is the
+    // centre itself and `origin - center` its negation, the same values without the six
+    // subtractions and their special-value checks.
+    let from_eye = ray.origin.x == T::ZERO && ray.origin.y == T::ZERO && ray.origin.z == T::ZERO;
+    let (to_center, rel) = if from_eye {
+        (center, -center)
+    } else {
+        (center - ray.origin, ray.origin - center)
+    };
+    let along = to_center.dot(ray.dir);
     let a = ray.dir.length_sq();
     let tc = if (a - T::ONE).abs() <= T::err_gamma(4) {
         along
@@ -63,7 +72,6 @@ pub(crate) fn local_origin<T: Real>(m: &Mat3<T>, center: Vec3<T>, ray: &Ray<T>) 
     // The point itself to 2^-24 (`Real::local_mat_vec`). A ray that passes too far from
     // the centre to hold the point overflows to a non-finite value, which every
     // comparison below treats as a miss.
-    let rel = ray.origin - center;
     let (rel, dir) = ([rel.x, rel.y, rel.z], [ray.dir.x, ray.dir.y, ray.dir.z]);
     let row = |r: Vec3<T>| [r.x, r.y, r.z];
     let [x, y, z] = T::local_mat_vec([row(m.r[0]), row(m.r[1]), row(m.r[2])], rel, dir, tc);
@@ -549,5 +557,86 @@ mod tests {
         assert!(e.intersect(&miss, f64::MAX).is_none());
         let hit = Ray::new(Vec3::new(1.0 - 1e-9, 0.0, 0.0), Vec3::new(0.0, 0.0, 1.0));
         assert!(e.intersect(&hit, f64::MAX).is_some());
+    }
+
+    /// `local_origin` from the eye (origin zero) takes `center` and `-center` for
+    /// `center - origin` and `origin - center`: the same bits as the subtractions, for
+    /// every centre (special values and the range's ends too).
+    #[test]
+    fn local_origin_from_the_eye_matches_the_subtractions() {
+        use crate::num::Fx;
+        let plain = |m: &Mat3<Fx>, center: Vec3<Fx>, ray: &Ray<Fx>| {
+            let along = (center - ray.origin).dot(ray.dir);
+            let a = ray.dir.length_sq();
+            let tc = if (a - Fx::ONE).abs() <= Fx::err_gamma(4) {
+                along
+            } else {
+                along / a
+            };
+            let rel = ray.origin - center;
+            let row = |r: Vec3<Fx>| [r.x, r.y, r.z];
+            let [x, y, z] = Fx::local_mat_vec(
+                [row(m.r[0]), row(m.r[1]), row(m.r[2])],
+                row(rel),
+                row(ray.dir),
+                tc,
+            );
+            (tc, Vec3::new(x, y, z))
+        };
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 33) as i32
+        };
+        let edges = [
+            Fx::INFINITY,
+            Fx::NEG_INFINITY,
+            Fx::NAN,
+            Fx::MAX,
+            -Fx::MAX,
+            Fx::ZERO,
+            Fx::from_raw(1),
+        ];
+        let (mut finite, mut checked) = (0, 0);
+        for k in 0..20_000 {
+            let mut coord = |i: usize| {
+                let r = next();
+                if (k + i).is_multiple_of(13) {
+                    edges[(r as u32 % edges.len() as u32) as usize]
+                } else {
+                    Fx::from_raw(r >> (r as u32 % 12))
+                }
+            };
+            let center = Vec3::new(coord(0), coord(1), coord(2));
+            let m = Mat3 {
+                r: [0; 3].map(|_| {
+                    Vec3::new(
+                        Fx::from_raw(next() >> 12),
+                        Fx::from_raw(next() >> 12),
+                        Fx::from_raw(next() >> 12),
+                    )
+                }),
+            };
+            let raw_dir = [0; 3].map(|_| Fx::from_raw(next() >> 8));
+            let Some([x, y, z]) = Fx::normalize3(raw_dir) else {
+                continue;
+            };
+            let ray = Ray::new(Vec3::zero(), Vec3::new(x, y, z));
+            let (tc, q) = local_origin(&m, center, &ray);
+            let (tc0, q0) = plain(&m, center, &ray);
+            let bits = |v: Vec3<Fx>| [v.x.raw(), v.y.raw(), v.z.raw()];
+            assert_eq!((tc.raw(), bits(q)), (tc0.raw(), bits(q0)), "{center:?}");
+            checked += 1;
+            if q.x.is_finite() && q.y.is_finite() && q.z.is_finite() {
+                finite += 1;
+            }
+        }
+        // Most cases reach the unit-frame point (not only the special-value paths).
+        assert!(
+            checked > 19_000 && finite > checked / 2,
+            "{checked} {finite}"
+        );
     }
 }
