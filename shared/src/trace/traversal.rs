@@ -110,7 +110,8 @@ pub(super) const ORDERED_FANOUT: usize = 8;
 pub(super) struct Nearest<T> {
     pub(super) hit: Option<Hit<T>>,
     pub(super) node: u32,
-    /// [`Nearest::limit`] (the walk's `t_max` until a hit) and the nearest hit's distance (infinite without one), kept as
+    pub(super) t_max: T,
+    /// [`Nearest::limit`] and the nearest hit's distance (infinite without one), kept as
     /// scalars of their own: the walk reads them for every box, and reading them back out of
     /// `hit` (its tag and distance, just stored whole by `offer`) stalled the host's walk.
     limit: T,
@@ -128,6 +129,7 @@ impl<T: Real> Nearest<T> {
         Self {
             hit: None,
             node: u32::MAX,
+            t_max,
             limit: t_max,
             best_t: T::INFINITY,
         }
