@@ -232,30 +232,8 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
     /// [`TWO_LINK_SLOTS`] on each, in the CCM the state lives in. Before the first
     /// exchange (it starts with none in flight).
     pub fn with_slots<const T: usize>(self) -> RelayedBus<'m, L, NoClock, T> {
-        RelayedBus {
-            link: self.link,
-            frames: self.frames,
-            rx: self.rx,
-            slot_count: self.slot_count.min(T as u16),
-            clock: NoClock,
-            timeout_us: self.timeout_us,
-            first: self.first,
-            per_relay: self.per_relay,
-            relays: self.relays,
-            depth: self.depth,
-            waiting: self.waiting,
-            slots: [None; T],
-            compose: self.compose,
-            cast: self.cast,
-            dangling: self.dangling,
-            next_scan: self.next_scan,
-            next_link: self.next_link,
-            casts: self.casts,
-            acked: self.acked,
-            deaf: self.deaf,
-            cast_until: self.cast_until,
-            counters: self.counters,
-        }
+        let timeout_us = self.timeout_us;
+        self.rebuilt(NoClock, timeout_us, [None; T])
     }
 }
 
@@ -265,11 +243,25 @@ impl<'m, L: RootBus, const S: usize> RelayedBus<'m, L, NoClock, S> {
     /// the root its nodes (their jobs time out and go elsewhere), not its bus. Without it an
     /// exchange waits for ever.
     pub fn with_timeout<C: RootClock>(self, clock: C, timeout_us: u64) -> RelayedBus<'m, L, C, S> {
+        let slots = self.slots;
+        self.rebuilt(clock, timeout_us, slots)
+    }
+}
+
+impl<'m, L, C, const S: usize> RelayedBus<'m, L, C, S> {
+    /// This bus with another clock, time-out and slot table (its slots bound by the table's
+    /// length).
+    fn rebuilt<C2, const T: usize>(
+        self,
+        clock: C2,
+        timeout_us: u64,
+        slots: [Option<Slot>; T],
+    ) -> RelayedBus<'m, L, C2, T> {
         RelayedBus {
             link: self.link,
             frames: self.frames,
             rx: self.rx,
-            slot_count: self.slot_count,
+            slot_count: self.slot_count.min(T as u16),
             clock,
             timeout_us,
             first: self.first,
@@ -277,7 +269,7 @@ impl<'m, L: RootBus, const S: usize> RelayedBus<'m, L, NoClock, S> {
             relays: self.relays,
             depth: self.depth,
             waiting: self.waiting,
-            slots: self.slots,
+            slots,
             compose: self.compose,
             cast: self.cast,
             dangling: self.dangling,
