@@ -99,29 +99,23 @@ pub trait KernelNumber: Real {
     ) -> Result<Stats, RenderError>;
 }
 
-impl KernelNumber for f32 {
-    fn trace_run(
-        state: &mut TracerState<f32>,
-        scene: SceneView<'_>,
-        frame: u16,
-        at: (u32, u32),
-        out: &mut [Rgb8],
-    ) -> Result<Stats, RenderError> {
-        trace_run(state, scene, frame, at, out)
-    }
+/// One non-generic entry per number type, each instantiating the tracer here in links-core.
+macro_rules! kernel_number {
+    ($($t:ty),*) => {$(
+        impl KernelNumber for $t {
+            fn trace_run(
+                state: &mut TracerState<$t>,
+                scene: SceneView<'_>,
+                frame: u16,
+                at: (u32, u32),
+                out: &mut [Rgb8],
+            ) -> Result<Stats, RenderError> {
+                trace_run(state, scene, frame, at, out)
+            }
+        }
+    )*};
 }
-
-impl KernelNumber for Fx {
-    fn trace_run(
-        state: &mut TracerState<Fx>,
-        scene: SceneView<'_>,
-        frame: u16,
-        at: (u32, u32),
-        out: &mut [Rgb8],
-    ) -> Result<Stats, RenderError> {
-        trace_run(state, scene, frame, at, out)
-    }
-}
+kernel_number!(f32, Fx);
 
 /// One run with `state`'s tracer (all techniques).
 fn trace_run<T: Real>(
