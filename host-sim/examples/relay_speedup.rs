@@ -16,9 +16,9 @@ use links_host::studies::cluster_sweep::steady_state_interval;
 
 fn main() {
     // Node counts, and optionally `--buses B` (the root's links; the board's by default)
-    // and `--policy FACTOR,MIN` (decreasing sizes; 6,128 by default).
+    // and `--policy FACTOR,MIN` (decreasing sizes; the relay tree's 6,192 by default).
     let mut counts: Vec<u16> = Vec::new();
-    let (mut buses, mut policy) = (None, Policy::DECREASING);
+    let (mut buses, mut policy) = (None, None);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -26,10 +26,10 @@ fn main() {
             "--policy" => {
                 let v = args.next().unwrap_or_default();
                 let (f, m) = v.split_once(',').expect("--policy FACTOR,MIN");
-                policy = Policy::Decreasing {
+                policy = Some(Policy::Decreasing {
                     factor: f.parse().expect("a factor"),
                     min_pixels: m.parse().expect("a smallest job"),
-                };
+                });
             }
             n => counts.push(n.parse().expect("node counts")),
         }
@@ -45,7 +45,7 @@ fn main() {
             let board = SimConfig::buildable(BoardProfile::F407, n);
             let cfg = SimConfig {
                 relay,
-                policy,
+                policy: policy.unwrap_or(board.policy),
                 buses: buses.unwrap_or(board.buses),
                 ..board
             };

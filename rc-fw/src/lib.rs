@@ -58,9 +58,17 @@ pub mod link {
     } else {
         NODES
     };
-    /// The nodes the root logic renders on, with the board's silence bound for them.
-    pub const RENDER_NODE_SET: links_core::serial::render::NodeSet =
-        links_core::serial::render::NodeSet::on(&PROFILE, RENDER_NODES as u16);
+    /// The nodes the root logic renders on, with the board's silence bound for them and,
+    /// behind relays, the relay tree's job sizes (`Policy::RELAYED`, as the simulator's
+    /// relay trees).
+    pub const RENDER_NODE_SET: links_core::serial::render::NodeSet = {
+        let on_bus = links_core::serial::render::NodeSet::on(&PROFILE, RENDER_NODES as u16);
+        if cfg!(feature = "relay-root") {
+            on_bus.relayed()
+        } else {
+            on_bus
+        }
+    };
     /// As the root of a relay tree: how long a node exchange through a relay may wait for
     /// the node's frame before the root gives it up (`RelayedBus::with_timeout`; the value
     /// is `links_core::relay::RELAY_TIMEOUT_US`, which the simulator's firmware relay tree
@@ -366,6 +374,11 @@ mod tests {
             );
             let expected = if links == 2 { 2 * two } else { relayed };
             assert_eq!((RENDER_NODES, RELAYED), (NODES * per_bus, expected));
+            // The simulator's relay trees divide the frame the same way.
+            assert_eq!(
+                super::link::RENDER_NODE_SET.policy,
+                links_core::sched::Policy::RELAYED
+            );
             assert_eq!(
                 super::plan::LINK_BANKS,
                 3 * links * PROFILE.dma_bank_bytes()
@@ -385,6 +398,10 @@ mod tests {
             }
         } else {
             assert_eq!((RENDER_NODES, RELAYED), (NODES, 0));
+            assert_eq!(
+                super::link::RENDER_NODE_SET.policy,
+                links_core::sched::Policy::DECREASING
+            );
         }
         // LINK_BANKS + RELAYED + SCENE <= SRAM and FILM_BANK <= SCENE: the plan's
         // compile-time assertions.

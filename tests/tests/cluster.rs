@@ -173,9 +173,9 @@ fn fixed_point_cluster_frames_are_bit_identical_to_the_single_node_fixed_render(
 
 /// Fixed-point frames stay bit-identical to the single-node fixed render under every policy
 /// (fixed divisions in spans and rectangles, static spans) and past one bus: 24 and 64 nodes
-/// on the buildable relay tree (the simulator's relay model), and 64 nodes through the
-/// firmware's relay code (`--relay firmware`, the F407 board whose nodes carry both
-/// kernels).
+/// on the buildable relay tree (the firmware's relay code, the board's default), and 64
+/// nodes through the simulator's relay model (`--relay model`, the F407 board whose nodes
+/// carry both kernels).
 #[test]
 fn fixed_point_frames_are_bit_identical_under_every_policy_and_topology() {
     use links_host::cluster::relay::RelayCode;
@@ -212,16 +212,15 @@ fn fixed_point_frames_are_bit_identical_under_every_policy_and_topology() {
             assert_eq!(r.root.pixels, 64 * 60, "{what}");
         }
     }
-    let firmware_relays = SimConfig {
-        relay: RelayCode::Firmware,
-        ..SimConfig::buildable(BoardProfile::F407, 64)
+    let board = SimConfig::buildable(BoardProfile::F407, 64);
+    assert!(board.tree().is_some(), "64 F407 nodes are a relay tree");
+    assert_eq!(board.relay, RelayCode::Firmware, "the board's relay code");
+    let modelled = SimConfig {
+        relay: RelayCode::Model,
+        ..board
     };
-    assert!(
-        firmware_relays.tree().is_some(),
-        "64 F407 nodes are a relay tree"
-    );
-    let r = run(&img, firmware_relays);
-    assert!(r.frames[0] == want, "the firmware's relay code");
+    let r = run(&img, modelled);
+    assert!(r.frames[0] == want, "the relay model");
 }
 
 /// Each board's node time-out keeps the F407's margin over the longest run a node renders:

@@ -91,10 +91,11 @@ pub struct ClusterArgs {
     /// simulator's model: node frames forwarded and batched, relays answering from the one
     /// job table as if it were local) or firmware (the firmware's relay code,
     /// links_core::relay: the root's RelayedBus and each relay's run_relay over emulated
-    /// SPI links; one level of relays, 64 nodes at most on the f407, one root bus, the
-    /// firmware link)
-    #[arg(long, default_value = "model", value_parser = cli_cluster::parse_relay)]
-    pub relay: crate::cluster::relay::RelayCode,
+    /// SPI links; one level of relays, 64 nodes at most on the f407, 1 or 2 root buses,
+    /// the firmware link). Default: firmware where it can run the tree (one level, no
+    /// serial backup line), model otherwise (two levels: more than 64 nodes on the f407)
+    #[arg(long, value_parser = cli_cluster::parse_relay)]
+    pub relay: Option<crate::cluster::relay::RelayCode>,
     /// How the nodes may code their pixel runs (cluster only): raw, rle (raw or run-length
     /// coded, whichever is shorter) or delta (raw, run-length or delta coded: shading steps
     /// in one or two bytes a pixel)
@@ -114,9 +115,10 @@ pub struct ClusterArgs {
     pub bit_rate_mhz: Option<f64>,
     /// Sub-screen policy (cluster only): decreasing (= decreasing=6,128), decreasing=FACTOR,MIN
     /// (each job the remaining pixels / (FACTOR x nodes), at least MIN), static, fixed=N,
-    /// fixed-rect=N
-    #[arg(long, default_value = "decreasing")]
-    pub policy: String,
+    /// fixed-rect=N. Default: decreasing=6,128 on a star, decreasing=6,192 under a relay
+    /// tree (as the firmware's root of relays)
+    #[arg(long)]
+    pub policy: Option<String>,
     /// DM time per frame in ms: frame f's scene exists at (f+1) x this (cluster only)
     #[arg(long, default_value_t = 0.0)]
     pub dm_ms: f64,
@@ -192,7 +194,10 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
         nodes,
         c.buses,
         c.bit_rate_mhz,
-        cli_cluster::parse_policy(&c.policy)?,
+        c.policy
+            .as_deref()
+            .map(cli_cluster::parse_policy)
+            .transpose()?,
         c.topology,
     );
     let samples = f64::from(a.scene.aa.unwrap_or(1)).powi(2);
@@ -207,7 +212,9 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
     if let Some(link) = c.link {
         cfg.link = link;
     }
-    cfg.relay = c.relay;
+    if let Some(relay) = c.relay {
+        cfg.relay = relay;
+    }
     cfg.node.coding = c.pixel_coding;
     let relays = cfg.tree().and_then(Result::ok).map_or(0, |t| t.leaves);
     cfg.relay_deaths = cli_cluster::relay_deaths(&c.kill_relays, relays)?;
@@ -217,6 +224,10 @@ pub(super) fn cluster_config(a: &RenderArgs, nodes: u16) -> Result<SimConfig, Cl
     cli_cluster::apply_faults(&mut cfg, &c.faults)?;
     if c.timeline.is_some() {
         cfg.timeline = Some(limits::MAX_TIMELINE_INTERVALS);
+    }
+    // The relay code the board runs, once every option that bears on it is set.
+    if c.relay.is_none() {
+        cfg = cfg.with_board_relays();
     }
     Ok(cfg)
 }
@@ -263,7 +274,7 @@ fn cluster(a: &RenderArgs, nodes: u16) -> Result<(), CliError> {
             rep.height,
             cli_cluster::topology_text(&cfg),
             cli_cluster::board_text(&cfg),
-            c.policy,
+            cli_cluster::policy_text(cfg.policy),
             rep.time_s,
             r.speedup,
             r.one_node_s,

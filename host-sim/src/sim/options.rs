@@ -189,9 +189,11 @@ pub fn topology_text(cfg: &SimConfig) -> String {
                 (m, 1) => format!(" ({m} mid relays)"),
                 (m, r) => format!(" ({m} mid relays, the root on {r} buses)"),
             },
-            match cfg.relay {
-                RelayCode::Model => ", modelled relays (--relay firmware runs their code)",
-                RelayCode::Firmware => ", the firmware's relay code",
+            match (cfg.relay, t.levels()) {
+                (RelayCode::Model, 1) => ", modelled relays (--relay firmware runs their code)",
+                (RelayCode::Model, _) =>
+                    ", modelled relays (the firmware's relay code drives one level)",
+                (RelayCode::Firmware, _) => ", the firmware's relay code",
             }
         ),
     }
@@ -234,6 +236,23 @@ pub fn topology_note(cfg: &SimConfig) -> String {
             cfg.profile.name, cfg.profile.link.nodes_per_bus
         ),
         None => String::new(),
+    }
+}
+
+/// A policy as `--policy` takes it (`decreasing=6,128`, `static`, `fixed=N`,
+/// `fixed-rect=N`).
+pub fn policy_text(p: Policy) -> String {
+    match p {
+        Policy::Decreasing { factor, min_pixels } => format!("decreasing={factor},{min_pixels}"),
+        Policy::Static { .. } => "static".into(),
+        Policy::Fixed {
+            divisions,
+            shape: Split::Span,
+        } => format!("fixed={divisions}"),
+        Policy::Fixed {
+            divisions,
+            shape: Split::Rect,
+        } => format!("fixed-rect={divisions}"),
     }
 }
 
@@ -560,20 +579,21 @@ pub fn link_summary(r: &SimReport) -> String {
 }
 
 /// A cluster configuration from the command line's settings: the board profile's, with
-/// the bit rate overridden if one is given.
+/// the bit rate overridden if one is given and the topology's policy unless one is
+/// ([`SimConfig::policy_for`]).
 pub fn config(
     board: BoardProfile,
     nodes: u16,
     buses: Option<u16>,
     bit_rate_mhz: Option<f64>,
-    policy: Policy,
+    policy: Option<Policy>,
     topology: TopologyArg,
 ) -> SimConfig {
     let topology = topology.topology(&board, nodes);
     let mut cfg = SimConfig {
         nodes,
         buses: buses.unwrap_or(topology.default_buses(&board)),
-        policy,
+        policy: policy.unwrap_or(SimConfig::policy_for(topology)),
         topology,
         ..SimConfig::for_board(board)
     };
@@ -663,7 +683,7 @@ mod tests {
             64,
             Some(1),
             None,
-            Policy::DECREASING,
+            Some(Policy::DECREASING),
             star,
         );
         assert_eq!(f.timing.bit_rate_hz, 21e6);
@@ -686,7 +706,7 @@ mod tests {
             256,
             Some(1),
             Some(10.0),
-            Policy::DECREASING,
+            Some(Policy::DECREASING),
             star,
         );
         assert_eq!((i.timing.bit_rate_hz, i.timing.overhead_ns), (10e6, 500.0));
@@ -702,7 +722,7 @@ mod tests {
             64,
             Some(8),
             None,
-            Policy::DECREASING,
+            Some(Policy::DECREASING),
             star,
         );
         assert_eq!(eight.overloaded_bus(), None);
@@ -741,7 +761,7 @@ mod tests {
             64,
             None,
             None,
-            Policy::DECREASING,
+            Some(Policy::DECREASING),
             TopologyArg::Buildable,
         );
         f.relay = RelayCode::Firmware;
@@ -757,7 +777,14 @@ mod tests {
         let e = "ring".parse::<TopologyArg>().unwrap_err().to_string();
         assert!(e.contains("unknown topology 'ring'"), "{e}");
         let b = TopologyArg::Buildable;
-        let f = config(BoardProfile::F407, 64, None, None, Policy::DECREASING, b);
+        let f = config(
+            BoardProfile::F407,
+            64,
+            None,
+            None,
+            Some(Policy::DECREASING),
+            b,
+        );
         assert_eq!(f.overloaded_bus(), None);
         assert_eq!(topology_note(&f), "");
         // The root drives its relays on the board's two root links unless told.
@@ -765,20 +792,77 @@ mod tests {
             topology_text(&f),
             "relay tree: 8 relays x 8 nodes, 1 level(s) (the root on 2 buses), modelled relays (--relay firmware runs their code)"
         );
-        let f = config(BoardProfile::F407, 64, Some(1), None, Policy::DECREASING, b);
+        let f = config(
+            BoardProfile::F407,
+            64,
+            Some(1),
+            None,
+            Some(Policy::DECREASING),
+            b,
+        );
         assert_eq!(
             topology_text(&f),
             "relay tree: 8 relays x 8 nodes, 1 level(s), modelled relays (--relay firmware runs their code)"
         );
-        let f = config(BoardProfile::F407, 256, None, None, Policy::DECREASING, b);
+        let f = config(
+            BoardProfile::F407,
+            256,
+            None,
+            None,
+            Some(Policy::DECREASING),
+            b,
+        );
         assert_eq!(
             topology_text(&f),
-            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays, the root on 2 buses), modelled relays (--relay firmware runs their code)"
+            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays, the root on 2 buses), modelled relays (the firmware's relay code drives one level)"
         );
-        let f = config(BoardProfile::F407, 8, None, None, Policy::DECREASING, b);
+        let f = config(
+            BoardProfile::F407,
+            8,
+            None,
+            None,
+            Some(Policy::DECREASING),
+            b,
+        );
         assert_eq!(topology_text(&f), "star, 1 bus(es)");
-        let i = config(BoardProfile::IDEAL, 256, None, None, Policy::DECREASING, b);
+        let i = config(
+            BoardProfile::IDEAL,
+            256,
+            None,
+            None,
+            Some(Policy::DECREASING),
+            b,
+        );
         assert_eq!(i.topology, Topology::Star);
+    }
+
+    /// Without `--policy` a relay tree's jobs are the firmware root of relays' sizes, a
+    /// star's LINKS-1's defaults; the board's relay code is the firmware's where it runs.
+    #[test]
+    fn the_default_policy_and_relay_code_follow_the_topology() {
+        let b = TopologyArg::Buildable;
+        let tree = config(BoardProfile::F407, 64, None, None, None, b);
+        assert_eq!(tree.policy, Policy::RELAYED);
+        assert_eq!(policy_text(tree.policy), "decreasing=6,192");
+        let star = config(BoardProfile::F407, 8, None, None, None, b);
+        assert_eq!(star.policy, Policy::DECREASING);
+        assert_eq!(policy_text(star.policy), "decreasing=6,128");
+        assert_eq!(tree.clone().with_board_relays().relay, RelayCode::Firmware);
+        let two_levels = config(BoardProfile::F407, 256, None, None, None, b);
+        assert_eq!(two_levels.with_board_relays().relay, RelayCode::Model);
+        // The serial backup line is simulated with the model only.
+        let line = SimConfig {
+            backup_line: true,
+            ..tree
+        };
+        assert_eq!(line.with_board_relays().relay, RelayCode::Model);
+        assert_eq!(
+            SimConfig::buildable(BoardProfile::F407, 64).relay,
+            RelayCode::Firmware
+        );
+        for p in ["static", "fixed=12", "fixed-rect=64", "decreasing=4,256"] {
+            assert_eq!(policy_text(parse_policy(p).unwrap()), p);
+        }
     }
 
     #[test]
@@ -819,7 +903,7 @@ mod tests {
             8,
             Some(1),
             Some(42.0),
-            Policy::DECREASING,
+            Some(Policy::DECREASING),
             star,
         );
         let args = FaultArgs {

@@ -75,11 +75,13 @@ fn profiles_table(
         for &nodes in counts {
             progress(&format!("board {}, {nodes} nodes", board.name));
             let base = SimConfig::buildable(board, nodes);
+            // The relay code the board runs on that link (the model on the idealised one).
             let cfg = SimConfig {
                 cache: Some(cache.clone()),
                 link: with_link(&base, link),
                 ..base
-            };
+            }
+            .with_board_relays();
             let p = measure(image, &cfg)?;
             let r = &p.report;
             t.push_str(&format!(
@@ -225,12 +227,33 @@ fn topology_table(
         link: with_link(&base, link),
         ..base.clone()
     };
-    let tree = |batch, buses| SimConfig {
-        topology: Topology::RelayTree { fanout: 8, batch },
-        ..star(buses)
+    // A relay tree divides the frame as the firmware's root of relays does.
+    let tree = |batch, buses| {
+        let topology = Topology::RelayTree { fanout: 8, batch };
+        SimConfig {
+            topology,
+            policy: SimConfig::policy_for(topology),
+            ..star(buses)
+        }
     };
     // The root of relays drives them on the board's root links (SPI1 and SPI2 on the F407).
     let root_links = BoardProfile::F407.link.root_links;
+    // The firmware's relay code (links_core::relay) drives one level of relays on the
+    // firmware link (64 nodes at most), on the root's two links (`TwoLinks`) or one: the
+    // board's where it can (buildable), the model otherwise.
+    let firmware = |buses| SimConfig {
+        relay: RelayCode::Firmware,
+        link: LinkModel::Firmware,
+        ..tree(true, buses)
+    };
+    let one_level = firmware(1)
+        .tree()
+        .is_some_and(|t| t.is_ok_and(|t| t.levels() == 1));
+    let model_name = if one_level {
+        "(c) relay tree, batched, the model (the root on SPI1/2)"
+    } else {
+        "(c) relay tree, batched, the model (buildable: the root on SPI1/2)"
+    };
     let mut variants = vec![
         ("(a) one RC, SPI1/2/3 (3 buses)", star(3)),
         ("(b) one bus of buffered segments", star(1)),
@@ -238,10 +261,7 @@ fn topology_table(
             "(c) relay tree, one exchange per node frame",
             tree(false, root_links),
         ),
-        (
-            "(c) relay tree, batched (buildable: the root on SPI1/2)",
-            tree(true, root_links),
-        ),
+        (model_name, tree(true, root_links)),
         ("(c) batched, the root on one bus (SPI1)", tree(true, 1)),
         (
             "(c) batched, the root's children on SPI1/2/3 (3 root buses)",
@@ -258,17 +278,7 @@ fn topology_table(
         ),
         ("one RC with 8 buses (not an F407)", star(8)),
     ];
-    // The firmware's relay code (links_core::relay) drives one level of relays on the
-    // firmware link (64 nodes at most), on the root's two links (`TwoLinks`) or one.
-    let firmware = |buses| SimConfig {
-        relay: RelayCode::Firmware,
-        link: LinkModel::Firmware,
-        ..tree(true, buses)
-    };
-    if firmware(1)
-        .tree()
-        .is_some_and(|t| t.is_ok_and(|t| t.levels() == 1))
-    {
+    if one_level {
         variants.insert(
             5,
             (

@@ -51,6 +51,8 @@ pub struct NodeSet {
     pub count: u16,
     /// How long one holding work may stay silent before the root declares it dead (µs).
     pub timeout_us: u64,
+    /// How the frame is divided among them.
+    pub policy: Policy,
 }
 
 impl NodeSet {
@@ -60,6 +62,15 @@ impl NodeSet {
         NodeSet {
             count,
             timeout_us: board.node_timeout_us,
+            policy: Policy::DECREASING,
+        }
+    }
+
+    /// The same nodes behind a tree of relays: their jobs divided by [`Policy::RELAYED`].
+    pub const fn relayed(self) -> Self {
+        NodeSet {
+            policy: Policy::RELAYED,
+            ..self
         }
     }
 }
@@ -195,7 +206,7 @@ async fn render_one<B: RootBus, C: RootClock, R: Room, Q: ByteQueue, L: RcLine>(
     line: Option<(&mut L, ServeConfig)>,
 ) -> Result<RootReport, RenderFail> {
     let cfg = RootConfig {
-        policy: Policy::DECREASING,
+        policy: nodes.policy,
         nodes: nodes.count,
         frames: 1,
         timeout_us: nodes.timeout_us,

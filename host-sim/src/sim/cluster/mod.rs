@@ -226,13 +226,51 @@ impl SimConfig {
     /// holds them all, a relay tree otherwise ([`Topology::buildable`]) whose root drives
     /// its relays on the profile's root links
     /// ([`links_core::board::LinkProfile::root_links`]).
+    ///
+    /// Under a relay tree its jobs are [`Policy::RELAYED`]'s (as `rc-fw --features
+    /// relay-root` divides them) and its relays run the firmware's relay code where it can
+    /// ([`Self::with_board_relays`]).
     pub fn buildable(profile: BoardProfile, nodes: u16) -> Self {
         let topology = Topology::buildable(&profile, nodes);
         Self {
             nodes,
             topology,
             buses: topology.default_buses(&profile),
+            policy: Self::policy_for(topology),
             ..Self::for_board(profile)
+        }
+        .with_board_relays()
+    }
+
+    /// The jobs' default sizes on `topology`: [`Policy::RELAYED`] under a relay tree (as the
+    /// firmware's root of relays divides a frame), [`Policy::DECREASING`] on a star.
+    pub const fn policy_for(topology: Topology) -> Policy {
+        match topology {
+            Topology::Star => Policy::DECREASING,
+            Topology::RelayTree { .. } => Policy::RELAYED,
+        }
+    }
+
+    /// This configuration with the relay code the board runs: the firmware's
+    /// ([`RelayCode::Firmware`]) where it can run it (one level of relays, the firmware
+    /// link, the same node count behind every relay, no serial backup line;
+    /// `relay_run::check`), the model otherwise (two levels of relays: 256 nodes on the
+    /// F407). A star is left as it is.
+    pub fn with_board_relays(self) -> Self {
+        if self.topology == Topology::Star {
+            return self;
+        }
+        let firmware = Self {
+            relay: RelayCode::Firmware,
+            ..self
+        };
+        if relay_run::check(&firmware).is_ok() {
+            firmware
+        } else {
+            Self {
+                relay: RelayCode::Model,
+                ..firmware
+            }
         }
     }
 
