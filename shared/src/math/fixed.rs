@@ -561,6 +561,7 @@ impl Real for Fx {
     const HALF: Fx = Fx(ONE_RAW / 2);
     const TWO: Fx = Fx(ONE_RAW * 2);
     const MAX: Fx = Fx(MAX_RAW);
+    const INFINITY: Fx = Fx(INF_RAW);
     /// pi rounded to the nearest step.
     const PI: Fx = Fx(205_887);
     const STORAGE: crate::num::Storage = crate::num::Storage::Q16_16;

@@ -356,6 +356,7 @@ impl Real for RefFx {
     const HALF: RefFx = RefFx(ONE_RAW / 2);
     const TWO: RefFx = RefFx(ONE_RAW * 2);
     const MAX: RefFx = RefFx(MAX_RAW);
+    const INFINITY: RefFx = RefFx(INF_RAW);
     /// pi rounded to the nearest step.
     const PI: RefFx = RefFx(205_887);
     const STORAGE: crate::num::Storage = crate::num::Storage::Q16_16;

@@ -74,6 +74,9 @@ pub trait Real:
     const TWO: Self;
     /// Largest finite value (used as "no hit yet").
     const MAX: Self;
+    /// Above every finite value (the IEEE infinity; Q16.16's reserved one): nothing compares
+    /// greater.
+    const INFINITY: Self;
     const PI: Self;
     /// How a SceneImage stores scalars for this type (the image header's number format).
     const STORAGE: Storage = Storage::F32;
@@ -304,6 +307,7 @@ macro_rules! impl_float_real {
             const HALF: Self = 0.5;
             const TWO: Self = 2.0;
             const MAX: Self = <$t>::MAX;
+            const INFINITY: Self = <$t>::INFINITY;
             const PI: Self = core::f64::consts::PI as $t;
             type EyePlanes = EdgePlanes<$t>;
             const EYE_PLANES_EMPTY: EdgePlanes<$t> = EdgePlanes::ZERO;
@@ -567,6 +571,7 @@ impl Real for FastF32 {
     const HALF: Self = FastF32(0.5);
     const TWO: Self = FastF32(2.0);
     const MAX: Self = FastF32(f32::MAX);
+    const INFINITY: Self = FastF32(f32::INFINITY);
     const PI: Self = FastF32(core::f32::consts::PI);
     type EyePlanes = EdgePlanes<FastF32>;
     const EYE_PLANES_EMPTY: EdgePlanes<FastF32> = EdgePlanes::ZERO;

@@ -4,7 +4,7 @@
 //! `d = (x0 + (x + 1/2) dx, y0 - (y + 1/2) dy, dz)`. A triangle is then tested against the
 //! three planes through the eye and its edges ([`EdgePlanes`]): three dot products with
 //! `d`, no per-ray set-up and no divide unless the ray passes inside. The planes depend on
-//! the triangle only, so the tracer keeps the ones it made in a small direct-mapped cache
+//! the triangle only, so the tracer keeps the ones it made in a small two-way cache
 //! ([`PlaneCache`]) for the rays of the rows that follow. Every technique set tests
 //! primary rays this way (the plain algorithm too), so they keep giving the same pixels.
 
@@ -12,8 +12,9 @@ use crate::geom::Vec3;
 use crate::image::SceneView;
 use crate::num::Real;
 
-/// Triangles whose planes the cache holds at once (a power of two: the slot is the low bits
-/// of the triangle index).
+/// Triangles whose planes the cache holds at once (a power of two: the set of two slots is
+/// the low bits of the triangle index). Two ways, not one slot per index: photo1-noshadow
+/// at 32x30 made 643 planes direct-mapped, 487 in two ways (452 distinct triangles).
 pub const PLANE_SLOTS: usize = 256;
 
 /// A primary ray's direction before normalising, and its length.
@@ -65,19 +66,27 @@ impl<T: Real> PlaneCache<T> {
     /// The planes of triangle `i` of `scene`, made now unless the cache holds them.
     #[inline(always)]
     pub(super) fn get(&mut self, scene: &SceneView<'_>, i: u32) -> &T::EyePlanes {
-        let slot = i as usize % PLANE_SLOTS;
-        if self.tags[slot] != i.wrapping_add(1) {
-            self.make(scene, i, slot);
+        let tag = i.wrapping_add(1);
+        let set = (i as usize % (PLANE_SLOTS / 2)) * 2;
+        if self.tags[set] == tag {
+            return &self.planes[set];
         }
-        &self.planes[slot]
+        if self.tags[set + 1] == tag {
+            return &self.planes[set + 1];
+        }
+        self.make(scene, i, set);
+        &self.planes[set]
     }
 
-    /// A miss: make triangle `i`'s planes into `slot` (out of line, so a hit pays no call).
+    /// A miss: make triangle `i`'s planes into the first slot of its `set`, whose planes
+    /// move to the second (out of line, so a hit pays no call).
     #[inline(never)]
-    fn make(&mut self, scene: &SceneView<'_>, i: u32, slot: usize) {
+    fn make(&mut self, scene: &SceneView<'_>, i: u32, set: usize) {
+        self.tags[set + 1] = self.tags[set];
+        self.planes[set + 1] = self.planes[set];
         let (index, tri) = scene.triangle_corners::<T>(i);
-        self.planes[slot] = T::eye_planes(&tri, index, self.l1);
-        self.tags[slot] = i.wrapping_add(1);
+        self.planes[set] = T::eye_planes(&tri, index, self.l1);
+        self.tags[set] = i.wrapping_add(1);
         self.made += 1;
     }
 }
@@ -134,6 +143,22 @@ mod tests {
         }
         // The repeat of each triangle right after it is a hit; the others evicted it.
         assert!(cache.made < asked && cache.made >= count as u64);
+
+        // Two triangles of one set are both kept; a third evicts the older of them.
+        let set = (PLANE_SLOTS / 2) as u32;
+        let mut cache = PlaneCache::<f32>::new(4.0);
+        for i in [0, set, 0, set, set, 0] {
+            cache.get(&view, i);
+        }
+        assert_eq!(cache.made, 2);
+        for i in [2 * set, set, 0] {
+            let (index, tri) = view.triangle_corners::<f32>(i);
+            assert_eq!(*cache.get(&view, i), EdgePlanes::new(&tri, index, 4.0));
+        }
+        // 2 * set evicted 0 (the older), so 0 was made again, evicting set.
+        assert_eq!(cache.made, 4);
+        cache.get(&view, set);
+        assert_eq!(cache.made, 5);
     }
 
     #[test]

@@ -111,6 +111,11 @@ pub(super) struct Nearest<T> {
     pub(super) hit: Option<Hit<T>>,
     pub(super) node: u32,
     pub(super) t_max: T,
+    /// [`Nearest::limit`] and the nearest hit's distance (infinite without one), kept as
+    /// scalars of their own: the walk reads them for every box, and reading them back out of
+    /// `hit` (its tag and distance, just stored whole by `offer`) stalled the host's walk.
+    limit: T,
+    best_t: T,
 }
 
 /// The tie-break key of the `k`-th shape of leaf `node` (a leaf holds at most 31).
@@ -125,25 +130,21 @@ impl<T: Real> Nearest<T> {
             hit: None,
             node: u32::MAX,
             t_max,
+            limit: t_max,
+            best_t: T::INFINITY,
         }
     }
     /// Upper bound for tests still worth making: a hit at the current distance may still
     /// win the tie, so a little beyond it; the exact winner is decided in `offer`.
     #[inline]
     pub(super) fn limit(&self) -> T {
-        match &self.hit {
-            // Relative slack: a shape lying in its box's face (a flat box) can compute its
-            // hit a few ulps before the box's computed entry, and must still be tested.
-            Some(h) => h.t * (T::ONE + T::err_gamma(16)),
-            None => self.t_max,
-        }
+        self.limit
     }
-    /// Whether a box entered at `t` lies wholly behind the nearest hit (with the same slack).
+    /// Whether a box entered at `t` lies wholly behind the nearest hit (with the same slack;
+    /// never without a hit: nothing compares above the infinite `best_t`).
     #[inline]
     pub(super) fn beyond(&self, t: T) -> bool {
-        self.hit
-            .as_ref()
-            .is_some_and(|h| t * (T::ONE - T::err_gamma(16)) > h.t)
+        t * (T::ONE - T::err_gamma(16)) > self.best_t
     }
     #[inline]
     pub(super) fn offer(&mut self, h: Hit<T>, node: u32) {
@@ -157,6 +158,10 @@ impl<T: Real> Nearest<T> {
             Some(b) => h.t < b.t || (h.t == b.t && node < self.node),
         };
         if better {
+            // Relative slack: a shape lying in its box's face (a flat box) can compute its
+            // hit a few ulps before the box's computed entry, and must still be tested.
+            self.limit = h.t * (T::ONE + T::err_gamma(16));
+            self.best_t = h.t;
             self.hit = Some(h);
             self.node = node;
         }
