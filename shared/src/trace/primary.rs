@@ -84,10 +84,19 @@ impl<T: Real> PlaneCache<T> {
     fn make(&mut self, scene: &SceneView<'_>, i: u32, set: usize) {
         self.tags[set + 1] = self.tags[set];
         self.planes[set + 1] = self.planes[set];
-        let (index, tri) = scene.triangle_corners::<T>(i);
-        self.planes[set] = T::eye_planes(&tri, index, self.l1);
+        self.planes[set] = self.made_now(scene, i);
         self.tags[set] = i.wrapping_add(1);
         self.made += 1;
+    }
+
+    /// Triangle `i`'s planes made now and not kept (the same values [`Self::get`] gives):
+    /// the plain algorithm tests every triangle of the scene for each ray, more than the
+    /// cache holds, so keeping them would only evict (+7% on the M4F's photo1-noshadow
+    /// plain algorithm with two ways, `docs/cortex-m-bench.md`).
+    #[inline(never)]
+    pub(super) fn made_now(&self, scene: &SceneView<'_>, i: u32) -> T::EyePlanes {
+        let (index, tri) = scene.triangle_corners::<T>(i);
+        T::eye_planes(&tri, index, self.l1)
     }
 }
 
@@ -159,6 +168,12 @@ mod tests {
         assert_eq!(cache.made, 4);
         cache.get(&view, set);
         assert_eq!(cache.made, 5);
+        // Planes made on the spot (the plain algorithm's) are the cached ones, and not kept.
+        for i in [0, set, 2 * set] {
+            let now = cache.made_now(&view, i);
+            assert_eq!(now, *cache.get(&view, i));
+        }
+        assert_eq!(cache.made, 6, "only 2 * set was not held");
     }
 
     #[test]

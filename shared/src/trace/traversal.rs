@@ -110,8 +110,7 @@ pub(super) const ORDERED_FANOUT: usize = 8;
 pub(super) struct Nearest<T> {
     pub(super) hit: Option<Hit<T>>,
     pub(super) node: u32,
-    pub(super) t_max: T,
-    /// [`Nearest::limit`] and the nearest hit's distance (infinite without one), kept as
+    /// [`Nearest::limit`] (the walk's `t_max` until a hit) and the nearest hit's distance (infinite without one), kept as
     /// scalars of their own: the walk reads them for every box, and reading them back out of
     /// `hit` (its tag and distance, just stored whole by `offer`) stalled the host's walk.
     limit: T,
@@ -129,7 +128,6 @@ impl<T: Real> Nearest<T> {
         Self {
             hit: None,
             node: u32::MAX,
-            t_max,
             limit: t_max,
             best_t: T::INFINITY,
         }
@@ -361,7 +359,12 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     pub(super) fn offer(&mut self, near: &mut Nearest<T>, leaf: Leaf, node: u32, probe: &Probe<T>) {
         if leaf.kind == ShapeKind::Triangle {
             return match &probe.eye {
-                Some(eye) => self.offer_triangles_from_eye(near, leaf, node, probe, eye),
+                // The plain algorithm (no bounding boxes) makes each triangle's planes on
+                // the spot: it tests more triangles per ray than the cache holds.
+                Some(eye) if self.techniques.bounding_boxes => {
+                    self.offer_triangles_from_eye::<true>(near, leaf, node, probe, eye)
+                }
+                Some(eye) => self.offer_triangles_from_eye::<false>(near, leaf, node, probe, eye),
                 // One loop per axis permutation, matched once per leaf (as for shadow rays).
                 None => match probe.shear.kz() {
                     0 => self.offer_triangles_permuted::<1, 2, 0>(near, leaf, node, probe),
@@ -378,8 +381,8 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     }
 
     /// [`Self::offer`] for a leaf of triangles and a primary ray: each triangle against
-    /// its cached edge planes.
-    fn offer_triangles_from_eye(
+    /// its edge planes, cached (`CACHED`) or made on the spot.
+    fn offer_triangles_from_eye<const CACHED: bool>(
         &mut self,
         near: &mut Nearest<T>,
         leaf: Leaf,
@@ -392,7 +395,14 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         for k in 0..leaf.count {
             let index = leaf.first + k;
             let scene = &self.scene;
-            let planes = self.state.borrow_mut().planes.get(scene, index);
+            let state = self.state.borrow_mut();
+            let made;
+            let planes = if CACHED {
+                state.planes.get(scene, index)
+            } else {
+                made = state.planes.made_now(scene, index);
+                &made
+            };
             let test = T::eye_test(planes, eye.d, eye.len, limit);
             let tri = || scene.triangle::<T>(index).tri;
             if let Some(h) = test.or_sheared(tri, &probe.shear, limit) {
