@@ -6,6 +6,11 @@
 //! (`rc_fw::with_relay_pins!`). Both link tasks run on an interrupt executor (UART4's
 //! interrupt, priority 6) above the thread executor where the relay logic runs. No USB, no
 //! scene: a relay stores and forwards. The backup line is not run on a relay.
+//!
+//! A middle relay of a two-level tree (`--features relay-mid`) runs the same logic with
+//! leaf relays as its bus devices ([`BUS_DEVICES`]): `run_relay` over a `RelayedBus` on
+//! SPI2, its buffers in SRAM, each node exchange given up after
+//! `links_core::relay::MID_RELAY_TIMEOUT_US` (below the root's time-out).
 
 use defmt::{info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
@@ -37,12 +42,23 @@ bind_interrupts!(struct Irqs {
     EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
 });
 
+/// The devices on the relay's bus: its NCs, or as a middle relay (`relay-mid`) the leaf
+/// relays whose nodes its report to the root has bits for (4 of 8 NCs).
+const BUS_DEVICES: usize = if cfg!(feature = "relay-mid") {
+    (links_core::relay::MAX_RELAY_NODES as usize) / NODES
+} else {
+    NODES
+};
+const _: () = assert!(BUS_DEVICES >= 1 && BUS_DEVICES <= NODES);
+
 /// Everything DMA touches (`.sram`): the parent link's five banks, the bus's three; and the
-/// relay's three frame buffers.
+/// relay's three frame buffers (a middle relay's `RelayedBus` buffers too).
 struct Sram {
     parent: [Bank; 5],
     bus: [Bank; 3],
     relay: [[u8; MAX_MESSAGE]; 3],
+    #[cfg(feature = "relay-mid")]
+    leaves: links_core::relay::RelayedBuffers,
 }
 
 static BUS: MasterShared<'static> = MasterShared::new();
@@ -74,6 +90,7 @@ async fn bus_task(port: RcPort<NODES>) {
 }
 
 /// Relay one render after another (each ends with the root's `Stop`).
+#[cfg(not(feature = "relay-mid"))]
 #[embassy_executor::task]
 async fn relay_task(
     parent: &'static SlaveShared<'static>,
@@ -87,6 +104,35 @@ async fn relay_task(
         match run_relay(&mut handle, &mut bus, buffers).await {
             Ok(r) => info!("relayed: {}", r),
             Err(e) => warn!("relay: {}", e),
+        }
+    }
+}
+
+/// As a middle relay: the bus's devices are leaf relays, driven through a `RelayedBus`.
+#[cfg(feature = "relay-mid")]
+#[embassy_executor::task]
+async fn relay_task(
+    parent: &'static SlaveShared<'static>,
+    bus: MasterFront<'static, 'static>,
+    bufs: &'static mut [[u8; MAX_MESSAGE]; 3],
+    leaves: &'static mut links_core::relay::RelayedBuffers,
+) {
+    use links_core::relay::{RelayedBus, MID_RELAY_TIMEOUT_US};
+    let mut handle = parent.handle();
+    let per_leaf = NODES as u16;
+    let mut leaves = match RelayedBus::new(bus, leaves, 0, per_leaf) {
+        Ok(b) => b.with_timeout(rc_fw::port::Clock, MID_RELAY_TIMEOUT_US),
+        Err(e) => {
+            warn!("middle relay: {}", e);
+            return;
+        }
+    };
+    loop {
+        let [down, up, node] = &mut *bufs;
+        let buffers = RelayBuffers { down, up, node };
+        match run_relay(&mut handle, &mut leaves, buffers).await {
+            Ok(r) => info!("relayed (middle): {}", r),
+            Err(e) => warn!("middle relay: {}", e),
         }
     }
 }
@@ -129,7 +175,15 @@ async fn main(spawner: Spawner) {
     info!("LINKS-1 relay RC up");
     // `main` runs once, so this expansion does: the only reference to the region.
     let sram: &'static mut Sram = links_board::take_sram!(Sram);
+    #[cfg(not(feature = "relay-mid"))]
     let Sram { parent, bus, relay } = sram;
+    #[cfg(feature = "relay-mid")]
+    let Sram {
+        parent,
+        bus,
+        relay,
+        leaves,
+    } = sram;
 
     let mut spi_cfg = spi::Config::default();
     spi_cfg.frequency = Hertz(rc_fw::link::SPI_HZ);
@@ -144,11 +198,14 @@ async fn main(spawner: Spawner) {
     });
     let shared: &'static SlaveShared<'static> = PARENT.init(shared);
     let [btx0, btx1, brx] = bus;
-    let front = MasterFront::new(&BUS, 0, NODES as u16, [btx0, btx1], brx);
+    let front = MasterFront::new(&BUS, 0, BUS_DEVICES as u16, [btx0, btx1], brx);
 
     interrupt::UART4.set_priority(Priority::P6);
     let links = EXECUTOR_LINKS.start(interrupt::UART4);
     links.spawn(unwrap!(parent_task(parent_port, task, shared)));
     links.spawn(unwrap!(bus_task(bus_port)));
+    #[cfg(not(feature = "relay-mid"))]
     spawner.spawn(unwrap!(relay_task(shared, front, relay)));
+    #[cfg(feature = "relay-mid")]
+    spawner.spawn(unwrap!(relay_task(shared, front, relay, leaves)));
 }

@@ -111,6 +111,84 @@ fn the_firmware_relay_code_renders_the_single_node_frame() {
     }
 }
 
+/// Two levels (`rc-fw --features relay-mid` between the root and the leaf relays): 128 and
+/// 256 nodes render the single-node frame under decreasing and static sizes, every node
+/// exchange is routed once by a middle relay and once by a leaf relay, every root broadcast
+/// reaches every relay's bus once, and no exchange times out; with bit errors on every
+/// link the frame is still exact.
+#[test]
+fn two_levels_of_firmware_relays_render_the_single_node_frame() {
+    let img = image("photo1.ron", 64, 60);
+    let want = reference(&img);
+    assert_eq!(
+        SimConfig::buildable(BoardProfile::F407, 256).relay,
+        RelayCode::Model,
+        "no root build drives middle relays: the board's default is the model"
+    );
+    for (nodes, mids, policy) in [
+        (128u16, 4usize, Policy::RELAYED),
+        (256, 8, Policy::RELAYED),
+        (256, 8, Policy::Static { shape: Split::Rect }),
+    ] {
+        let r = run(
+            &img,
+            SimConfig {
+                policy,
+                ..firmware(nodes)
+            },
+        );
+        let what = format!("{nodes} nodes, {policy:?}");
+        assert!(r.frames[0] == want, "{what}");
+        assert_eq!(r.root.pixels, 64 * 60, "{what}");
+        let f = r.relayed.as_ref().expect("the firmware's relay code ran");
+        assert_eq!((f.mids.len(), f.relays.len()), (mids, nodes as usize / 8));
+        for rep in f.mids.iter().chain(&f.relays) {
+            let rep = rep.expect("every relay passed the Stop on");
+            assert_eq!(rep.forwarded, r.root.broadcasts + 1, "{what}");
+            assert_eq!(rep.bad_frames, 0, "{what}");
+        }
+        // Every node exchange the root made went through a middle relay once. The leaf
+        // relays clock at least as many (a few more: an exchange a middle relay gave up at
+        // its time-out may still be clocked below it; the node's sequence numbers make the
+        // repeat harmless, see docs/cluster.md, "Two levels of firmware relays").
+        let mids: u32 = f.mids.iter().flatten().map(|r| r.routed).sum();
+        let leaves: u32 = f.relays.iter().flatten().map(|r| r.routed).sum();
+        let leaf_bus: u64 = r.bus.iter().map(|b| b.exchanges).sum();
+        assert_eq!(mids, r.root.exchanges, "{what}: {:?} {:?}", f.root, f.mid);
+        assert!(
+            leaves >= mids && leaves <= mids + mids / 20,
+            "{what}: {leaves}"
+        );
+        assert_eq!(leaf_bus, leaves as u64, "{what}");
+        assert_eq!(f.root.timeouts, 0, "{what}");
+        // (A known defect: a few exchanges wait at a middle relay past its time-out.)
+        assert!(
+            f.mid.timeouts * 20 <= r.root.exchanges,
+            "{what}: {:?}",
+            f.mid
+        );
+        assert_eq!((f.root.bad_batches, f.mid.bad_batches), (0, 0), "{what}");
+        assert!(f.mid.link_exchanges >= r.root.exchanges, "{what}");
+        // An exchange a middle relay gave up comes to the root empty.
+        assert!(r.root.bad_messages <= f.mid.timeouts, "{what}");
+    }
+    let r = run(
+        &img,
+        SimConfig {
+            noise: Noise {
+                ber_up: 2e-5,
+                ber_down: 2e-5,
+                drop_broadcast: 0.0,
+                ..Noise::default()
+            },
+            ..firmware(256)
+        },
+    );
+    assert!(r.frames[0] == want, "bit errors on every link");
+    let link = r.link.expect("the firmware link ran");
+    assert!(link.any(), "the errors were seen: {link:?}");
+}
+
 #[test]
 fn a_repeated_still_through_the_firmware_relays_is_exact_every_frame() {
     let img = image("photo1.ron", 48, 45);
@@ -209,11 +287,9 @@ fn a_relay_that_stops_answering_costs_its_nodes_not_the_frame() {
 fn what_the_firmware_root_cannot_drive_is_refused_with_the_reason() {
     let img = image("photo1.ron", 16, 15);
     let err = |cfg: SimConfig| simulate_frame(&img, &cfg).unwrap_err().to_string();
-    // Two levels: the firmware's root drives one.
+    // Two levels: a middle relay reports 32 nodes, 4 leaf relays of 8.
     let e = err(firmware(72));
-    assert!(e.contains("one level") && e.contains("64 nodes"), "{e}");
-    let e = err(firmware(256));
-    assert!(e.contains("two levels"), "{e}");
+    assert!(e.contains("multiple of 32 nodes"), "{e}");
     // The root's children on three buses, the idealised link, uneven relays.
     let e = err(SimConfig {
         buses: 3,

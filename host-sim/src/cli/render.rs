@@ -91,9 +91,10 @@ pub struct ClusterArgs {
     /// simulator's model: node frames forwarded and batched, relays answering from the one
     /// job table as if it were local) or firmware (the firmware's relay code,
     /// links_core::relay: the root's RelayedBus and each relay's run_relay over emulated
-    /// SPI links; one level of relays, 64 nodes at most on the f407, 1 or 2 root buses,
-    /// the firmware link). Default: firmware where it can run the tree (one level, no
-    /// serial backup line), model otherwise (two levels: more than 64 nodes on the f407)
+    /// SPI links; one level of relays, or two with middle relays of 4 leaf relays
+    /// (rc-fw --features relay-mid), 1 or 2 root buses, the firmware link). Default:
+    /// firmware where the board's root of relays drives the tree (one level, no serial
+    /// backup line), model otherwise (two levels: more than 64 nodes on the f407)
     #[arg(long, value_parser = cli_cluster::parse_relay)]
     pub relay: Option<crate::cluster::relay::RelayCode>,
     /// How the nodes may code their pixel runs (cluster only): raw, rle (raw or run-length

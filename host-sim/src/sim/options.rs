@@ -183,7 +183,7 @@ pub fn topology_text(cfg: &SimConfig) -> String {
             t.leaves,
             cfg.profile.link.nodes_per_bus,
             t.levels(),
-            match (t.mids, t.roots) {
+            match (cfg.mid_relays(), t.roots) {
                 (0, 1) => String::new(),
                 (0, r) => format!(" (the root on {r} buses)"),
                 (m, 1) => format!(" ({m} mid relays)"),
@@ -192,7 +192,7 @@ pub fn topology_text(cfg: &SimConfig) -> String {
             match (cfg.relay, t.levels()) {
                 (RelayCode::Model, 1) => ", modelled relays (--relay firmware runs their code)",
                 (RelayCode::Model, _) =>
-                    ", modelled relays (the firmware's relay code drives one level)",
+                    ", modelled relays (--relay firmware runs their code: 4 leaf relays per mid relay)",
                 (RelayCode::Firmware, _) => ", the firmware's relay code",
             }
         ),
@@ -814,7 +814,7 @@ mod tests {
         );
         assert_eq!(
             topology_text(&f),
-            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays, the root on 2 buses), modelled relays (the firmware's relay code drives one level)"
+            "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays, the root on 2 buses), modelled relays (--relay firmware runs their code: 4 leaf relays per mid relay)"
         );
         let f = config(
             BoardProfile::F407,

@@ -172,6 +172,15 @@ pub trait RootBus {
     /// waiting (the root logic calls it whenever it looks for work; a no-op by default).
     fn poll(&mut self) {}
 
+    /// Wait until the bus has news for a relay above it: a node's line rose, or (buses
+    /// with [`RootBus::in_flight`] above 1) a frame came back or a node newly waits. The
+    /// default: [`RootBus::wait_ready`]. A bus of relays ([`crate::relay::RelayedBus`])
+    /// keeps its link moving meanwhile and does not return for nodes it already reported
+    /// waiting (a middle relay waits for the root's requests for those).
+    async fn wait_news(&mut self) {
+        self.wait_ready().await;
+    }
+
     /// Swap frames with `node`: send `tx`, receive its frame into `rx`; returns the number
     /// of bytes received (start + finish, nothing else in flight).
     async fn exchange(

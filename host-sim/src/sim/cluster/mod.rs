@@ -252,13 +252,20 @@ impl SimConfig {
     }
 
     /// This configuration with the relay code the board runs: the firmware's
-    /// ([`RelayCode::Firmware`]) where it can run it (one level of relays, the firmware
-    /// link, the same node count behind every relay, no serial backup line;
-    /// `relay_run::check`), the model otherwise (two levels of relays: 256 nodes on the
-    /// F407). A star is left as it is.
+    /// ([`RelayCode::Firmware`]) where the board's root of relays is built for the tree
+    /// and the code can run it (one level of relays, the firmware link, the same node count
+    /// behind every relay, no serial backup line; `relay_run::check`), the model otherwise.
+    /// Two levels (256 nodes on the F407) stay on the model: the firmware's middle relay
+    /// runs in the loop with `--relay firmware`, but no root build drives middle relays.
     pub fn with_board_relays(self) -> Self {
         if self.topology == Topology::Star {
             return self;
+        }
+        if self.tree().is_some_and(|t| t.is_ok_and(|t| t.levels() > 1)) {
+            return Self {
+                relay: RelayCode::Model,
+                ..self
+            };
         }
         let firmware = Self {
             relay: RelayCode::Firmware,
@@ -282,6 +289,17 @@ impl SimConfig {
                 TreeShape::of(self.nodes, self.profile.link.nodes_per_bus, fanout)
                     .map(|t| t.with_roots(self.buses)),
             ),
+        }
+    }
+
+    /// The middle relays of the tree as the relay code in the loop builds it: the
+    /// firmware's (`relay_run::firmware_tree`: each drives as many leaf relays as its report
+    /// to the root has bits for, 8 for 256 F407 nodes) or the model's (`TreeShape::mids`).
+    pub fn mid_relays(&self) -> u16 {
+        match (relay_run::firmware_tree(self), self.tree()) {
+            (Some(fw), _) if fw.leaves_per_mid > 0 => fw.children,
+            (_, Some(Ok(t))) => t.mids,
+            _ => 0,
         }
     }
 

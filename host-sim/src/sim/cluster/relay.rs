@@ -111,6 +111,10 @@ pub struct FirmwareRelays {
     /// The root's link to its relays: transfers, bytes, busy time, what the configured bit
     /// errors and losses did on it.
     pub link: BusCounters,
+    /// Two levels: each middle relay's report (`relays` are then the leaf relays').
+    pub mids: Vec<Option<RelayReport>>,
+    /// Two levels: what the middle relays' `RelayedBus`es counted, summed.
+    pub mid: RelayedCounters,
 }
 
 /// Why a relay tree cannot be built.

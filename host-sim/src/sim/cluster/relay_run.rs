@@ -1,23 +1,30 @@
 //! The firmware's relay code in the simulator's loop (`SimConfig::relay` =
-//! [`RelayCode::Firmware`]): a one-level relay tree run by the code the boards run
-//! (`links_core::relay`), in virtual time.
+//! [`RelayCode::Firmware`]): a relay tree of one or two levels run by the code the boards
+//! run (`links_core::relay`), in virtual time.
 //!
 //! - **The root** (`rc-fw --features relay-root`): `run_bus` over
-//!   [`RelayedBus`]`::new(link, ..).with_timeout(clock, RELAY_TIMEOUT_US)` (up to
-//!   `links_core::relay::DEPTH` node exchanges in flight per relay), where `link` is
-//!   the split master of an emulated SPI bus of its own whose "nodes" are the relays (the
-//!   same [`super::spi_bus`] emulation and board-profile timing as every bus), its CPU
-//!   charged by [`RcClock`] (composing, decoding) and [`LinkCpu`] (its `RelayedBus`'s
-//!   copies).
-//! - **Each relay** (`rc-fw --features relay`): `run_relay` between a slave link on the
-//!   root's bus (`SlaveTask` + `SlaveHandle`) and the split master of its own leaf bus,
+//!   [`RelayedBus`]`::new(link, ..).with_timeout(clock, root_timeout_us(levels))` (up to
+//!   `links_core::relay::DEPTH` node exchanges in flight per child), on two links through
+//!   [`TwoLinks`] as the F407 drives them, where each `link` is the split master of an
+//!   emulated SPI bus of its own whose "nodes" are the root's children (the same
+//!   [`super::spi_bus`] emulation and board-profile timing as every bus), its CPU charged
+//!   by [`RcClock`] (composing, decoding) and [`LinkCpu`] (its `RelayedBus`'s copies).
+//! - **Two levels: each middle relay** (`rc-fw --features relay-mid`): `run_relay` between a
+//!   slave link on the root's bus and a [`RelayedBus`] over the split master of its own
+//!   bus, whose "nodes" are 4 leaf relays (its report to the root has bits for 32 nodes),
+//!   given up after `MID_RELAY_TIMEOUT_US`. Built only with the firmware's relay code:
+//!   no root build drives middle relays yet, so the board's default for two levels is the
+//!   model (`SimConfig::with_board_relays`).
+//! - **Each leaf relay** (`rc-fw --features relay`): `run_relay` between a slave link on its
+//!   parent's bus (`SlaveTask` + `SlaveHandle`) and the split master of its own leaf bus,
 //!   its CPU charged by [`LinkCpu`].
 //! - **The nodes**: the simulator's node tasks on the leaf buses, unchanged.
 //!
-//! Faults: the configuration's bit errors and lost broadcasts act on the root's link too
-//! (its own generator, seeded from the same seed); the deterministic every-`n` faults and
-//! broadcast drops act on the leaf buses only; a relay that stops answering
-//! (`SimConfig::relay_deaths`) is a dead "node" of the root's bus (its DMA never re-arms).
+//! Faults: the configuration's bit errors and lost broadcasts act on the root's links and
+//! the middle relays' buses too (generators of their own, seeded from the same seed); the
+//! deterministic every-`n` faults and broadcast drops act on the leaf buses only; a relay
+//! that stops answering (`SimConfig::relay_deaths`: one of the root's children) is a dead
+//! "node" of the root's bus (its DMA never re-arms).
 
 use super::exec::{Ps, SharedClock, Task, VirtualClock};
 use super::rccost::{LinkCpu, LinkRole, RcClock};
@@ -28,8 +35,9 @@ use super::star::{BusCounters, Faults, Noise, SharedStar, Star};
 use super::timeline::SharedTimeline;
 use super::{Collect, SimConfig, SimError};
 use links_core::relay::{
-    run_relay, RelayBuffers, RelayError, RelayReport, RelayedBuffers, RelayedBus, RelayedCounters,
-    RelayedFrames, TwoLinks, MAX_RELAYS, MAX_RELAY_NODES, RELAY_TIMEOUT_US, TWO_LINK_SLOTS,
+    root_timeout_us, run_relay, RelayBuffers, RelayError, RelayReport, RelayedBuffers, RelayedBus,
+    RelayedCounters, RelayedFrames, TwoLinks, MAX_RELAYS, MAX_RELAY_NODES, MID_RELAY_TIMEOUT_US,
+    TWO_LINK_SLOTS,
 };
 use links_core::root::{run_bus, RootError};
 use links_core::spi::{Bank, BANK};
@@ -44,14 +52,57 @@ const ROOT_LINK_SEED: u64 = 0x9e37_79b9_7f4a_7c15;
 /// relay-root`: SPI1 and SPI2 of the F407).
 pub(super) const ROOT_LINKS: usize = 2;
 
-/// The relays and nodes per relay of the firmware's relay tree `cfg` asks for, if it asks
-/// for one (checked by [`check`]).
-pub(super) fn firmware_tree(cfg: &SimConfig) -> Option<(u16, u16, u16)> {
+/// The firmware's relay tree: the root's children on its links, and under two levels
+/// the leaf relays behind each middle relay.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct FirmwareTree {
+    /// The root's children: leaf relays (one level) or middle relays (two).
+    pub(super) children: u16,
+    /// Nodes behind each child.
+    pub(super) per_child: u16,
+    /// The root's links.
+    pub(super) roots: u16,
+    /// Leaf relays behind each middle relay (0: one level).
+    pub(super) leaves_per_mid: u16,
+    /// Nodes on each leaf relay's bus.
+    pub(super) per_leaf: u16,
+}
+
+impl FirmwareTree {
+    /// The leaf relays.
+    pub(super) fn leaves(&self) -> u16 {
+        self.children * self.leaves_per_mid.max(1)
+    }
+}
+
+/// The firmware's relay tree `cfg` asks for, if it asks for one (checked by [`check`]):
+/// the model's leaf relays (`TreeShape::leaves`); under two levels each middle relay
+/// drives as many leaf relays as its report to the root has bits for
+/// ([`MAX_RELAY_NODES`] nodes: 4 leaf relays of 8), so 256 nodes are 8 middle relays of 4.
+pub(super) fn firmware_tree(cfg: &SimConfig) -> Option<FirmwareTree> {
     if cfg.relay != RelayCode::Firmware || cfg.topology == Topology::Star {
         return None;
     }
     let shape = cfg.tree()?.ok()?;
-    Some((shape.leaves, cfg.nodes / shape.leaves.max(1), shape.roots))
+    let leaves = shape.leaves.max(1);
+    let per_leaf = cfg.nodes / leaves;
+    if shape.levels() == 1 {
+        return Some(FirmwareTree {
+            children: leaves,
+            per_child: per_leaf,
+            roots: shape.roots,
+            leaves_per_mid: 0,
+            per_leaf,
+        });
+    }
+    let leaves_per_mid = (MAX_RELAY_NODES / per_leaf.max(1)).max(1);
+    Some(FirmwareTree {
+        children: leaves.div_ceil(leaves_per_mid),
+        per_child: per_leaf * leaves_per_mid,
+        roots: shape.roots,
+        leaves_per_mid,
+        per_leaf,
+    })
 }
 
 /// Refuse what the firmware's relay code cannot run, saying why.
@@ -67,24 +118,26 @@ pub(super) fn check(cfg: &SimConfig) -> Result<(), SimError> {
         }
         _ => return Ok(()),
     };
-    let fanout = tree.fanout as u32;
-    let per_bus = cfg.profile.link.nodes_per_bus as u32;
-    if tree.levels() > 1 {
-        return no(format!(
-            "{} nodes need two levels of relays ({} leaf relays under {} mid relays); the firmware's root of relays (rc-fw --features relay-root) drives one level: at most {fanout} relays x {per_bus} nodes = {} nodes on the {} board (--relay model simulates two levels)",
-            cfg.nodes,
-            tree.leaves,
-            tree.mids,
-            fanout * per_bus,
-            cfg.profile.name
-        ));
+    let Some(fw) = firmware_tree(cfg) else {
+        return Ok(());
+    };
+    if tree.levels() > 2 {
+        return no(format!("{} levels of relays", tree.levels()));
     }
-    if tree.roots as usize > ROOT_LINKS || tree.roots > tree.leaves {
+    if tree.roots as usize > ROOT_LINKS || tree.roots > fw.children {
         return no(format!(
             "the firmware's root of relays drives its {} relays on 1 to {} SPI buses, not {} (--buses)",
-            tree.leaves,
-            ROOT_LINKS.min(tree.leaves as usize),
+            fw.children,
+            ROOT_LINKS.min(fw.children as usize),
             tree.roots
+        ));
+    }
+    if fw.leaves_per_mid > 0 && tree.leaves % fw.leaves_per_mid != 0 {
+        return no(format!(
+            "{} leaf relays under middle relays of {}: the firmware's middle relay reports {MAX_RELAY_NODES} nodes (give a multiple of {} nodes)",
+            tree.leaves,
+            fw.leaves_per_mid,
+            fw.leaves_per_mid as u32 * cfg.profile.link.nodes_per_bus as u32
         ));
     }
     if cfg.link != LinkModel::Firmware {
@@ -98,11 +151,11 @@ pub(super) fn check(cfg: &SimConfig) -> Result<(), SimError> {
             cfg.nodes, tree.leaves, tree.leaves
         ));
     }
-    let per = cfg.nodes / tree.leaves;
-    if tree.leaves as usize > MAX_RELAYS || per > MAX_RELAY_NODES {
+    let per_link = fw.children.div_ceil(fw.roots.max(1));
+    if per_link as usize > MAX_RELAYS || fw.per_child > MAX_RELAY_NODES {
         return no(format!(
-            "{} relays of {per} nodes: the firmware's RelayedBus drives at most {MAX_RELAYS} relays of {MAX_RELAY_NODES}",
-            tree.leaves
+            "{} relays of {} nodes on {} link(s): the firmware's RelayedBus drives at most {MAX_RELAYS} relays of {MAX_RELAY_NODES} on a link",
+            fw.children, fw.per_child, fw.roots
         ));
     }
     if cfg.backup_line || !cfg.spi_dead.is_empty() {
@@ -114,14 +167,14 @@ pub(super) fn check(cfg: &SimConfig) -> Result<(), SimError> {
     if let Some(d) = cfg
         .relay_deaths
         .iter()
-        .find(|d| d.node >= tree.leaves || !(d.at_s.is_finite() && d.at_s >= 0.0))
+        .find(|d| d.node >= fw.children || !(d.at_s.is_finite() && d.at_s >= 0.0))
     {
         return no(format!(
-            "relay {} cannot stop at {} s ({} relays: 0 to {})",
+            "relay {} cannot stop at {} s ({} relays under the root: 0 to {})",
             d.node,
             d.at_s,
-            tree.leaves,
-            tree.leaves - 1
+            fw.children,
+            fw.children - 1
         ));
     }
     Ok(())
@@ -134,21 +187,39 @@ pub(super) struct RelayLink {
     pub(super) star: SharedStar,
     wire: SharedWire,
     pub(super) counters: LinkReport,
+    /// The root's children and the nodes behind each.
     relays: u16,
     per_relay: u16,
     /// The root's CPU: its `RcClock` and its `RelayedBus`'s link work.
     root_busy: Rc<Cell<Ps>>,
     relayed: RefCell<RelayedCounters>,
+    /// The root's children's reports.
+    reports: RefCell<Vec<Option<Result<RelayReport, RelayError>>>>,
+    /// Two levels: the middle relays' buses to their leaf relays.
+    pub(super) mid: Option<MidLinks>,
+}
+
+/// The middle relays' buses of a two-level tree (emulated SPI buses whose "nodes" are the
+/// leaf relays: leaf `l` on middle relay `l / leaves_per_mid`'s bus).
+pub(super) struct MidLinks {
+    wire: SharedWire,
+    pub(super) counters: LinkReport,
+    leaves_per_mid: u16,
+    per_leaf: u16,
+    /// What the middle relays' `RelayedBus`es counted, summed.
+    relayed: RefCell<RelayedCounters>,
+    /// The leaf relays' reports.
     reports: RefCell<Vec<Option<Result<RelayReport, RelayError>>>>,
 }
 
+/// The middle relays' buses' noise generator (same rates as the leaf buses').
+const MID_LINK_SEED: u64 = 0x6a09_e667_f3bc_c909;
+
 impl RelayLink {
-    /// `relays` relays of `per_relay` nodes on `links` root links at `cfg`'s timing.
-    pub(super) fn new(
-        clock: &SharedClock,
-        cfg: &SimConfig,
-        (relays, per_relay, links): (u16, u16, u16),
-    ) -> Self {
+    /// The firmware tree `tree` at `cfg`'s timing: the root's children on its links, and
+    /// under two levels the middle relays' buses.
+    pub(super) fn new(clock: &SharedClock, cfg: &SimConfig, tree: FirmwareTree) -> Self {
+        let (relays, links) = (tree.children, tree.roots);
         let star = Star::new(clock, relays, links, cfg.timing, Faults::default(), None);
         star.borrow_mut().set_noise(Noise {
             seed: cfg.noise.seed ^ ROOT_LINK_SEED,
@@ -160,26 +231,52 @@ impl RelayLink {
         }
         let timing = WireTiming::of(&cfg.profile.link, cfg.timing.bit_rate_hz);
         let wire = Wire::new(&star, timing, &[]);
+        let mid = (tree.leaves_per_mid > 0).then(|| {
+            let leaves = tree.leaves();
+            let star = Star::new(clock, leaves, relays, cfg.timing, Faults::default(), None);
+            star.borrow_mut().set_noise(Noise {
+                seed: cfg.noise.seed ^ MID_LINK_SEED,
+                ..cfg.noise
+            });
+            let wire = Wire::new(&star, timing, &[]);
+            MidLinks {
+                wire,
+                counters: LinkReport::new(relays as usize, leaves),
+                leaves_per_mid: tree.leaves_per_mid,
+                per_leaf: tree.per_leaf,
+                relayed: RefCell::new(RelayedCounters::default()),
+                reports: RefCell::new(vec![None; leaves as usize]),
+            }
+        });
         Self {
             star,
             wire,
             counters: LinkReport::new(links.clamp(1, relays.max(1)) as usize, relays),
             relays,
-            per_relay,
+            per_relay: tree.per_child,
             root_busy: Rc::new(Cell::new(0)),
             relayed: RefCell::new(RelayedCounters::default()),
             reports: RefCell::new(vec![None; relays as usize]),
+            mid,
         }
     }
 
-    /// Whether every relay has ended (passed the `Stop` on) or stopped answering.
+    /// Whether every relay has ended (passed the `Stop` on) or stopped answering (with the
+    /// leaf relays behind it).
     pub(super) fn ended(&self) -> bool {
         let star = self.star.borrow();
-        self.reports
+        let children = self
+            .reports
             .borrow()
             .iter()
             .enumerate()
-            .all(|(r, rep)| rep.is_some() || star.is_dead(r))
+            .all(|(r, rep)| rep.is_some() || star.is_dead(r));
+        children
+            && self.mid.as_ref().is_none_or(|m| {
+                m.reports.borrow().iter().enumerate().all(|(l, rep)| {
+                    rep.is_some() || star.is_dead(l / m.leaves_per_mid.max(1) as usize)
+                })
+            })
     }
 
     /// The root links' traffic and the root's CPU, as the relay model reports them;
@@ -215,14 +312,26 @@ impl RelayLink {
 
     /// What the relay code reported (a relay's error is the run's).
     pub(super) fn firmware_relays(&self) -> Result<FirmwareRelays, SimError> {
-        let mut relays = Vec::new();
-        for (r, rep) in self.reports.borrow().iter().enumerate() {
-            match rep {
-                Some(Err(e)) => return Err(SimError::Config(format!("relay {r}: {e}"))),
-                Some(Ok(rep)) => relays.push(Some(*rep)),
-                None => relays.push(None),
+        let reports = |all: &RefCell<Vec<Option<Result<RelayReport, RelayError>>>>, what| {
+            let mut out = Vec::new();
+            for (r, rep) in all.borrow().iter().enumerate() {
+                match rep {
+                    Some(Err(e)) => return Err(SimError::Config(format!("{what} {r}: {e}"))),
+                    Some(Ok(rep)) => out.push(Some(*rep)),
+                    None => out.push(None),
+                }
             }
-        }
+            Ok(out)
+        };
+        let children = reports(&self.reports, "relay")?;
+        let (relays, mids, mid) = match &self.mid {
+            None => (children, Vec::new(), RelayedCounters::default()),
+            Some(m) => (
+                reports(&m.reports, "leaf relay")?,
+                children,
+                *m.relayed.borrow(),
+            ),
+        };
         let star = self.star.borrow();
         let mut link = BusCounters::default();
         for c in star.counters() {
@@ -232,6 +341,8 @@ impl RelayLink {
             root: *self.relayed.borrow(),
             relays,
             link,
+            mids,
+            mid,
         })
     }
 }
@@ -264,6 +375,8 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
         timeline: log.clone(),
     });
     let per = link.per_relay;
+    // The root waits for every level below it.
+    let root_timeout = root_timeout_us(if link.mid.is_some() { 2 } else { 1 });
     let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
     // Each root link's master end; the root's one CPU is shared.
     let [end0, end1] = [0, 1].map(|_| MasterEnd {
@@ -285,7 +398,7 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                 let Ok(relayed) = RelayedBus::new(bus, &mut *bufs, 0, per) else {
                     return Err(failed);
                 };
-                let mut relayed = relayed.with_timeout(timeout_clock, RELAY_TIMEOUT_US);
+                let mut relayed = relayed.with_timeout(timeout_clock, root_timeout);
                 let r = run_bus(0, &mut relayed, rc_clock, root, dm, sink).await;
                 add_counters(&mut link.relayed.borrow_mut(), &relayed.counters);
                 r
@@ -310,8 +423,8 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                         return Err(failed);
                     };
                     let Ok(mut two) = TwoLinks::new(
-                        r0.with_timeout(timeout_clock, RELAY_TIMEOUT_US),
-                        r1.with_timeout(clock2, RELAY_TIMEOUT_US),
+                        r0.with_timeout(timeout_clock, root_timeout),
+                        r1.with_timeout(clock2, root_timeout),
                     ) else {
                         return Err(failed);
                     };
@@ -327,8 +440,15 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
         };
         bus_results.borrow_mut()[0] = Some(r);
     })));
-    for r in 0..link.relays {
-        let (root_wire, slots) = (link.wire.clone(), link.counters.slaves.clone());
+    // The leaf relays: `run_relay` between a slave link on their parent's bus (the root's,
+    // or under two levels their middle relay's) and the master of their own leaf bus.
+    let (parents, leaf_reports) = match &link.mid {
+        None => ((&link.wire, &link.counters), &link.reports),
+        Some(m) => ((&m.wire, &m.counters), &m.reports),
+    };
+    let leaves = leaf_reports.borrow().len() as u16;
+    for l in 0..leaves {
+        let (parent_wire, slots) = (parents.0.clone(), parents.1.slaves.clone());
         let end = MasterEnd {
             split: true,
             report: counters.master.clone(),
@@ -337,9 +457,9 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
         let leaf_wire = wire.clone();
         tasks.push(Some(Box::pin(async move {
             let mut banks: Box<[Bank; 5]> = Box::new([[0u8; BANK]; 5]);
-            let out = on_slave_link(&root_wire, r, slots, &mut banks, async move |shared| {
+            let out = on_slave_link(&parent_wire, l, slots, &mut banks, async move |shared| {
                 let mut parent = shared.handle();
-                on_master_bus(&leaf_wire, r as usize, end, async move |mut bus| {
+                on_master_bus(&leaf_wire, l as usize, end, async move |mut bus| {
                     let mut bufs = Box::new([[0u8; MAX_MESSAGE]; 3]);
                     let [down, up, node] = &mut *bufs;
                     run_relay(&mut parent, &mut bus, RelayBuffers { down, up, node }).await
@@ -347,8 +467,44 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                 .await
             })
             .await;
-            link.reports.borrow_mut()[r as usize] = Some(out);
+            leaf_reports.borrow_mut()[l as usize] = Some(out);
         })));
+    }
+    // Two levels: each middle relay, `run_relay` between a slave link on the root's bus and
+    // a `RelayedBus` over its leaf relays (as `rc-fw --features relay-mid` runs it), with
+    // its own time-out below the root's.
+    if let Some(mid) = &link.mid {
+        for m in 0..link.relays {
+            let (root_wire, slots) = (link.wire.clone(), link.counters.slaves.clone());
+            let end = MasterEnd {
+                split: true,
+                report: mid.counters.master.clone(),
+                cpu: Some(cpu(LinkRole::Relay, rc_busy, Rc::new(Cell::new(0)))),
+            };
+            let (mid_wire, per_leaf) = (mid.wire.clone(), mid.per_leaf);
+            let timeout_clock = VirtualClock(clock.clone());
+            tasks.push(Some(Box::pin(async move {
+                let mut banks: Box<[Bank; 5]> = Box::new([[0u8; BANK]; 5]);
+                let out = on_slave_link(&root_wire, m, slots, &mut banks, async move |shared| {
+                    let mut parent = shared.handle();
+                    on_master_bus(&mid_wire, m as usize, end, async move |bus| {
+                        let mut frames = Box::new(RelayedBuffers::new());
+                        let mut bufs = Box::new([[0u8; MAX_MESSAGE]; 3]);
+                        let [down, up, node] = &mut *bufs;
+                        let mut leaves = RelayedBus::new(bus, &mut *frames, 0, per_leaf)?
+                            .with_timeout(timeout_clock, MID_RELAY_TIMEOUT_US);
+                        let r =
+                            run_relay(&mut parent, &mut leaves, RelayBuffers { down, up, node })
+                                .await;
+                        add_counters(&mut mid.relayed.borrow_mut(), &leaves.counters);
+                        r
+                    })
+                    .await
+                })
+                .await;
+                link.reports.borrow_mut()[m as usize] = Some(out);
+            })));
+        }
     }
     tasks
 }

@@ -37,6 +37,13 @@
 //! first time, (2) one whose node's frame may be up, (3) one with nothing in flight and no
 //! waiting node the root knows of (it has news). A relay sends one node frame up per batch,
 //! so the exchange that brings a frame up usually carries that relay's next request down.
+//! A middle relay of a two-level tree runs the same [`run_relay`] with a [`RelayedBus`] over
+//! its leaf relays as its bus ([`RootBus::in_flight`] above 1): it begins each requested
+//! exchange without waiting, sends each node frame up when its leaf relay brings it, and
+//! keeps its bus moving meanwhile ([`RootBus::wait_news`]); its records name the nodes
+//! behind its leaf relays 0..32 ([`MAX_RELAY_NODES`]: 4 leaf relays of 8 nodes), and the
+//! root's broadcasts cross it still tagged. Its time-out is [`MID_RELAY_TIMEOUT_US`]; the
+//! root above waits for both levels ([`root_timeout_us`]).
 //! Broadcasts go on the link when the root logic finishes them (as before: a relay forwards
 //! one on its bus before it can take the next two). The simulator runs this code (`links
 //! render --relay firmware`; `docs/cluster.md`). A relay that stops answering costs the root
@@ -71,6 +78,20 @@ use core::fmt;
 /// node time-out (`RootConfig::DEFAULT_TIMEOUT_US`) then retires the nodes of a relay that
 /// stopped.
 pub const RELAY_TIMEOUT_US: u64 = 20_000;
+
+/// How long a middle relay of a two-level tree (`rc-fw --features relay-mid`, and the
+/// simulator's) lets a node exchange through one of its leaf relays wait: as long as the
+/// root of a one-level tree (a leaf relay forwards the scene's broadcasts for a few ms
+/// while requests wait; 10 ms timed some out). The root above it waits for both levels
+/// ([`root_timeout_us`]), so a leaf relay that stopped costs the middle relay's exchange
+/// (sent up empty) before the root gives up on the middle relay.
+pub const MID_RELAY_TIMEOUT_US: u64 = RELAY_TIMEOUT_US;
+
+/// How long the root lets a node exchange through `levels` levels of relays wait
+/// ([`RELAY_TIMEOUT_US`] a level).
+pub const fn root_timeout_us(levels: u16) -> u64 {
+    RELAY_TIMEOUT_US * levels as u64
+}
 
 /// How long a root broadcast waits for a relay's report that it has passed on all but the
 /// last one (µs; [`Kind::Forwarded`], with [`RelayedBus::with_timeout`]'s clock): a relay

@@ -37,6 +37,9 @@ pub struct RelayReport {
 struct Nodes {
     /// Reported as waiting in a batch the parent took (a request may come).
     waiting: u32,
+    /// A middle relay's (a bus with several exchanges in flight): begun with the root's
+    /// reply, its frame not yet taken off the bus.
+    flying: u32,
     /// Clocked with the root's reply; the frame is in `up` or in the posted batch.
     answered: u32,
     /// Answered in the batch now posted: idle again once the parent takes it.
@@ -49,6 +52,13 @@ struct Nodes {
 /// Run a relay until the root's `Stop` has been passed on: forward the parent's broadcasts
 /// to `bus`, report the nodes waiting to be asked, clock each requested node with the
 /// root's reply and send its frame up (see the module doc).
+///
+/// A middle relay of a two-level tree runs this too, its `bus` a
+/// [`super::RelayedBus`] over its child relays (a bus with several exchanges in flight,
+/// [`RootBus::in_flight`] above 1): it begins each requested exchange without waiting for
+/// it, sends each node frame up as it comes back, and meanwhile keeps its bus moving
+/// ([`RootBus::wait_news`]). Its parent's broadcasts go down already tagged: the child
+/// relays unwrap them.
 pub async fn run_relay<L: NodeLink, B: RootBus>(
     parent: &mut L,
     bus: &mut B,
@@ -66,16 +76,21 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
     let mut report = RelayReport::default();
     let mut nodes = Nodes::default();
     let mut posted = false;
+    let overlapped = bus.in_flight() > 1;
     // The broadcasts passed on as last told to the parent.
     let mut told: u16 = 0;
     loop {
+        // 0. A middle relay: the node frames its bus has brought back go up.
+        if overlapped {
+            collect(bus, &mut nodes, &mut up, node, &mut report).await?;
+        }
         // 1. Nodes whose line is up and that are not being served wait to be asked.
         let mut fresh = 0u32;
         let mut busy_line = false;
         for i in 0..count {
             if bus.line(first + i) {
                 let b = 1u32 << i;
-                if (nodes.waiting | nodes.answered) & b == 0 {
+                if (nodes.waiting | nodes.flying | nodes.answered) & b == 0 {
                     fresh |= b;
                 } else {
                     busy_line = true;
@@ -125,8 +140,15 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
                 })?;
             }
         }
-        // 3. Wait for the parent, or (when no line is up) for a node's line.
-        let got = if busy_line || fresh != 0 {
+        // 3. Wait for the parent, or (when no line is up) for a node's line; a middle
+        // relay's bus moves meanwhile and says when it has news (also while a frame is
+        // held for the next batch: its exchanges in flight go on).
+        let got = if overlapped {
+            match select(parent.recv(&mut down[..]), bus.wait_news()).await {
+                Either::First(got) => got?,
+                Either::Second(()) => continue,
+            }
+        } else if busy_line || fresh != 0 {
             parent.recv(&mut down[..]).await?
         } else {
             match select(parent.recv(&mut down[..]), bus.wait_ready()).await {
@@ -216,6 +238,15 @@ async fn serve<B: RootBus>(
         if nodes.held.is_some() {
             continue;
         }
+        if bus.in_flight() > 1 {
+            // A middle relay: begin the exchange; its frame goes up when it comes back. A
+            // bus with no room for it now leaves the node waiting (the root asks again).
+            if begin(bus, first + node as NodeId, data).is_ok() {
+                nodes.waiting &= !b;
+                nodes.flying |= b;
+            }
+            continue;
+        }
         let got = bus
             .exchange(first + node as NodeId, data, &mut rx[..])
             .await?;
@@ -232,6 +263,59 @@ async fn serve<B: RootBus>(
             nodes.held = Some((node, len as u16));
         }
         nodes.waiting &= !b;
+        nodes.answered |= b;
+        report.routed += 1;
+    }
+    Ok(())
+}
+
+/// Begin an exchange with `node` on a bus with several in flight: the root's reply `data`
+/// into its idle bank, then `start`.
+fn begin<B: RootBus>(bus: &mut B, node: NodeId, data: &[u8]) -> Result<(), LinkError> {
+    let bank = bus.tx_bank();
+    let max = bank.len() as u32;
+    bank.get_mut(..data.len())
+        .ok_or(LinkError::TooLong {
+            len: data.len() as u32,
+            max,
+        })?
+        .copy_from_slice(data);
+    bus.start(crate::cluster::link::Transfer::Exchange(node), data.len())
+}
+
+/// A middle relay: take every node frame its bus has brought back into the batch (one
+/// that no longer fits is held for the next batch; while one is held the others wait on
+/// the bus).
+async fn collect<B: RootBus>(
+    bus: &mut B,
+    nodes: &mut Nodes,
+    up: &mut BatchWriter<'_>,
+    rx: &mut [u8; MAX_MESSAGE],
+    report: &mut RelayReport,
+) -> Result<(), RelayError> {
+    let (first, count) = bus.nodes();
+    bus.poll();
+    while nodes.held.is_none() {
+        let Some(n) = bus.arrived() else {
+            return Ok(());
+        };
+        let got = bus.finish_node(n, &mut rx[..]).await?;
+        let Some(b) = bit(first, count, n) else {
+            continue;
+        };
+        let index = n - first;
+        // A frame too long to route (or none: a child relay that stopped) goes up empty.
+        let len = if got <= super::MAX_ROUTED { got } else { 0 };
+        if len <= up.room() {
+            up.push(Record {
+                kind: Kind::Frame,
+                node: index,
+                data: rx.get(..len).unwrap_or(&[]),
+            })?;
+        } else {
+            nodes.held = Some((index, len as u16));
+        }
+        nodes.flying &= !b;
         nodes.answered |= b;
         report.routed += 1;
     }

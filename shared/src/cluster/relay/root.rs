@@ -378,6 +378,19 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             .map(|s| s.node)
     }
 
+    /// How many exchanges in flight have ended (their frame is here, or their time is up).
+    fn ended_count(&self) -> usize {
+        let now = (self.timeout_us > 0).then(|| self.clock.now_us());
+        self.slots
+            .iter()
+            .flatten()
+            .filter(|s| match s.stage {
+                Stage::Answered { .. } => true,
+                Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
+            })
+            .count()
+    }
+
     /// The earliest time-out of an exchange in flight, or of a broadcast waiting for the
     /// relays' reports.
     fn deadline(&self) -> Option<u64> {
@@ -812,6 +825,25 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                     return Ok(0);
                 }
                 Stage::Asked { .. } => self.pump().await?,
+            }
+        }
+    }
+
+    async fn wait_news(&mut self) {
+        let known = self.waiting;
+        let ended = self.ended_count();
+        loop {
+            self.poll();
+            let fresh = self
+                .waiting
+                .iter()
+                .zip(known)
+                .any(|(&now, was)| now & !was != 0);
+            if fresh || self.ended_count() > ended {
+                return;
+            }
+            if self.pump().await.is_err() {
+                self.dangling = None;
             }
         }
     }
