@@ -327,18 +327,20 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
             .and_then(Result::ok)
             .map(|shape| l.report(shape, frames_up));
         relayed = Some(l.firmware_relays()?);
-        link_counters = Some(FirmwareLinkCounters::of(
-            &[
-                &counters.master.borrow()[..],
-                &l.counters.master.borrow()[..],
-            ]
-            .concat(),
-            &[
-                &counters.slaves.borrow()[..],
-                &l.counters.slaves.borrow()[..],
-            ]
-            .concat(),
-        ));
+        // Every level's links: the leaf buses, the root's links and (two levels) the middle
+        // relays' buses.
+        let mids = l.mid.as_ref().map(|m| &m.counters);
+        let master: Vec<_> = [Some(&counters), Some(&l.counters), mids]
+            .into_iter()
+            .flatten()
+            .flat_map(|c| c.master.borrow().clone())
+            .collect();
+        let slaves: Vec<_> = [Some(&counters), Some(&l.counters), mids]
+            .into_iter()
+            .flatten()
+            .flat_map(|c| c.slaves.borrow().clone())
+            .collect();
+        link_counters = Some(FirmwareLinkCounters::of(&master, &slaves));
     }
     let time_ps = done_at.last().copied().unwrap_or(0);
     drop(star);
