@@ -189,6 +189,13 @@ pub trait RootBus {
         tx: &[u8],
         rx: &mut [u8],
     ) -> Result<usize, LinkError> {
+        self.begin_exchange(node, tx)?;
+        self.finish(rx).await
+    }
+
+    /// Begin an exchange with `node`: `tx` into the idle TX bank, then `start` (a bus with
+    /// several exchanges in flight takes each one's frame later, [`RootBus::finish_node`]).
+    fn begin_exchange(&mut self, node: NodeId, tx: &[u8]) -> Result<(), LinkError> {
         let bank = self.tx_bank();
         let max = bank.len() as u32;
         bank.get_mut(..tx.len())
@@ -197,8 +204,7 @@ pub trait RootBus {
                 max,
             })?
             .copy_from_slice(tx);
-        self.start(Transfer::Exchange(node), tx.len())?;
-        self.finish(rx).await
+        self.start(Transfer::Exchange(node), tx.len())
     }
 
     /// Write `frame` to every node on this bus at once (all chip-selects asserted).

@@ -241,7 +241,7 @@ async fn serve<B: RootBus>(
         if bus.in_flight() > 1 {
             // A middle relay: begin the exchange; its frame goes up when it comes back. A
             // bus with no room for it now leaves the node waiting (the root asks again).
-            if begin(bus, first + node as NodeId, data).is_ok() {
+            if bus.begin_exchange(first + node as NodeId, data).is_ok() {
                 nodes.waiting &= !b;
                 nodes.flying |= b;
             }
@@ -250,18 +250,7 @@ async fn serve<B: RootBus>(
         let got = bus
             .exchange(first + node as NodeId, data, &mut rx[..])
             .await?;
-        // A frame too long to route is sent up empty (the root counts it bad, the node's
-        // go-back sends it again).
-        let len = if got <= super::MAX_ROUTED { got } else { 0 };
-        if len <= up.room() {
-            up.push(Record {
-                kind: Kind::Frame,
-                node,
-                data: rx.get(..len).unwrap_or(&[]),
-            })?;
-        } else {
-            nodes.held = Some((node, len as u16));
-        }
+        queue_frame(up, nodes, node, &rx[..], got)?;
         nodes.waiting &= !b;
         nodes.answered |= b;
         report.routed += 1;
@@ -269,18 +258,28 @@ async fn serve<B: RootBus>(
     Ok(())
 }
 
-/// Begin an exchange with `node` on a bus with several in flight: the root's reply `data`
-/// into its idle bank, then `start`.
-fn begin<B: RootBus>(bus: &mut B, node: NodeId, data: &[u8]) -> Result<(), LinkError> {
-    let bank = bus.tx_bank();
-    let max = bank.len() as u32;
-    bank.get_mut(..data.len())
-        .ok_or(LinkError::TooLong {
-            len: data.len() as u32,
-            max,
-        })?
-        .copy_from_slice(data);
-    bus.start(crate::cluster::link::Transfer::Exchange(node), data.len())
+/// Queue the frame (`got` bytes in `rx`) of node `index` on the relay's bus for the
+/// parent: into the batch, or held for the next one when it no longer fits. A frame too
+/// long to route (or none: a child relay that stopped) goes up empty (the root counts it
+/// bad, the node's go-back sends it again).
+fn queue_frame(
+    up: &mut BatchWriter<'_>,
+    nodes: &mut Nodes,
+    index: NodeId,
+    rx: &[u8],
+    got: usize,
+) -> Result<(), RelayError> {
+    let len = if got <= super::MAX_ROUTED { got } else { 0 };
+    if len <= up.room() {
+        up.push(Record {
+            kind: Kind::Frame,
+            node: index,
+            data: rx.get(..len).unwrap_or(&[]),
+        })?;
+    } else {
+        nodes.held = Some((index, len as u16));
+    }
+    Ok(())
 }
 
 /// A middle relay: take every node frame its bus has brought back into the batch (one
@@ -303,18 +302,7 @@ async fn collect<B: RootBus>(
         let Some(b) = bit(first, count, n) else {
             continue;
         };
-        let index = n - first;
-        // A frame too long to route (or none: a child relay that stopped) goes up empty.
-        let len = if got <= super::MAX_ROUTED { got } else { 0 };
-        if len <= up.room() {
-            up.push(Record {
-                kind: Kind::Frame,
-                node: index,
-                data: rx.get(..len).unwrap_or(&[]),
-            })?;
-        } else {
-            nodes.held = Some((index, len as u16));
-        }
+        queue_frame(up, nodes, n - first, &rx[..], got)?;
         nodes.flying &= !b;
         nodes.answered |= b;
         report.routed += 1;
