@@ -655,6 +655,10 @@ pub struct FirmwareBus<'s, 'b> {
     bus: usize,
     /// The started transfer: a broadcast's earliest start (relay tree) and its length.
     started: Option<(Transfer, Ps, usize)>,
+    /// A finished transfer whose result waits for the relay code's CPU work after it (until
+    /// the time given): kept so that a caller that drops `finish` while it waits (a middle
+    /// relay races its bus against its parent) gets the result when it calls again.
+    after: Option<(Ps, usize)>,
     /// Where the link's counters are kept for the report.
     report: Rc<RefCell<Vec<MasterCounters>>>,
     /// The relay code's CPU work around each transfer (firmware relay tree), if charged.
@@ -695,6 +699,7 @@ impl<'s, 'b> FirmwareBus<'s, 'b> {
             clock,
             bus,
             started: None,
+            after: None,
             report,
             cpu: None,
         }
@@ -751,9 +756,18 @@ impl RootBus for FirmwareBus<'_, '_> {
     }
 
     async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
-        // `started` is taken only once the link's `finish` is done: a caller may drop this
-        // future while it waits (`RelayedBus` races its link against time-outs) and call
-        // again for the same transfer.
+        // `started` is taken only once the link's `finish` is done, and a finished transfer's
+        // result is kept until the relay's CPU work after it is over: a caller may drop this
+        // future while it waits (`RelayedBus` races its link against time-outs, a middle
+        // relay against its parent) and call again, with the same `rx`, for the same
+        // transfer.
+        if let Some((end, got)) = self.after {
+            if end > self.clock.borrow().now {
+                Delay::new(&self.clock, end).await;
+            }
+            self.after = None;
+            return Ok(got);
+        }
         let Some((transfer, at, down)) = self.started else {
             return self.link.finish(rx).await;
         };
@@ -774,7 +788,9 @@ impl RootBus for FirmwareBus<'_, '_> {
         if let Some((end, true)) = after {
             // The relay logic goes on once it has copied (or checked) what came.
             if end > self.clock.borrow().now {
+                self.after = Some((end, got));
                 Delay::new(&self.clock, end).await;
+                self.after = None;
             }
         }
         Ok(got)
