@@ -365,30 +365,24 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             })
     }
 
-    /// A node exchange that has ended: its frame is here, or its time is up.
-    fn arrived_in(&self) -> Option<NodeId> {
+    /// The node exchanges in flight that have ended: their frame is here, or their time is
+    /// up.
+    fn ended(&self) -> impl Iterator<Item = &Slot> {
         let now = (self.timeout_us > 0).then(|| self.clock.now_us());
-        self.slots
-            .iter()
-            .flatten()
-            .find(|s| match s.stage {
-                Stage::Answered { .. } => true,
-                Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
-            })
-            .map(|s| s.node)
+        self.slots.iter().flatten().filter(move |s| match s.stage {
+            Stage::Answered { .. } => true,
+            Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
+        })
     }
 
-    /// How many exchanges in flight have ended (their frame is here, or their time is up).
+    /// A node exchange that has ended.
+    fn arrived_in(&self) -> Option<NodeId> {
+        self.ended().next().map(|s| s.node)
+    }
+
+    /// How many exchanges in flight have ended.
     fn ended_count(&self) -> usize {
-        let now = (self.timeout_us > 0).then(|| self.clock.now_us());
-        self.slots
-            .iter()
-            .flatten()
-            .filter(|s| match s.stage {
-                Stage::Answered { .. } => true,
-                Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
-            })
-            .count()
+        self.ended().count()
     }
 
     /// The earliest time-out of an exchange in flight, or of a broadcast waiting for the
