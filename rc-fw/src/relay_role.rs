@@ -21,6 +21,7 @@ use embassy_stm32::peripherals::{DMA1_CH3, DMA1_CH4};
 use embassy_stm32::spi::{self, Spi};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::{bind_interrupts, dma, interrupt};
+use links_core::link::RootBus;
 use links_core::relay::{run_relay, RelayBuffers};
 use links_core::spi::{
     Bank, MasterFront, MasterShared, MasterTask, SlaveBanks, SlaveShared, SlaveTask,
@@ -89,7 +90,24 @@ async fn bus_task(port: RcPort<NODES>) {
     MasterTask::new().run(&mut port, &BUS).await
 }
 
-/// Relay one render after another (each ends with the root's `Stop`).
+/// Relay one render after another over `bus` (each ends with the root's `Stop`).
+async fn relay_forever<B: RootBus>(
+    parent: &'static SlaveShared<'static>,
+    bus: &mut B,
+    bufs: &'static mut [[u8; MAX_MESSAGE]; 3],
+) {
+    let mut handle = parent.handle();
+    loop {
+        let [down, up, node] = &mut *bufs;
+        let buffers = RelayBuffers { down, up, node };
+        match run_relay(&mut handle, bus, buffers).await {
+            Ok(r) => info!("relayed: {}", r),
+            Err(e) => warn!("relay: {}", e),
+        }
+    }
+}
+
+/// The relay logic over its bus of NCs.
 #[cfg(not(feature = "relay-mid"))]
 #[embassy_executor::task]
 async fn relay_task(
@@ -97,15 +115,7 @@ async fn relay_task(
     mut bus: MasterFront<'static, 'static>,
     bufs: &'static mut [[u8; MAX_MESSAGE]; 3],
 ) {
-    let mut handle = parent.handle();
-    loop {
-        let [down, up, node] = &mut *bufs;
-        let buffers = RelayBuffers { down, up, node };
-        match run_relay(&mut handle, &mut bus, buffers).await {
-            Ok(r) => info!("relayed: {}", r),
-            Err(e) => warn!("relay: {}", e),
-        }
-    }
+    relay_forever(parent, &mut bus, bufs).await
 }
 
 /// As a middle relay: the bus's devices are leaf relays, driven through a `RelayedBus`.
@@ -118,22 +128,12 @@ async fn relay_task(
     leaves: &'static mut links_core::relay::RelayedBuffers,
 ) {
     use links_core::relay::{RelayedBus, MID_RELAY_TIMEOUT_US};
-    let mut handle = parent.handle();
-    let per_leaf = NODES as u16;
-    let mut leaves = match RelayedBus::new(bus, leaves, 0, per_leaf) {
-        Ok(b) => b.with_timeout(rc_fw::port::Clock, MID_RELAY_TIMEOUT_US),
-        Err(e) => {
-            warn!("middle relay: {}", e);
-            return;
+    match RelayedBus::new(bus, leaves, 0, NODES as u16) {
+        Ok(b) => {
+            let mut leaves = b.with_timeout(rc_fw::port::Clock, MID_RELAY_TIMEOUT_US);
+            relay_forever(parent, &mut leaves, bufs).await
         }
-    };
-    loop {
-        let [down, up, node] = &mut *bufs;
-        let buffers = RelayBuffers { down, up, node };
-        match run_relay(&mut handle, &mut leaves, buffers).await {
-            Ok(r) => info!("relayed (middle): {}", r),
-            Err(e) => warn!("middle relay: {}", e),
-        }
+        Err(e) => warn!("middle relay: {}", e),
     }
 }
 

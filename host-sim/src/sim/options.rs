@@ -612,6 +612,23 @@ pub fn render(image: &[u8], cfg: &SimConfig) -> Result<ClusterRender, String> {
 mod tests {
     use super::*;
 
+    /// `config` at the board's bit rate with LINKS-1's decreasing sizes.
+    fn decreasing(
+        board: BoardProfile,
+        nodes: u16,
+        buses: Option<u16>,
+        topology: TopologyArg,
+    ) -> SimConfig {
+        config(
+            board,
+            nodes,
+            buses,
+            None,
+            Some(Policy::DECREASING),
+            topology,
+        )
+    }
+
     #[test]
     fn policies_parse_and_bad_ones_say_why() {
         assert_eq!(parse_policy("decreasing"), Ok(Policy::DECREASING));
@@ -678,14 +695,7 @@ mod tests {
             "{e}"
         );
         let star = TopologyArg::Star;
-        let f = config(
-            BoardProfile::F407,
-            64,
-            Some(1),
-            None,
-            Some(Policy::DECREASING),
-            star,
-        );
+        let f = decreasing(BoardProfile::F407, 64, Some(1), star);
         assert_eq!(f.timing.bit_rate_hz, 21e6);
         assert_eq!((f.timing.header_bytes, f.timing.trailer_bytes), (8, 1));
         assert_eq!(f.timing.overhead_ns, 23_000.0);
@@ -717,14 +727,7 @@ mod tests {
         let e = parse_link("fast").unwrap_err().to_string();
         assert!(e.contains("unknown link 'fast'"), "{e}");
         assert_eq!(topology_note(&i), "");
-        let eight = config(
-            BoardProfile::F407,
-            64,
-            Some(8),
-            None,
-            Some(Policy::DECREASING),
-            star,
-        );
+        let eight = decreasing(BoardProfile::F407, 64, Some(8), star);
         assert_eq!(eight.overloaded_bus(), None);
     }
 
@@ -777,14 +780,7 @@ mod tests {
         let e = "ring".parse::<TopologyArg>().unwrap_err().to_string();
         assert!(e.contains("unknown topology 'ring'"), "{e}");
         let b = TopologyArg::Buildable;
-        let f = config(
-            BoardProfile::F407,
-            64,
-            None,
-            None,
-            Some(Policy::DECREASING),
-            b,
-        );
+        let f = decreasing(BoardProfile::F407, 64, None, b);
         assert_eq!(f.overloaded_bus(), None);
         assert_eq!(topology_note(&f), "");
         // The root drives its relays on the board's two root links unless told.
@@ -792,47 +788,19 @@ mod tests {
             topology_text(&f),
             "relay tree: 8 relays x 8 nodes, 1 level(s) (the root on 2 buses), modelled relays (--relay firmware runs their code)"
         );
-        let f = config(
-            BoardProfile::F407,
-            64,
-            Some(1),
-            None,
-            Some(Policy::DECREASING),
-            b,
-        );
+        let f = decreasing(BoardProfile::F407, 64, Some(1), b);
         assert_eq!(
             topology_text(&f),
             "relay tree: 8 relays x 8 nodes, 1 level(s), modelled relays (--relay firmware runs their code)"
         );
-        let f = config(
-            BoardProfile::F407,
-            256,
-            None,
-            None,
-            Some(Policy::DECREASING),
-            b,
-        );
+        let f = decreasing(BoardProfile::F407, 256, None, b);
         assert_eq!(
             topology_text(&f),
             "relay tree: 32 relays x 8 nodes, 2 level(s) (4 mid relays, the root on 2 buses), modelled relays (--relay firmware runs their code: 4 leaf relays per mid relay)"
         );
-        let f = config(
-            BoardProfile::F407,
-            8,
-            None,
-            None,
-            Some(Policy::DECREASING),
-            b,
-        );
+        let f = decreasing(BoardProfile::F407, 8, None, b);
         assert_eq!(topology_text(&f), "star, 1 bus(es)");
-        let i = config(
-            BoardProfile::IDEAL,
-            256,
-            None,
-            None,
-            Some(Policy::DECREASING),
-            b,
-        );
+        let i = decreasing(BoardProfile::IDEAL, 256, None, b);
         assert_eq!(i.topology, Topology::Star);
     }
 
