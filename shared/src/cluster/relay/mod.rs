@@ -22,18 +22,21 @@
 //!
 //! Replies are routed by node number: records name a node by its index on its relay's bus
 //! (a relay needs no strap to know where it sits; [`RelayedBus`] maps the root's numbers),
-//! and a request for a node not on the relay's bus, or not waiting, is counted and dropped (the root re-sends a request in every exchange with that relay until the
-//! node's frame comes back, so a lost down half costs one more exchange). Nothing read from
-//! either link can make the relay panic; no heap: the relay's buffers are the caller's.
+//! and a request for a node not on the relay's bus, or not waiting, is counted and dropped.
+//! A request goes down once: the root sends it again only when a batch the relay composed
+//! after it went down still reports its node waiting (the relay never got it: a damaged
+//! half, or no room for it), so a lost down half costs one more exchange and a delivered
+//! one costs nothing more. Nothing read from either link can make the relay panic; no heap:
+//! the relay's buffers are the caller's.
 //!
 //! Several node exchanges in flight: [`RelayedBus`] keeps up to [`DEPTH`] per relay
 //! ([`SLOTS`] in all; [`RootBus::in_flight`]), so the root's link, the root's CPU and the
 //! relays' buses work at once. `run_bus` composes a reply for every node the bus may begin
 //! an exchange with ([`RootBus::ready`]) and takes each frame when it comes back
 //! ([`RootBus::arrived`], [`RootBus::finish_node`]) without waiting for the others. Each
-//! reply waits in its own buffer of [`RelayedBuffers`] and goes down in every exchange with
-//! its relay until the node's frame comes up into the same buffer; the root's link takes, in
-//! turn round the relays whose line is up, (1) a relay with a reply to take down for the
+//! reply waits in its own buffer of [`RelayedBuffers`] (going down once, as above) until the
+//! node's frame comes up into the same buffer; the root's link takes, in turn round the
+//! relays whose line is up, (1) a relay with a reply to take down for the
 //! first time, (2) one whose node's frame may be up, (3) one with nothing in flight and no
 //! waiting node the root knows of (it has news). A relay sends one node frame up per batch,
 //! so the exchange that brings a frame up usually carries that relay's next request down.

@@ -84,10 +84,16 @@ impl<const FRAMES: usize> Default for RelayedFrames<FRAMES> {
 /// Where a node exchange in flight is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Stage {
-    /// The reply (`len` bytes) goes down in every exchange with the node's relay until the
-    /// node's frame comes up (`sent`: it went down at least once); given up at `deadline`
-    /// (µs, with a time-out).
-    Asked { len: u16, sent: bool, deadline: u64 },
+    /// The reply (`len` bytes) waits to go down (`sent` false), or went down in the
+    /// relay's exchange number `sent_in` ([`RelayedBus`]'s `gathers`); it goes down again
+    /// when a batch of a later exchange still reports the node waiting (the relay never
+    /// got it). Given up at `deadline` (µs, with a time-out).
+    Asked {
+        len: u16,
+        sent: bool,
+        sent_in: u16,
+        deadline: u64,
+    },
     /// The node's frame (`len` bytes) is in the buffer.
     Answered { len: u16 },
 }
@@ -146,6 +152,9 @@ pub struct RelayedBus<'m, L, C = NoClock, const S: usize = SLOTS> {
     depth: u16,
     /// Per relay: its nodes waiting to be asked, as it last reported (bit `i`: its `i`-th).
     waiting: [u32; MAX_RELAYS],
+    /// Per relay: the number of the last exchange with it (wrapping), so a batch is judged
+    /// against the requests that went down before it was composed.
+    gathers: [u16; MAX_RELAYS],
     /// The node exchanges in flight.
     slots: [Option<Slot>; S],
     /// The frame buffer the next reply is composed in (no slot's).
@@ -213,6 +222,7 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
             relays,
             depth: DEPTH,
             waiting: [0; MAX_RELAYS],
+            gathers: [0; MAX_RELAYS],
             slots: [None; SLOTS],
             compose: 0,
             cast: None,
@@ -269,6 +279,7 @@ impl<'m, L, C, const S: usize> RelayedBus<'m, L, C, S> {
             relays: self.relays,
             depth: self.depth,
             waiting: self.waiting,
+            gathers: self.gathers,
             slots,
             compose: self.compose,
             cast: self.cast,
@@ -473,52 +484,62 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 Ok(())
             }
             LinkOp::Gather(r) => {
-                // Every reply for the relay's nodes still without its frame, those already
-                // down first (the relay drops one it served: its frame comes up in this
-                // exchange), as many as fit.
+                // Every reply for the relay's nodes not yet down (or lost on the way: see
+                // `apply`), as many as fit. One the relay got is not sent again: the
+                // relay's batches stop reporting its node waiting.
                 let (first, per) = (self.first, self.per_relay.max(1));
                 let base = first.wrapping_add(r.wrapping_mul(per));
                 let mut w =
                     BatchWriter::new(self.link.tx_bank()).map_err(|_| LinkError::Aborted)?;
                 let mut carried = [false; S];
                 let mut requests = 0u32;
-                for pass_sent in [true, false] {
-                    for (i, s) in self.slots.iter().enumerate() {
-                        let Some(Slot {
-                            node,
-                            buf,
-                            stage: Stage::Asked { len, sent, .. },
-                        }) = *s
-                        else {
-                            continue;
-                        };
-                        let local = node.wrapping_sub(base);
-                        if sent != pass_sent || node < base || local >= per {
-                            continue;
-                        }
-                        let data = self.frames[buf as usize].get(..len as usize).unwrap_or(&[]);
-                        if w.push(Record {
-                            kind: Kind::Request,
-                            node: local,
-                            data,
-                        })
-                        .is_ok()
-                        {
-                            carried[i] = true;
-                            requests += 1;
-                        }
+                for (i, s) in self.slots.iter().enumerate() {
+                    let Some(Slot {
+                        node,
+                        buf,
+                        stage:
+                            Stage::Asked {
+                                len, sent: false, ..
+                            },
+                    }) = *s
+                    else {
+                        continue;
+                    };
+                    let local = node.wrapping_sub(base);
+                    if node < base || local >= per {
+                        continue;
+                    }
+                    let data = self.frames[buf as usize].get(..len as usize).unwrap_or(&[]);
+                    if w.push(Record {
+                        kind: Kind::Request,
+                        node: local,
+                        data,
+                    })
+                    .is_ok()
+                    {
+                        carried[i] = true;
+                        requests += 1;
                     }
                 }
                 let n = w.bytes().len();
                 self.link
                     .start(Transfer::Exchange(link_first.wrapping_add(r)), n)?;
+                let number = match self.gathers.get_mut(r as usize) {
+                    Some(g) => {
+                        *g = g.wrapping_add(1);
+                        *g
+                    }
+                    None => 0,
+                };
                 for (s, c) in self.slots.iter_mut().zip(carried) {
                     if let Some(Slot {
-                        stage: Stage::Asked { sent, .. },
+                        stage: Stage::Asked { sent, sent_in, .. },
                         ..
                     }) = s
                     {
-                        *sent |= c;
+                        if c {
+                            (*sent, *sent_in) = (true, number);
+                        }
                     }
                 }
                 self.dangling = Some(LinkOp::Gather(r));
@@ -643,6 +664,21 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 _ => self.counters.bad_batches += 1,
             }
         }
+        // A request that went down before this batch was composed (an earlier exchange
+        // with the relay) while the batch still reports its node waiting never reached
+        // the relay (a damaged half, or the relay had no room for it): it goes down again.
+        let number = self.gathers.get(r as usize).copied().unwrap_or(0);
+        for s in self.slots.iter_mut().flatten() {
+            let local = s.node.wrapping_sub(base);
+            if s.node < base || local >= per || local >= MAX_RELAY_NODES {
+                continue;
+            }
+            if let Stage::Asked { sent, sent_in, .. } = &mut s.stage {
+                if *sent && *sent_in != number && waiting & (1u32 << local) != 0 {
+                    *sent = false;
+                }
+            }
+        }
     }
 }
 
@@ -705,6 +741,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                     stage: Stage::Asked {
                         len: len as u16,
                         sent: false,
+                        sent_in: 0,
                         deadline,
                     },
                 });
@@ -891,6 +928,30 @@ mod tests {
         owed: Vec<Vec<NodeId>>,
         done: Vec<Vec<NodeId>>,
         broadcasts: u32,
+        /// Per relay: nodes it reports waiting until their request comes (bitmap).
+        waits: Vec<u32>,
+        /// Requests sent down (also in halves lost), per relay and node index.
+        requests: Vec<[u32; 4]>,
+        /// Down halves still to be lost (as to a bit error).
+        lose_down: u32,
+    }
+
+    impl<'c> Relays<'c> {
+        fn new(clock: &'c Jump, alive: Vec<bool>) -> Self {
+            let n = alive.len();
+            Relays {
+                clock,
+                alive,
+                bank: [0; MAX_MESSAGE],
+                started: None,
+                owed: vec![Vec::new(); n],
+                done: vec![Vec::new(); n],
+                broadcasts: 0,
+                waits: vec![0; n],
+                requests: vec![[0; 4]; n],
+                lose_down: 0,
+            }
+        }
     }
 
     impl RootBus for Relays<'_> {
@@ -935,9 +996,22 @@ mod tests {
                 })
                 .map_err(|_| LinkError::Aborted)?;
             }
+            w.set_waiting(self.waits[r as usize]);
             let n = w.bytes().len();
             if let Ok(Relayed::Batch { records, .. }) = parse(&self.bank[..len]) {
                 for rec in records.flatten() {
+                    if let Some(c) = self.requests[r as usize].get_mut(rec.node as usize) {
+                        *c += 1;
+                    }
+                }
+            }
+            if self.lose_down > 0 {
+                self.lose_down -= 1;
+                return Ok(n);
+            }
+            if let Ok(Relayed::Batch { records, .. }) = parse(&self.bank[..len]) {
+                for rec in records.flatten() {
+                    self.waits[r as usize] &= !(1u32 << rec.node);
                     let seen = self.owed[r as usize].contains(&rec.node)
                         || self.done[r as usize].contains(&rec.node);
                     if !seen {
@@ -952,15 +1026,7 @@ mod tests {
     #[test]
     fn exchanges_through_two_relays_are_in_flight_at_once_and_a_dead_relays_time_out() {
         let clock = Jump(Cell::new(0));
-        let link = Relays {
-            clock: &clock,
-            alive: vec![true, false],
-            bank: [0; MAX_MESSAGE],
-            started: None,
-            owed: vec![Vec::new(), Vec::new()],
-            done: vec![Vec::new(), Vec::new()],
-            broadcasts: 0,
-        };
+        let link = Relays::new(&clock, vec![true, false]);
         let mut bufs = Box::new(RelayedBuffers::new());
         let mut bus = RelayedBus::new(link, &mut bufs, 0, 3)
             .unwrap()
@@ -998,5 +1064,42 @@ mod tests {
             assert_eq!(block_on(bus.finish(&mut rx)), Ok(0));
         }
         assert_eq!(bus.link().broadcasts, 3);
+    }
+
+    /// A request goes down once when the relay gets it, and again only when a batch
+    /// composed after it went down still reports its node waiting: with the down halves of
+    /// the next `lost` exchanges lost, each costs the request it carried one more sending,
+    /// and nothing else goes down twice. (Node 0's request goes on the free link at once,
+    /// node 1's in the next exchange; each lost half's batch was composed before it, so the
+    /// loss shows in the batch after.)
+    #[test]
+    fn a_request_goes_down_again_only_when_the_relay_did_not_get_it() {
+        for (lost, expect) in [(0, [1, 1]), (1, [2, 1]), (3, [3, 2])] {
+            let clock = Jump(Cell::new(0));
+            let mut link = Relays::new(&clock, vec![true]);
+            link.waits[0] = 0b11;
+            let mut bufs = Box::new(RelayedBuffers::new());
+            let mut bus = RelayedBus::new(link, &mut bufs, 0, 2)
+                .unwrap()
+                .with_timeout(&clock, 10_000);
+            let mut rx = [0u8; MAX_MESSAGE];
+            // The root learns of the waiting nodes, asks both, and takes both frames.
+            block_on(bus.wait_news());
+            bus.link.lose_down = lost;
+            for node in [0, 1] {
+                bus.tx_bank()[..2].copy_from_slice(&[7, node as u8]);
+                assert_eq!(bus.start(Transfer::Exchange(node), 2), Ok(()));
+            }
+            for node in [0, 1] {
+                assert_eq!(
+                    block_on(bus.finish_node(node, &mut rx)),
+                    Ok(2),
+                    "lost {lost}"
+                );
+                assert_eq!(rx[..2], [0xAA, node as u8]);
+            }
+            assert_eq!(bus.link().requests[0][..2], expect, "lost {lost}");
+            assert_eq!(bus.counters.timeouts, 0);
+        }
     }
 }
