@@ -44,7 +44,7 @@ impl Policy {
     /// simulator's relay trees): a node exchange there crosses two links and waits for the
     /// root's reply to come down, so the frame's last jobs are kept at 192 pixels or more
     /// (the sweep in `docs/cluster.md`, "The smallest job under a relay tree": the
-    /// firmware's relay code on 64 F407 nodes 59.84x at 128, 60.33x at 192, 60.28x at 256).
+    /// firmware's relay code on 64 F407 nodes 60.20x at 128, 60.45x at 192, 60.47x at 256).
     pub const RELAYED: Policy = Policy::Decreasing {
         factor: 6,
         min_pixels: 192,
