@@ -53,7 +53,7 @@ fn main() {
             let steady = steady_state_interval(&img, &cfg, 8).expect("runs");
             let compute: f64 = r.node_compute_s.iter().sum();
             println!(
-                "{n} nodes, {} relay code: {:.4} s, speed-up {:.2}x; steady {:.4} s/frame, {:.2}x; nodes computing {:.1}%, {} node exchanges",
+                "{n} nodes, {} relay code: {:.4} s, speed-up {:.2}x; steady {:.4} s/frame, {:.2}x; nodes computing {:.1}%, {} node exchanges ({} of them polls)",
                 relay.name(),
                 r.time_s,
                 one / r.time_s,
@@ -61,6 +61,7 @@ fn main() {
                 one_steady / steady,
                 100.0 * compute / (n as f64 * r.time_s),
                 r.root.exchanges,
+                r.root.polls,
             );
         }
     }
