@@ -99,10 +99,9 @@ fn main() {
             .chain((0..5).map(|w| end - (5 - w) * WINDOW));
         for a in starts {
             let z = a + WINDOW;
-            let link = busy_in(t.root_link.iter().map(|x| x.at), a, z);
+            let link = busy_in(t.root_link_transfers().map(|x| x.at), a, z);
             let transfers = t
-                .root_link
-                .iter()
+                .root_link_transfers()
                 .filter(|x| x.at.start >= a && x.at.start < z)
                 .count();
             let rc = busy_in(t.rc.iter().copied(), a, z);

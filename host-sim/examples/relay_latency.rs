@@ -64,7 +64,10 @@ fn us(ps: Ps) -> f64 {
 
 /// The cycle of the firmware relays' node exchanges, in parts.
 fn breakdown(t: &Timeline, time_s: f64, exchanges: usize) {
-    let link: Vec<&BusTransfer> = t.root_link.iter().filter(|x| x.node.is_some()).collect();
+    let link: Vec<&BusTransfer> = t
+        .root_link_transfers()
+        .filter(|x| x.node.is_some())
+        .collect();
     let mut used = vec![false; link.len()];
     // (request end, leaf start, leaf end, frame-up start, frame-up end, request duration,
     // frame-up duration)
@@ -100,8 +103,7 @@ fn breakdown(t: &Timeline, time_s: f64, exchanges: usize) {
     let mean = |f: &dyn Fn(&[Ps; 7]) -> Ps| rows.iter().map(|r| us(f(r))).sum::<f64>() / n;
     let busy: Ps = link.iter().map(|x| x.at.len()).sum();
     let bcast: Ps = t
-        .root_link
-        .iter()
+        .root_link_transfers()
         .filter(|x| x.node.is_none())
         .map(|x| x.at.len())
         .sum();

@@ -1533,6 +1533,51 @@ fn the_timeline_accounts_for_every_node_transfer_and_pixel() {
     }
 }
 
+/// Under two levels of the firmware's relays the timeline has a row for each root link and
+/// each middle relay's bus: each row's transfers apart in time, the root links' rows
+/// accounting for every transfer and all the busy time of their links.
+#[test]
+fn the_timeline_draws_every_link_between_rcs() {
+    use links_host::cluster::relay::RelayCode;
+    use links_host::cluster::timeline::Interval;
+    let img = image("photo1.ron", 64, 60);
+    let r = run(
+        &img,
+        SimConfig {
+            relay: RelayCode::Firmware,
+            timeline: Some(1_000_000),
+            ..SimConfig::buildable(BoardProfile::F407, 256)
+        },
+    );
+    let t = r.timeline.as_ref().expect("a timeline was asked for");
+    assert!(t.complete());
+    let tree = r.tree.as_ref().expect("a relay tree");
+    // The root on two links; 8 middle relays of 4 leaf relays.
+    assert_eq!((t.root_links.len(), t.mid_links.len()), (2, 8));
+    assert_eq!(tree.links.len(), 2);
+    let apart = |row: &[Interval]| row.windows(2).all(|w| w[0].end <= w[1].start);
+    for (k, row) in t.root_links.iter().enumerate() {
+        let spans: Vec<Interval> = row.iter().map(|x| x.at).collect();
+        assert!(apart(&spans), "root link {k}");
+        let c = &tree.links[k];
+        assert_eq!(row.len() as u64, c.exchanges + c.broadcasts, "root link {k}");
+        let busy: u64 = spans.iter().map(Interval::len).sum();
+        assert_eq!(busy, c.busy_ps, "root link {k}");
+        // Its relays are the middle relays on it (4 a link).
+        assert!(row.iter().flat_map(|x| x.node).all(|m| m < 8), "root link {k}");
+    }
+    for (m, row) in t.mid_links.iter().enumerate() {
+        let spans: Vec<Interval> = row.iter().map(|x| x.at).collect();
+        assert!(apart(&spans), "middle relay {m}");
+        assert!(row.iter().any(|x| x.node.is_some()), "middle relay {m} exchanged");
+        assert!(row.iter().any(|x| x.node.is_none()), "middle relay {m} broadcast");
+        // Its "nodes" are its leaf relays, numbered over all of them.
+        assert!(row.iter().flat_map(|x| x.node).all(|l| l / 4 == m as u16));
+    }
+    // The leaf relays' buses are the bus rows.
+    assert_eq!(t.bus.len(), 32);
+}
+
 /// `links render --nodes N --precision fixed` writes the host's fixed-point PNG byte for
 /// byte, on the F407 (asked), the F207 and the G0B1 (their default); f32 on f32-less F207
 /// nodes and an f64 cluster are refused with one line each.

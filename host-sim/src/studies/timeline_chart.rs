@@ -141,8 +141,8 @@ fn legend(out: &mut String, t: &Timeline, y: f64) {
         (BROADCAST.to_string(), "broadcast"),
         (RC_WORK.to_string(), "RC CPU busy"),
     ];
-    if !t.root_link.is_empty() {
-        items.push((ROOT_LINK.to_string(), "root-relay exchange"));
+    if !(t.root_links.is_empty() && t.mid_links.is_empty()) {
+        items.push((ROOT_LINK.to_string(), "exchange between RCs"));
     }
     let mut x = LEFT;
     for (fill, text) in items {
@@ -157,12 +157,22 @@ fn legend(out: &mut String, t: &Timeline, y: f64) {
     }
 }
 
-/// The bus rows and the RC row (a root link to relays first, if logged); returns the y
-/// below them.
+/// The bus rows and the RC row (the links between RCs first, if logged: each root link,
+/// then each middle relay's bus); returns the y below them.
 fn bus_rows(out: &mut String, t: &Timeline, axis: &Axis, mut y: f64) -> f64 {
-    if !t.root_link.is_empty() {
-        label(out, y, BUS_ROW, "root link", 10.0);
-        for tr in &t.root_link {
+    let links = t
+        .root_links
+        .iter()
+        .enumerate()
+        .map(|(k, r)| ("root link", k, r));
+    let mids = t
+        .mid_links
+        .iter()
+        .enumerate()
+        .map(|(k, r)| ("mid relay", k, r));
+    for (name, k, row) in links.chain(mids) {
+        label(out, y, BUS_ROW, &format!("{name} {k}"), 10.0);
+        for tr in row {
             let fill = if tr.node.is_some() {
                 ROOT_LINK
             } else {

@@ -202,6 +202,8 @@ pub(super) struct RelayLink {
 /// The middle relays' buses of a two-level tree (emulated SPI buses whose "nodes" are the
 /// leaf relays: leaf `l` on middle relay `l / leaves_per_mid`'s bus).
 pub(super) struct MidLinks {
+    /// The middle relays' buses (bus `m`: middle relay `m`'s, its "nodes" leaf relays).
+    pub(super) star: SharedStar,
     wire: SharedWire,
     pub(super) counters: LinkReport,
     leaves_per_mid: u16,
@@ -240,6 +242,7 @@ impl RelayLink {
             });
             let wire = Wire::new(&star, timing, &[]);
             MidLinks {
+                star,
                 wire,
                 counters: LinkReport::new(relays as usize, leaves),
                 leaves_per_mid: tree.leaves_per_mid,

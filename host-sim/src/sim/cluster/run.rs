@@ -13,7 +13,7 @@ use super::spi_bus::{
     master_task, FirmwareBus, FirmwareLinkCounters, LinkModel, NodeOnLink, Overlapped, SharedWire,
     SpiSlave, Wire, WireTiming,
 };
-use super::star::{SharedStar, SimBus, SimNodeLink, Star};
+use super::star::{LinkRow, SharedStar, SimBus, SimNodeLink, Star};
 use super::timeline::{SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
 use crate::cost::{CycleModel, SceneCheckCost};
@@ -228,7 +228,14 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     }
     let relay_link = firmware_tree(cfg).map(|tree| RelayLink::new(&clock, cfg, tree));
     if let (Some(link), Some(log)) = (&relay_link, &log) {
-        link.star.borrow_mut().set_root_link_timeline(log.clone());
+        link.star
+            .borrow_mut()
+            .set_link_timeline(log.clone(), LinkRow::Root);
+        if let Some(mid) = &link.mid {
+            mid.star
+                .borrow_mut()
+                .set_link_timeline(log.clone(), LinkRow::Mid);
+        }
     }
     let sink = RefCell::new(match cfg.collect {
         Collect::Snoop => Sink::None,

@@ -336,9 +336,19 @@ pub struct Star {
     timeline: Option<SharedTimeline>,
     /// The relay tree above the buses (bus `b` is leaf relay `b`'s), if the topology is one.
     relays: Option<Relays>,
-    /// This star is the root's link to its relays (the firmware's relay code): its
-    /// transfers go to the timeline's root-link row.
-    root_link: bool,
+    /// Which of the timeline's rows this star's transfers go to.
+    row: LinkRow,
+}
+
+/// What a star's buses are, for the timeline's rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkRow {
+    /// Buses of nodes (a star, or the leaf relays' buses): the bus rows.
+    Leaf,
+    /// The root's links to its relays (the firmware's relay code): a row per root link.
+    Root,
+    /// The middle relays' buses to their leaf relays: a row per middle relay.
+    Mid,
 }
 
 pub type SharedStar = Rc<RefCell<Star>>;
@@ -387,7 +397,7 @@ impl Star {
             noise: NoiseGen::new(Noise::default()),
             timeline: None,
             relays: None,
-            root_link: false,
+            row: LinkRow::Leaf,
         }))
     }
 
@@ -401,11 +411,12 @@ impl Star {
         self.timeline = Some(log);
     }
 
-    /// Log every transfer from now on into `log`'s root-link row: this star's one bus is
-    /// the root's link to its relays (its "nodes").
-    pub fn set_root_link_timeline(&mut self, log: SharedTimeline) {
+    /// Log every transfer from now on into `log`'s rows of links between RCs: this star's
+    /// buses are the root's links to its relays (`LinkRow::Root`) or the middle relays'
+    /// buses (`LinkRow::Mid`), its "nodes" relays.
+    pub fn set_link_timeline(&mut self, log: SharedTimeline, row: LinkRow) {
         self.timeline = Some(log);
-        self.root_link = true;
+        self.row = row;
     }
 
     /// Put a relay tree above the buses: bus `b` is leaf relay `b`'s.
@@ -663,8 +674,13 @@ impl Star {
     /// Log a transfer on the timeline, if one is recorded.
     pub fn log_transfer(&self, bus: usize, node: Option<NodeId>, start: Ps, end: Ps) {
         match &self.timeline {
-            Some(log) if self.root_link => log.borrow_mut().root_transfer(node, start, end),
-            Some(log) => log.borrow_mut().transfer(bus, node, start, end),
+            Some(log) => match self.row {
+                LinkRow::Leaf => log.borrow_mut().transfer(bus, node, start, end),
+                LinkRow::Root | LinkRow::Mid => {
+                    log.borrow_mut()
+                        .link_transfer(self.row == LinkRow::Mid, bus, node, start, end)
+                }
+            },
             None => {}
         }
     }

@@ -39,6 +39,10 @@ pub struct BusTransfer {
     pub node: Option<NodeId>,
 }
 
+/// Most rows of links between RCs of one kind (root links, middle relays' buses) the log
+/// keeps: more than any tree the simulator builds.
+const MAX_LINK_ROWS: usize = 64;
+
 /// No node rendered this pixel (yet).
 pub const NO_NODE: u16 = u16::MAX;
 
@@ -52,9 +56,12 @@ pub struct Timeline {
     pub exchanges: Vec<Vec<Interval>>,
     /// Per bus: its transfers.
     pub bus: Vec<Vec<BusTransfer>>,
-    /// The root's link to its relays (the firmware's relay code in the loop): its
-    /// transfers, `node` the relay exchanged with.
-    pub root_link: Vec<BusTransfer>,
+    /// The root's links to its relays (the firmware's relay code in the loop), one row per
+    /// link: its transfers, `node` the relay exchanged with.
+    pub root_links: Vec<Vec<BusTransfer>>,
+    /// Under two levels, each middle relay's bus to its leaf relays, one row per middle
+    /// relay: its transfers, `node` the leaf relay exchanged with.
+    pub mid_links: Vec<Vec<BusTransfer>>,
     /// The RC's CPU (one for all buses): composing, checking and decoding frames.
     pub rc: Vec<Interval>,
     /// Frame 0's size and, per pixel (row-major), the node that rendered it ([`NO_NODE`]:
@@ -115,7 +122,8 @@ impl Timeline {
             compute: vec![Vec::new(); nodes as usize],
             exchanges: vec![Vec::new(); nodes as usize],
             bus: vec![Vec::new(); buses],
-            root_link: Vec::new(),
+            root_links: Vec::new(),
+            mid_links: Vec::new(),
             rc: Vec::new(),
             width,
             height,
@@ -164,14 +172,34 @@ impl Timeline {
         }
     }
 
-    /// The root's link to its relays carried a transfer from `start` to `end`: an exchange
-    /// with relay `relay`, or a broadcast.
-    pub fn root_transfer(&mut self, relay: Option<NodeId>, start: Ps, end: Ps) {
+    /// Root link `link` (or, `mid`, middle relay `link`'s bus) carried a transfer from
+    /// `start` to `end`: an exchange with relay `relay`, or a broadcast.
+    pub fn link_transfer(
+        &mut self,
+        mid: bool,
+        link: usize,
+        relay: Option<NodeId>,
+        start: Ps,
+        end: Ps,
+    ) {
         let at = Interval { start, end };
-        if at.is_empty() || !self.budget.take() {
+        let rows = if mid {
+            &mut self.mid_links
+        } else {
+            &mut self.root_links
+        };
+        if at.is_empty() || link >= MAX_LINK_ROWS || !self.budget.take() {
             return;
         }
-        self.root_link.push(BusTransfer { at, node: relay });
+        if rows.len() <= link {
+            rows.resize(link + 1, Vec::new());
+        }
+        rows[link].push(BusTransfer { at, node: relay });
+    }
+
+    /// Every root link's transfers, in no particular order.
+    pub fn root_link_transfers(&self) -> impl Iterator<Item = &BusTransfer> {
+        self.root_links.iter().flatten()
     }
 
     /// Node `node` rendered `len` pixels of frame 0's row `y` from column `x`.
