@@ -1560,17 +1560,30 @@ fn the_timeline_draws_every_link_between_rcs() {
         let spans: Vec<Interval> = row.iter().map(|x| x.at).collect();
         assert!(apart(&spans), "root link {k}");
         let c = &tree.links[k];
-        assert_eq!(row.len() as u64, c.exchanges + c.broadcasts, "root link {k}");
+        assert_eq!(
+            row.len() as u64,
+            c.exchanges + c.broadcasts,
+            "root link {k}"
+        );
         let busy: u64 = spans.iter().map(Interval::len).sum();
         assert_eq!(busy, c.busy_ps, "root link {k}");
         // Its relays are the middle relays on it (4 a link).
-        assert!(row.iter().flat_map(|x| x.node).all(|m| m < 8), "root link {k}");
+        assert!(
+            row.iter().flat_map(|x| x.node).all(|m| m < 8),
+            "root link {k}"
+        );
     }
     for (m, row) in t.mid_links.iter().enumerate() {
         let spans: Vec<Interval> = row.iter().map(|x| x.at).collect();
         assert!(apart(&spans), "middle relay {m}");
-        assert!(row.iter().any(|x| x.node.is_some()), "middle relay {m} exchanged");
-        assert!(row.iter().any(|x| x.node.is_none()), "middle relay {m} broadcast");
+        assert!(
+            row.iter().any(|x| x.node.is_some()),
+            "middle relay {m} exchanged"
+        );
+        assert!(
+            row.iter().any(|x| x.node.is_none()),
+            "middle relay {m} broadcast"
+        );
         // Its "nodes" are its leaf relays, numbered over all of them.
         assert!(row.iter().flat_map(|x| x.node).all(|l| l / 4 == m as u16));
     }

@@ -673,15 +673,14 @@ impl Star {
 
     /// Log a transfer on the timeline, if one is recorded.
     pub fn log_transfer(&self, bus: usize, node: Option<NodeId>, start: Ps, end: Ps) {
-        match &self.timeline {
-            Some(log) => match self.row {
-                LinkRow::Leaf => log.borrow_mut().transfer(bus, node, start, end),
-                LinkRow::Root | LinkRow::Mid => {
-                    log.borrow_mut()
-                        .link_transfer(self.row == LinkRow::Mid, bus, node, start, end)
-                }
-            },
-            None => {}
+        let Some(log) = &self.timeline else {
+            return;
+        };
+        let mut log = log.borrow_mut();
+        match self.row {
+            LinkRow::Leaf => log.transfer(bus, node, start, end),
+            LinkRow::Root => log.link_transfer(false, bus, node, start, end),
+            LinkRow::Mid => log.link_transfer(true, bus, node, start, end),
         }
     }
 }
