@@ -184,17 +184,13 @@ pub(super) fn check(cfg: &SimConfig) -> Result<(), SimError> {
 /// `r` on link `r * links / relays`), what their two ends counted, and what the relay code
 /// reported.
 pub(super) struct RelayLink {
-    pub(super) star: SharedStar,
-    wire: SharedWire,
-    pub(super) counters: LinkReport,
+    /// The root's links; their "nodes" are the root's children.
+    pub(super) links: RcLinks,
     /// The root's children and the nodes behind each.
     relays: u16,
     per_relay: u16,
     /// The root's CPU: its `RcClock` and its `RelayedBus`'s link work.
     root_busy: Rc<Cell<Ps>>,
-    relayed: RefCell<RelayedCounters>,
-    /// The root's children's reports.
-    reports: RefCell<Vec<Option<Result<RelayReport, RelayError>>>>,
     /// Two levels: the middle relays' buses to their leaf relays.
     pub(super) mid: Option<MidLinks>,
 }
@@ -202,16 +198,41 @@ pub(super) struct RelayLink {
 /// The middle relays' buses of a two-level tree (emulated SPI buses whose "nodes" are the
 /// leaf relays: leaf `l` on middle relay `l / leaves_per_mid`'s bus).
 pub(super) struct MidLinks {
-    /// The middle relays' buses (bus `m`: middle relay `m`'s, its "nodes" leaf relays).
+    /// Bus `m`: middle relay `m`'s; its "nodes" are the leaf relays.
+    pub(super) links: RcLinks,
+    leaves_per_mid: u16,
+    per_leaf: u16,
+}
+
+/// Links between RCs (the root's to its children, or the middle relays' to their leaf
+/// relays): emulated SPI buses whose "nodes" are relays, what their two ends counted, what
+/// the `RelayedBus`es driving them counted (summed), and the relays' reports.
+pub(super) struct RcLinks {
     pub(super) star: SharedStar,
     wire: SharedWire,
     pub(super) counters: LinkReport,
-    leaves_per_mid: u16,
-    per_leaf: u16,
-    /// What the middle relays' `RelayedBus`es counted, summed.
     relayed: RefCell<RelayedCounters>,
-    /// The leaf relays' reports.
     reports: RefCell<Vec<Option<Result<RelayReport, RelayError>>>>,
+}
+
+impl RcLinks {
+    /// `relays` relays over `buses` buses at `cfg`'s timing, their noise seeded with `seed`.
+    fn new(clock: &SharedClock, cfg: &SimConfig, relays: u16, buses: u16, seed: u64) -> Self {
+        let star = Star::new(clock, relays, buses, cfg.timing, Faults::default(), None);
+        star.borrow_mut().set_noise(Noise {
+            seed: cfg.noise.seed ^ seed,
+            ..cfg.noise
+        });
+        let timing = WireTiming::of(&cfg.profile.link, cfg.timing.bit_rate_hz);
+        let wire = Wire::new(&star, timing, &[]);
+        RcLinks {
+            star,
+            wire,
+            counters: LinkReport::new(buses.clamp(1, relays.max(1)) as usize, relays),
+            relayed: RefCell::new(RelayedCounters::default()),
+            reports: RefCell::new(vec![None; relays as usize]),
+        }
+    }
 }
 
 /// The middle relays' buses' noise generator (same rates as the leaf buses').
@@ -221,45 +242,24 @@ impl RelayLink {
     /// The firmware tree `tree` at `cfg`'s timing: the root's children on its links, and
     /// under two levels the middle relays' buses.
     pub(super) fn new(clock: &SharedClock, cfg: &SimConfig, tree: FirmwareTree) -> Self {
-        let (relays, links) = (tree.children, tree.roots);
-        let star = Star::new(clock, relays, links, cfg.timing, Faults::default(), None);
-        star.borrow_mut().set_noise(Noise {
-            seed: cfg.noise.seed ^ ROOT_LINK_SEED,
-            ..cfg.noise
-        });
+        let relays = tree.children;
+        let links = RcLinks::new(clock, cfg, relays, tree.roots, ROOT_LINK_SEED);
         for d in &cfg.relay_deaths {
-            star.borrow_mut()
+            links
+                .star
+                .borrow_mut()
                 .kill_at(d.node, (d.at_s * 1e12).round() as Ps);
         }
-        let timing = WireTiming::of(&cfg.profile.link, cfg.timing.bit_rate_hz);
-        let wire = Wire::new(&star, timing, &[]);
-        let mid = (tree.leaves_per_mid > 0).then(|| {
-            let leaves = tree.leaves();
-            let star = Star::new(clock, leaves, relays, cfg.timing, Faults::default(), None);
-            star.borrow_mut().set_noise(Noise {
-                seed: cfg.noise.seed ^ MID_LINK_SEED,
-                ..cfg.noise
-            });
-            let wire = Wire::new(&star, timing, &[]);
-            MidLinks {
-                star,
-                wire,
-                counters: LinkReport::new(relays as usize, leaves),
-                leaves_per_mid: tree.leaves_per_mid,
-                per_leaf: tree.per_leaf,
-                relayed: RefCell::new(RelayedCounters::default()),
-                reports: RefCell::new(vec![None; leaves as usize]),
-            }
+        let mid = (tree.leaves_per_mid > 0).then(|| MidLinks {
+            links: RcLinks::new(clock, cfg, tree.leaves(), relays, MID_LINK_SEED),
+            leaves_per_mid: tree.leaves_per_mid,
+            per_leaf: tree.per_leaf,
         });
         Self {
-            star,
-            wire,
-            counters: LinkReport::new(links.clamp(1, relays.max(1)) as usize, relays),
+            links,
             relays,
             per_relay: tree.per_child,
             root_busy: Rc::new(Cell::new(0)),
-            relayed: RefCell::new(RelayedCounters::default()),
-            reports: RefCell::new(vec![None; relays as usize]),
             mid,
         }
     }
@@ -267,8 +267,9 @@ impl RelayLink {
     /// Whether every relay has ended (passed the `Stop` on) or stopped answering (with the
     /// leaf relays behind it).
     pub(super) fn ended(&self) -> bool {
-        let star = self.star.borrow();
+        let star = self.links.star.borrow();
         let children = self
+            .links
             .reports
             .borrow()
             .iter()
@@ -276,7 +277,7 @@ impl RelayLink {
             .all(|(r, rep)| rep.is_some() || star.is_dead(r));
         children
             && self.mid.as_ref().is_none_or(|m| {
-                m.reports.borrow().iter().enumerate().all(|(l, rep)| {
+                m.links.reports.borrow().iter().enumerate().all(|(l, rep)| {
                     rep.is_some() || star.is_dead(l / m.leaves_per_mid.max(1) as usize)
                 })
             })
@@ -287,6 +288,7 @@ impl RelayLink {
     /// nodes' transfers is not known here: all are put on the first link).
     pub(super) fn report(&self, shape: TreeShape, frames_up: u64) -> TreeReport {
         let links = self
+            .links
             .star
             .borrow()
             .counters()
@@ -310,7 +312,7 @@ impl RelayLink {
 
     /// The root's links.
     pub(super) fn links(&self) -> usize {
-        self.star.borrow().bus_count()
+        self.links.star.borrow().bus_count()
     }
 
     /// What the relay code reported (a relay's error is the run's).
@@ -326,22 +328,22 @@ impl RelayLink {
             }
             Ok(out)
         };
-        let children = reports(&self.reports, "relay")?;
+        let children = reports(&self.links.reports, "relay")?;
         let (relays, mids, mid) = match &self.mid {
             None => (children, Vec::new(), RelayedCounters::default()),
             Some(m) => (
-                reports(&m.reports, "leaf relay")?,
+                reports(&m.links.reports, "leaf relay")?,
                 children,
-                *m.relayed.borrow(),
+                *m.links.relayed.borrow(),
             ),
         };
-        let star = self.star.borrow();
+        let star = self.links.star.borrow();
         let mut link = BusCounters::default();
         for c in star.counters() {
             link.add(&c);
         }
         Ok(FirmwareRelays {
-            root: *self.relayed.borrow(),
+            root: *self.links.relayed.borrow(),
             relays,
             link,
             mids,
@@ -384,10 +386,10 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
     // Each root link's master end; the root's one CPU is shared.
     let [end0, end1] = [0, 1].map(|_| MasterEnd {
         split: true,
-        report: link.counters.master.clone(),
+        report: link.links.counters.master.clone(),
         cpu: Some(cpu(LinkRole::Root, &link.root_busy, root_cpu_free.clone())),
     });
-    let (root_wire, wire1) = (link.wire.clone(), link.wire.clone());
+    let (root_wire, wire1) = (link.links.wire.clone(), link.links.wire.clone());
     let (timeout_clock, clock2) = (VirtualClock(clock.clone()), VirtualClock(clock.clone()));
     tasks.push(Some(Box::pin(async move {
         let rc_clock = &*rc_clock;
@@ -403,14 +405,14 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                 };
                 let mut relayed = relayed.with_timeout(timeout_clock, root_timeout);
                 let r = run_bus(0, &mut relayed, rc_clock, root, dm, sink).await;
-                add_counters(&mut link.relayed.borrow_mut(), &relayed.counters);
+                add_counters(&mut link.links.relayed.borrow_mut(), &relayed.counters);
                 r
             })
             .await
         } else {
             // Two links, as `rc-fw --features relay-root` drives them: `TwoLinks` over a
             // `RelayedBus` on each (TWO_LINK_SLOTS exchanges in flight on each).
-            let second_first = link.star.borrow().bus_nodes(1).0.saturating_mul(per);
+            let second_first = link.links.star.borrow().bus_nodes(1).0.saturating_mul(per);
             on_master_bus(&root_wire, 0, end0, async move |bus0| {
                 on_master_bus(&wire1, 1, end1, async move |bus1| {
                     let mut bufs = Box::new([
@@ -433,8 +435,8 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                     };
                     let r = run_bus(0, &mut two, rc_clock, root, dm, sink).await;
                     let (l0, l1) = two.links();
-                    add_counters(&mut link.relayed.borrow_mut(), &l0.counters);
-                    add_counters(&mut link.relayed.borrow_mut(), &l1.counters);
+                    add_counters(&mut link.links.relayed.borrow_mut(), &l0.counters);
+                    add_counters(&mut link.links.relayed.borrow_mut(), &l1.counters);
                     r
                 })
                 .await
@@ -446,8 +448,11 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
     // The leaf relays: `run_relay` between a slave link on their parent's bus (the root's,
     // or under two levels their middle relay's) and the master of their own leaf bus.
     let (parents, leaf_reports) = match &link.mid {
-        None => ((&link.wire, &link.counters), &link.reports),
-        Some(m) => ((&m.wire, &m.counters), &m.reports),
+        None => (
+            (&link.links.wire, &link.links.counters),
+            &link.links.reports,
+        ),
+        Some(m) => ((&m.links.wire, &m.links.counters), &m.links.reports),
     };
     let leaves = leaf_reports.borrow().len() as u16;
     for l in 0..leaves {
@@ -478,13 +483,13 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
     // its own time-out below the root's.
     if let Some(mid) = &link.mid {
         for m in 0..link.relays {
-            let (root_wire, slots) = (link.wire.clone(), link.counters.slaves.clone());
+            let (root_wire, slots) = (link.links.wire.clone(), link.links.counters.slaves.clone());
             let end = MasterEnd {
                 split: true,
-                report: mid.counters.master.clone(),
+                report: mid.links.counters.master.clone(),
                 cpu: Some(cpu(LinkRole::Relay, rc_busy, Rc::new(Cell::new(0)))),
             };
-            let (mid_wire, per_leaf) = (mid.wire.clone(), mid.per_leaf);
+            let (mid_wire, per_leaf) = (mid.links.wire.clone(), mid.per_leaf);
             let timeout_clock = VirtualClock(clock.clone());
             tasks.push(Some(Box::pin(async move {
                 let mut banks: Box<[Bank; 5]> = Box::new([[0u8; BANK]; 5]);
@@ -499,13 +504,13 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                         let r =
                             run_relay(&mut parent, &mut leaves, RelayBuffers { down, up, node })
                                 .await;
-                        add_counters(&mut mid.relayed.borrow_mut(), &leaves.counters);
+                        add_counters(&mut mid.links.relayed.borrow_mut(), &leaves.counters);
                         r
                     })
                     .await
                 })
                 .await;
-                link.reports.borrow_mut()[m as usize] = Some(out);
+                link.links.reports.borrow_mut()[m as usize] = Some(out);
             })));
         }
     }

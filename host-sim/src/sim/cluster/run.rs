@@ -228,11 +228,13 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
     }
     let relay_link = firmware_tree(cfg).map(|tree| RelayLink::new(&clock, cfg, tree));
     if let (Some(link), Some(log)) = (&relay_link, &log) {
-        link.star
+        link.links
+            .star
             .borrow_mut()
             .set_link_timeline(log.clone(), LinkRow::Root);
         if let Some(mid) = &link.mid {
-            mid.star
+            mid.links
+                .star
                 .borrow_mut()
                 .set_link_timeline(log.clone(), LinkRow::Mid);
         }
@@ -336,13 +338,13 @@ pub fn simulate<S: AsRef<[u8]>>(scenes: &[S], cfg: &SimConfig) -> Result<SimRepo
         relayed = Some(l.firmware_relays()?);
         // Every level's links: the leaf buses, the root's links and (two levels) the middle
         // relays' buses.
-        let mids = l.mid.as_ref().map(|m| &m.counters);
-        let master: Vec<_> = [Some(&counters), Some(&l.counters), mids]
+        let mids = l.mid.as_ref().map(|m| &m.links.counters);
+        let master: Vec<_> = [Some(&counters), Some(&l.links.counters), mids]
             .into_iter()
             .flatten()
             .flat_map(|c| c.master.borrow().clone())
             .collect();
-        let slaves: Vec<_> = [Some(&counters), Some(&l.counters), mids]
+        let slaves: Vec<_> = [Some(&counters), Some(&l.links.counters), mids]
             .into_iter()
             .flatten()
             .flat_map(|c| c.slaves.borrow().clone())
