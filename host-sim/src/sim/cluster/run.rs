@@ -13,8 +13,8 @@ use super::spi_bus::{
     master_task, FirmwareBus, FirmwareLinkCounters, LinkModel, NodeOnLink, Overlapped, SharedWire,
     SpiSlave, Wire, WireTiming,
 };
-use super::star::{LinkRow, SharedStar, SimBus, SimNodeLink, Star};
-use super::timeline::{SharedTimeline, Timeline};
+use super::star::{SharedStar, SimBus, SimNodeLink, Star};
+use super::timeline::{LinkRow, SharedTimeline, Timeline};
 use super::{dm, techniques_key, Collect, RunCache, SimConfig, SimError, SimReport, Unfinished};
 use crate::cost::{CycleModel, SceneCheckCost};
 use links_core::image::SceneView;

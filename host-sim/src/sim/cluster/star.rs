@@ -10,7 +10,7 @@
 use super::exec::{PollFn, Ps, SharedClock};
 use super::framemem::FrameMemory;
 use super::relay::Relays;
-use super::timeline::SharedTimeline;
+use super::timeline::{LinkRow, SharedTimeline};
 use links_core::board::{BoardProfile, LinkProfile};
 use links_core::link::{Incoming, LinkError, NodeId, NodeLink, RootBus, Transfer};
 use links_core::wire::MAX_MESSAGE;
@@ -340,17 +340,6 @@ pub struct Star {
     row: LinkRow,
 }
 
-/// What a star's buses are, for the timeline's rows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LinkRow {
-    /// Buses of nodes (a star, or the leaf relays' buses): the bus rows.
-    Leaf,
-    /// The root's links to its relays (the firmware's relay code): a row per root link.
-    Root,
-    /// The middle relays' buses to their leaf relays: a row per middle relay.
-    Mid,
-}
-
 pub type SharedStar = Rc<RefCell<Star>>;
 
 impl Star {
@@ -673,14 +662,8 @@ impl Star {
 
     /// Log a transfer on the timeline, if one is recorded.
     pub fn log_transfer(&self, bus: usize, node: Option<NodeId>, start: Ps, end: Ps) {
-        let Some(log) = &self.timeline else {
-            return;
-        };
-        let mut log = log.borrow_mut();
-        match self.row {
-            LinkRow::Leaf => log.transfer(bus, node, start, end),
-            LinkRow::Root => log.link_transfer(false, bus, node, start, end),
-            LinkRow::Mid => log.link_transfer(true, bus, node, start, end),
+        if let Some(log) = &self.timeline {
+            log.borrow_mut().transfer(self.row, bus, node, start, end);
         }
     }
 }
@@ -777,9 +760,7 @@ impl SimBus {
         b.busy_until = start + d;
         b.counters.busy_ps += d;
         b.counters.clocked_bytes += clocked;
-        if let Some(log) = &s.timeline {
-            log.borrow_mut().transfer(self.bus, node, start, start + d);
-        }
+        s.log_transfer(self.bus, node, start, start + d);
         start + d
     }
 }

@@ -43,6 +43,17 @@ pub struct BusTransfer {
 /// keeps: more than any tree the simulator builds.
 const MAX_LINK_ROWS: usize = 64;
 
+/// What a star's buses are, for the log's rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkRow {
+    /// Buses of nodes (a star, or the leaf relays' buses): the bus rows.
+    Leaf,
+    /// The root's links to its relays (the firmware's relay code): a row per root link.
+    Root,
+    /// The middle relays' buses to their leaf relays: a row per middle relay.
+    Mid,
+}
+
 /// No node rendered this pixel (yet).
 pub const NO_NODE: u16 = u16::MAX;
 
@@ -154,47 +165,35 @@ impl Timeline {
         self.budget.push(&mut self.rc, Interval { start, end });
     }
 
-    /// Bus `bus` carried a transfer from `start` to `end`: an exchange with `node`, or a
-    /// broadcast.
-    pub fn transfer(&mut self, bus: usize, node: Option<NodeId>, start: Ps, end: Ps) {
+    /// Bus `bus` of the kind `row` carried a transfer from `start` to `end`: an exchange
+    /// with `node` (a node, or on links between RCs a relay), or a broadcast. A node bus's
+    /// exchange also goes to the node's row.
+    pub fn transfer(&mut self, row: LinkRow, bus: usize, node: Option<NodeId>, start: Ps, end: Ps) {
         let at = Interval { start, end };
-        let Some(row) = self.bus.get_mut(bus) else {
+        let rows = match row {
+            LinkRow::Leaf => &mut self.bus,
+            LinkRow::Root => &mut self.root_links,
+            LinkRow::Mid => &mut self.mid_links,
+        };
+        // Node buses are laid out up front; rows of links between RCs grow as they appear.
+        if row != LinkRow::Leaf && bus < MAX_LINK_ROWS && rows.len() <= bus {
+            rows.resize(bus + 1, Vec::new());
+        }
+        let Some(transfers) = rows.get_mut(bus) else {
             return;
         };
         if at.is_empty() || !self.budget.take() {
             return;
         }
-        row.push(BusTransfer { at, node });
+        transfers.push(BusTransfer { at, node });
+        if row != LinkRow::Leaf {
+            return;
+        }
         if let Some(row) = node.and_then(|n| self.exchanges.get_mut(n as usize)) {
             if self.budget.take() {
                 row.push(at);
             }
         }
-    }
-
-    /// Root link `link` (or, `mid`, middle relay `link`'s bus) carried a transfer from
-    /// `start` to `end`: an exchange with relay `relay`, or a broadcast.
-    pub fn link_transfer(
-        &mut self,
-        mid: bool,
-        link: usize,
-        relay: Option<NodeId>,
-        start: Ps,
-        end: Ps,
-    ) {
-        let at = Interval { start, end };
-        let rows = if mid {
-            &mut self.mid_links
-        } else {
-            &mut self.root_links
-        };
-        if at.is_empty() || link >= MAX_LINK_ROWS || !self.budget.take() {
-            return;
-        }
-        if rows.len() <= link {
-            rows.resize(link + 1, Vec::new());
-        }
-        rows[link].push(BusTransfer { at, node: relay });
     }
 
     /// Every root link's transfers, in no particular order.
@@ -241,7 +240,7 @@ mod tests {
             ]
         );
         assert_eq!(t.compute_ps(0), 35);
-        t.transfer(0, Some(1), 40, 50);
+        t.transfer(LinkRow::Leaf, 0, Some(1), 40, 50);
         // Full: the bus row took the third entry, the node's exchange is dropped.
         assert_eq!(
             (t.bus[0].len(), t.exchanges[1].len(), t.dropped()),

@@ -84,14 +84,13 @@ impl<const FRAMES: usize> Default for RelayedFrames<FRAMES> {
 /// Where a node exchange in flight is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Stage {
-    /// The reply (`len` bytes) waits to go down (`sent` false), or went down in the
+    /// The reply (`len` bytes) waits to go down (`sent_in` None), or went down in the
     /// relay's exchange number `sent_in` ([`RelayedBus`]'s `gathers`); it goes down again
     /// when a batch of a later exchange still reports the node waiting (the relay never
     /// got it). Given up at `deadline` (µs, with a time-out).
     Asked {
         len: u16,
-        sent: bool,
-        sent_in: u16,
+        sent_in: Option<u16>,
         deadline: u64,
     },
     /// The node's frame (`len` bytes) is in the buffer.
@@ -340,9 +339,9 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         for s in self.slots.iter().flatten() {
             if self.relay_of(s.node) == Some(r) {
                 n += 1;
-                if let Stage::Asked { sent, .. } = s.stage {
-                    unsent |= !sent;
-                    asked |= sent;
+                if let Stage::Asked { sent_in, .. } = s.stage {
+                    unsent |= sent_in.is_none();
+                    asked |= sent_in.is_some();
                 }
             }
         }
@@ -499,7 +498,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                         buf,
                         stage:
                             Stage::Asked {
-                                len, sent: false, ..
+                                len, sent_in: None, ..
                             },
                     }) = *s
                     else {
@@ -533,12 +532,12 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 };
                 for (s, c) in self.slots.iter_mut().zip(carried) {
                     if let Some(Slot {
-                        stage: Stage::Asked { sent, sent_in, .. },
+                        stage: Stage::Asked { sent_in, .. },
                         ..
                     }) = s
                     {
                         if c {
-                            (*sent, *sent_in) = (true, number);
+                            *sent_in = Some(number);
                         }
                     }
                 }
@@ -673,9 +672,9 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             if s.node < base || local >= per || local >= MAX_RELAY_NODES {
                 continue;
             }
-            if let Stage::Asked { sent, sent_in, .. } = &mut s.stage {
-                if *sent && *sent_in != number && waiting & (1u32 << local) != 0 {
-                    *sent = false;
+            if let Stage::Asked { sent_in, .. } = &mut s.stage {
+                if sent_in.is_some_and(|k| k != number) && waiting & (1u32 << local) != 0 {
+                    *sent_in = None;
                 }
             }
         }
@@ -740,8 +739,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                     buf: self.compose,
                     stage: Stage::Asked {
                         len: len as u16,
-                        sent: false,
-                        sent_in: 0,
+                        sent_in: None,
                         deadline,
                     },
                 });
