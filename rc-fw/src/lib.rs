@@ -15,6 +15,9 @@ pub mod port;
 // The relay role's pin table and port are the STM32F4DISCOVERY's (port E, DMA streams).
 #[cfg(all(feature = "relay", feature = "board-g0b1"))]
 compile_error!("the relay role (--features relay) is built for the F4 boards, not board-g0b1");
+// 256 nodes are built on the F407 (its root drives the middle relays on SPI1 and SPI2).
+#[cfg(all(feature = "relay-root-mid", not(feature = "board-f407")))]
+compile_error!("the root of two relay levels (--features relay-root-mid) is built for the F407");
 
 /// The link's numbers, all the board profile's ([`links_core::board::BoardProfile::F407`]):
 /// the SPI clock, chip-select timing and nodes per bus the port and `main` use.
@@ -50,14 +53,27 @@ pub mod link {
     const _: () =
         assert!((ROOT_LINKS == 2) == cfg!(all(feature = "relay-root", feature = "board-f407")));
     const _: () = assert!(LINK_NODES * ROOT_LINKS == NODES);
-    /// The NCs the root logic hands work to: those on its bus, or, as the root of a relay
-    /// tree (`relay-root`), the nodes behind its relays (one level: each relay's bus holds
-    /// as many as the root's).
-    pub const RENDER_NODES: usize = if cfg!(feature = "relay-root") {
-        NODES * LINK.nodes_per_bus as usize
+    /// Levels of relays below the root: none, one (`relay-root`: leaf relays, each with a
+    /// bus of NCs) or two (`relay-root-mid`: middle relays, each driving leaf relays).
+    pub const RELAY_LEVELS: u16 = if cfg!(feature = "relay-root-mid") {
+        2
+    } else if cfg!(feature = "relay-root") {
+        1
     } else {
-        NODES
+        0
     };
+    /// The NCs behind each of the root's relays: a leaf relay's bus holds as many as the
+    /// root's; a middle relay reports as many as its report to the root has bits for
+    /// (`links_core::relay::MAX_RELAY_NODES`, 4 leaf relays of 8), as the simulator's
+    /// firmware tree builds it.
+    pub const PER_RELAY: u16 = match RELAY_LEVELS {
+        0 => 1,
+        1 => LINK.nodes_per_bus,
+        _ => links_core::relay::MAX_RELAY_NODES,
+    };
+    /// The NCs the root logic hands work to: those on its bus, or, as the root of a relay
+    /// tree (`relay-root`), the nodes behind its relays.
+    pub const RENDER_NODES: usize = NODES * PER_RELAY as usize;
     /// The nodes the root logic renders on, with the board's silence bound for them and,
     /// behind relays, the relay tree's job sizes (`Policy::RELAYED`, as the simulator's
     /// relay trees).
@@ -69,11 +85,11 @@ pub mod link {
             on_bus
         }
     };
-    /// As the root of a relay tree: how long a node exchange through a relay may wait for
-    /// the node's frame before the root gives it up (`RelayedBus::with_timeout`; the value
-    /// is `links_core::relay::RELAY_TIMEOUT_US`, which the simulator's firmware relay tree
-    /// uses too).
-    pub const RELAY_TIMEOUT_US: u64 = links_core::relay::RELAY_TIMEOUT_US;
+    /// As the root of a relay tree: how long a node exchange through its relays may wait
+    /// for the node's frame before the root gives it up (`RelayedBus::with_timeout`;
+    /// `links_core::relay::root_timeout_us` of the levels below, as the simulator's
+    /// firmware relay tree waits: 20 ms a level).
+    pub const RELAY_TIMEOUT_US: u64 = links_core::relay::root_timeout_us(RELAY_LEVELS);
     // The timer counts whole microseconds: the profile's times must be whole too.
     const _: () =
         assert!(LINK.cs_setup_ns.is_multiple_of(1000) && LINK.cs_hold_ns.is_multiple_of(1000));
@@ -334,6 +350,14 @@ pub mod backup_line {
     pub const REPLY_TIMEOUT_US: u32 = LINE.reply_timeout_us;
     /// The RC calls the roll this often (ms).
     pub const ROLL_CALL_PERIOD_MS: u64 = 1000;
+    /// The nodes the roll call asks: line addresses 1..=this. A node's address straps
+    /// have 6 bits (`links_core::backup::MAX_ADDR` = 64), so the line reaches the first 64
+    /// of a 256-node tree (the rest are reached by SPI only); `SERVE` clamps the same way.
+    pub const ROLL_CALL_NODES: u8 = {
+        let max = links_core::backup::MAX_ADDR as usize;
+        let nodes = crate::link::RENDER_NODES;
+        (if nodes < max { nodes } else { max }) as u8
+    };
     /// During a render: nodes on the line, how often the RC calls one that failed on SPI,
     /// how long the line rests when no served node has anything to do
     /// (`links_core::backup::serve_root`).
@@ -356,7 +380,7 @@ mod tests {
     /// the nodes behind its relays and pays for `RelayedBus`'s buffers out of the scene's
     /// SRAM; the plain root drives its own bus's nodes and keeps all of it.
     #[test]
-    fn the_root_of_relays_reaches_64_nodes_and_its_buffers_come_from_the_scene() {
+    fn the_root_of_relays_reaches_its_nodes_and_its_buffers_come_from_the_scene() {
         use super::link::{NODES, PROFILE, RENDER_NODES};
         use super::plan::{FILM_BANK, RELAYED, SCENE};
         let per_bus = PROFILE.link.nodes_per_bus as usize;
@@ -373,7 +397,18 @@ mod tests {
                 (links_core::relay::TWO_LINK_SLOTS + 3) * links_core::wire::MAX_MESSAGE
             );
             let expected = if links == 2 { 2 * two } else { relayed };
-            assert_eq!((RENDER_NODES, RELAYED), (NODES * per_bus, expected));
+            // A leaf relay brings its bus's nodes; a middle relay the 32 its report holds
+            // (4 leaf relays of 8), as the simulator's firmware tree builds 256 nodes.
+            let (levels, per_relay, timeout_us) = if cfg!(feature = "relay-root-mid") {
+                (2, 32, 40_000)
+            } else {
+                (1, per_bus, 20_000)
+            };
+            assert_eq!((RENDER_NODES, RELAYED), (NODES * per_relay, expected));
+            assert_eq!(
+                (super::link::RELAY_LEVELS, super::link::RELAY_TIMEOUT_US),
+                (levels, timeout_us)
+            );
             // The simulator's relay trees divide the frame the same way.
             assert_eq!(
                 super::link::RENDER_NODE_SET.policy,
@@ -389,7 +424,10 @@ mod tests {
                 // what the first (a node's 61,440-byte bank) leaves: 24,576 B (34,816 with
                 // one link of 16 exchanges in flight, 58,368 with one exchange in flight).
                 assert_eq!(links, 2);
-                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 86_016, 61_440));
+                let nodes = if levels == 2 { 256 } else { 64 };
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (nodes, 86_016, 61_440));
+                // The backup line's 6-bit addresses reach a 256-node tree's first 64.
+                assert_eq!(super::backup_line::ROLL_CALL_NODES, 64);
             }
             if cfg!(feature = "board-g0b1") {
                 // 80 KB - 3 DMA banks - 29,944 B = 47,212 -> 46 KB; the first film bank is a
@@ -398,6 +436,7 @@ mod tests {
             }
         } else {
             assert_eq!((RENDER_NODES, RELAYED), (NODES, 0));
+            assert_eq!(super::backup_line::ROLL_CALL_NODES as usize, NODES);
             assert_eq!(
                 super::link::RENDER_NODE_SET.policy,
                 links_core::sched::Policy::DECREASING

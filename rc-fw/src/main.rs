@@ -58,10 +58,10 @@ mod fw {
     use links_core::serial::throttle::Room;
     use links_core::serial::{Encoder, FrameStreamer};
     use links_core::spi::{Bank, MasterFront, MasterShared, MasterTask};
-    use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_PERIOD_MS, SERVE};
+    use rc_fw::backup_line::{REPLY_TIMEOUT_US, ROLL_CALL_NODES, ROLL_CALL_PERIOD_MS, SERVE};
     #[cfg(all(feature = "relay-root", feature = "board-f407"))]
     use rc_fw::link::LINK_NODES;
-    use rc_fw::link::{RENDER_NODES, RENDER_NODE_SET};
+    use rc_fw::link::RENDER_NODE_SET;
     #[cfg(not(all(feature = "relay-root", feature = "board-f407")))]
     use rc_fw::pins::NODES;
     use rc_fw::plan::{FILM_BANK, SCENE};
@@ -231,14 +231,15 @@ mod fw {
         }
     }
 
-    /// The serial backup line between renders: call the roll of every node once a period
+    /// The serial backup line between renders: call the roll of every node on the line
+    /// (`ROLL_CALL_NODES`: all, or a 256-node tree's first 64) once a period
     /// (`links_core::backup::rc::ask_health`, one node at a time: no table of 64 healths in
     /// the task) and log who is absent and each node's health. During a render the serial
     /// task holds the line.
     #[embassy_executor::task]
     async fn backup_task(line: &'static Line) {
         loop {
-            for a in 1..=RENDER_NODES as u8 {
+            for a in 1..=ROLL_CALL_NODES {
                 let mut rs485 = line.lock().await;
                 let mut port = PortLine {
                     port: &mut *rs485,
@@ -542,15 +543,16 @@ mod fw {
             front,
             &mut sram.relayed,
             0,
-            rc_fw::link::PROFILE.link.nodes_per_bus
+            rc_fw::link::PER_RELAY
         ))
         .with_timeout(Clock, rc_fw::link::RELAY_TIMEOUT_US);
-        // Two root links: relays 0..3 (their nodes 0..32) on SPI1, relays 4..7 (nodes
-        // 32..64) on SPI2, one `RelayedBus` each, joined into the root logic's one bus.
+        // Two root links: relays 0..3 (their nodes 0..32, or under two levels 0..128) on
+        // SPI1, relays 4..7 (the rest) on SPI2, one `RelayedBus` each, joined into the root
+        // logic's one bus.
         #[cfg(all(feature = "relay-root", feature = "board-f407"))]
         let (link, port, port2) = {
             let (port, port2) = port;
-            let per = rc_fw::link::PROFILE.link.nodes_per_bus;
+            let per = rc_fw::link::PER_RELAY;
             let half = LINK_NODES as u16;
             let front = MasterFront::new(&BUS, 0, half, [btx0, btx1], brx);
             let [ctx0, ctx1, crx] = &mut sram.link2;

@@ -111,10 +111,11 @@ fn the_firmware_relay_code_renders_the_single_node_frame() {
     }
 }
 
-/// Two levels (`rc-fw --features relay-mid` between the root and the leaf relays): 128 and
-/// 256 nodes render the single-node frame under decreasing and static sizes, every node
-/// exchange is routed once by a middle relay and once by a leaf relay, every root broadcast
-/// reaches every relay's bus once, and no exchange times out; with bit errors on every
+/// Two levels (`rc-fw --features relay-root-mid` the root, `relay-mid` between it and the
+/// leaf relays; the board's default for 256 nodes): 128 and 256 nodes render the
+/// single-node frame under decreasing and static sizes, every node exchange is routed once
+/// by a middle relay and once by a leaf relay, every root broadcast reaches every relay's
+/// bus once, and no exchange times out; with bit errors on every
 /// link the frame is still exact.
 #[test]
 fn two_levels_of_firmware_relays_render_the_single_node_frame() {
@@ -122,8 +123,8 @@ fn two_levels_of_firmware_relays_render_the_single_node_frame() {
     let want = reference(&img);
     assert_eq!(
         SimConfig::buildable(BoardProfile::F407, 256).relay,
-        RelayCode::Model,
-        "no root build drives middle relays: the board's default is the model"
+        RelayCode::Firmware,
+        "`rc-fw --features relay-root-mid` drives middle relays: the board's default is its code"
     );
     for (nodes, mids, policy) in [
         (128u16, 4usize, Policy::RELAYED),

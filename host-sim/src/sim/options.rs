@@ -817,7 +817,8 @@ mod tests {
         assert_eq!(policy_text(star.policy), "decreasing=6,128");
         assert_eq!(tree.clone().with_board_relays().relay, RelayCode::Firmware);
         let two_levels = config(BoardProfile::F407, 256, None, None, None, b);
-        assert_eq!(two_levels.with_board_relays().relay, RelayCode::Model);
+        // Two levels too: `rc-fw --features relay-root-mid` drives middle relays.
+        assert_eq!(two_levels.with_board_relays().relay, RelayCode::Firmware);
         // The serial backup line is simulated with the model only.
         let line = SimConfig {
             backup_line: true,

@@ -208,10 +208,10 @@ fn lifts_table(
 
 /// The F407's ways to `nodes` nodes (docs/hardware.md, "Reaching 64 and 256 nodes"): one
 /// RC driving its three SPI buses, one bus of buffered segments (the same bit rate), a
-/// tree of relay RCs (the simulator's model; up to 64 nodes also the firmware's relay code
-/// on the firmware link; the model also with the root's children spread over its three
-/// SPI buses: the lift tried for the root's link), and for comparison one RC with 8 buses
-/// (no F407 has them).
+/// tree of relay RCs (the simulator's model and the firmware's relay code on the firmware
+/// link; the model also with the root's children spread over its three SPI buses: the
+/// lift tried for the root's link), and for comparison one RC with 8 buses (no F407 has
+/// them).
 fn topology_table(
     image: &[u8],
     nodes: u16,
@@ -238,31 +238,34 @@ fn topology_table(
     };
     // The root of relays drives them on the board's root links (SPI1 and SPI2 on the F407).
     let root_links = BoardProfile::F407.link.root_links;
-    // The firmware's relay code (links_core::relay) drives one level of relays on the
-    // firmware link (64 nodes at most), on the root's two links (`TwoLinks`) or one: the
-    // board's where it can (buildable), the model otherwise.
+    // The firmware's relay code (links_core::relay) drives one or two levels of relays on
+    // the firmware link, on the root's two links (`TwoLinks`) or one: the board's
+    // (buildable, `rc-fw --features relay-root` or `relay-root-mid`).
     let firmware = |buses| SimConfig {
         relay: RelayCode::Firmware,
         link: LinkModel::Firmware,
         ..tree(true, buses)
     };
-    let one_level = firmware(1)
-        .tree()
-        .is_some_and(|t| t.is_ok_and(|t| t.levels() == 1));
-    let model_name = if one_level {
-        "(c) relay tree, batched, the model (the root on SPI1/2)"
-    } else {
-        "(c) relay tree, batched, the model (buildable: the root on SPI1/2)"
-    };
-    let mut variants = vec![
+    let variants = vec![
         ("(a) one RC, SPI1/2/3 (3 buses)", star(3)),
         ("(b) one bus of buffered segments", star(1)),
         (
             "(c) relay tree, one exchange per node frame",
             tree(false, root_links),
         ),
-        (model_name, tree(true, root_links)),
+        (
+            "(c) relay tree, batched, the model (the root on SPI1/2)",
+            tree(true, root_links),
+        ),
+        (
+            "(c) the firmware's relay code (buildable: the root on SPI1/2)",
+            firmware(root_links),
+        ),
         ("(c) batched, the root on one bus (SPI1)", tree(true, 1)),
+        (
+            "(c) the firmware's relay code, the root on one bus (SPI1)",
+            firmware(1),
+        ),
         (
             "(c) batched, the root's children on SPI1/2/3 (3 root buses)",
             tree(true, 3),
@@ -278,22 +281,6 @@ fn topology_table(
         ),
         ("one RC with 8 buses (not an F407)", star(8)),
     ];
-    if one_level {
-        variants.insert(
-            5,
-            (
-                "(c) the firmware's relay code, the root on one bus (SPI1)",
-                firmware(1),
-            ),
-        );
-        variants.insert(
-            4,
-            (
-                "(c) the firmware's relay code (buildable: the root on SPI1/2)",
-                firmware(root_links),
-            ),
-        );
-    }
     let mut t = table_head([
         "topology",
         "nodes per bus",

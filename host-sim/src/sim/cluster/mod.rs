@@ -253,19 +253,13 @@ impl SimConfig {
 
     /// This configuration with the relay code the board runs: the firmware's
     /// ([`RelayCode::Firmware`]) where the board's root of relays is built for the tree
-    /// and the code can run it (one level of relays, the firmware link, the same node count
-    /// behind every relay, no serial backup line; `relay_run::check`), the model otherwise.
-    /// Two levels (256 nodes on the F407) stay on the model: the firmware's middle relay
-    /// runs in the loop with `--relay firmware`, but no root build drives middle relays.
+    /// and the code can run it (one or two levels of relays, as `rc-fw --features
+    /// relay-root` and `relay-root-mid` build the root; the firmware link, the same node
+    /// count behind every relay, no serial backup line; `relay_run::check`), the model
+    /// otherwise.
     pub fn with_board_relays(self) -> Self {
         if self.topology == Topology::Star {
             return self;
-        }
-        if self.tree().is_some_and(|t| t.is_ok_and(|t| t.levels() > 1)) {
-            return Self {
-                relay: RelayCode::Model,
-                ..self
-            };
         }
         let firmware = Self {
             relay: RelayCode::Firmware,
