@@ -71,6 +71,15 @@ pub mod link {
         1 => LINK.nodes_per_bus,
         _ => links_core::relay::MAX_RELAY_NODES,
     };
+    /// As the root of a relay tree: node exchanges in flight per relay (`RelayedBus::
+    /// with_depth`): a leaf relay's 2 (`relay::DEPTH`, one on its bus and one reply down),
+    /// a middle relay's 8 (`relay::MID_DEPTH`: 2 for each of its 4 leaf relays), as the
+    /// simulator's firmware relay tree keeps them.
+    pub const RELAY_DEPTH: u16 = if RELAY_LEVELS == 2 {
+        links_core::relay::MID_DEPTH
+    } else {
+        links_core::relay::DEPTH
+    };
     /// The NCs the root logic hands work to: those on its bus, or, as the root of a relay
     /// tree (`relay-root`), the nodes behind its relays.
     pub const RENDER_NODES: usize = NODES * PER_RELAY as usize;
@@ -106,12 +115,16 @@ pub mod plan {
     /// bank size (`links_core::spi::BANK`); one set per bus (`link::ROOT_LINKS`).
     pub const LINK_BANKS: usize = 3 * BANK * crate::link::ROOT_LINKS;
     /// One root link's `links_core::relay::RelayedBus` buffers when the root drives its
-    /// relays on two (`links_core::relay::TWO_LINK_SLOTS` exchanges in flight on each).
-    pub type TwoLinkFrames =
-        links_core::relay::RelayedFrames<{ links_core::relay::TWO_LINK_SLOTS + 2 }>;
+    /// relays on two (`links_core::relay::TWO_LINK_SLOTS` exchanges in flight on each,
+    /// `TWO_LINK_LANDINGS` relay batches kept).
+    pub type TwoLinkFrames = links_core::relay::RelayedFrames<
+        { links_core::relay::TWO_LINK_SLOTS },
+        { links_core::relay::TWO_LINK_LANDINGS },
+    >;
     /// As the root of a relay tree (feature `relay-root`): the buffers of each link's
-    /// `links_core::relay::RelayedBus` (a frame buffer per node exchange in flight, one for
-    /// the broadcast waiting to go, one to compose in, the relay's batch;
+    /// `links_core::relay::RelayedBus` (a reply cell per node exchange in flight, four frame
+    /// buffers: to compose in, for the broadcast waiting to go, for longer replies; the
+    /// relay batches its node frames wait in;
     /// `links_core::relay::SLOTS` exchanges in flight on one link, `TWO_LINK_SLOTS` on each
     /// of two), in SRAM (the CCM has no room), taken from the scene's share.
     pub const RELAYED: usize = match (cfg!(feature = "relay-root"), crate::link::ROOT_LINKS) {
@@ -119,9 +132,18 @@ pub mod plan {
         (true, 1) => core::mem::size_of::<links_core::relay::RelayedBuffers>(),
         (true, links) => links * core::mem::size_of::<TwoLinkFrames>(),
     };
+    /// As the root of relays on two links (the F407's `relay-root`): room for the two
+    /// `RelayedBus`es' state (their slot tables), which `main` keeps in SRAM (a compile-time
+    /// assertion there checks it fits); the CCM has no room for it.
+    pub const LINK_STATE: usize = if crate::link::ROOT_LINKS == 2 {
+        2048
+    } else {
+        0
+    };
     /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
-    /// through the TX bank): what the DMA banks (and the relay buffers) leave, in whole KB.
-    pub const SCENE: usize = (SRAM - LINK_BANKS - RELAYED) / 1024 * 1024;
+    /// through the TX bank): what the DMA banks (and the relay buffers and state) leave, in
+    /// whole KB.
+    pub const SCENE: usize = (SRAM - LINK_BANKS - RELAYED - LINK_STATE) / 1024 * 1024;
     /// The first of a film's two scene banks, which split [`SCENE`]: frame k is uploaded
     /// into one while frame k - 1 renders from the other (`links_core::serial::film`); a
     /// still scene uses the first. Half of [`SCENE`], or a node's larger scene bank if that
@@ -149,7 +171,7 @@ pub mod plan {
         8 * 1024
     };
 
-    const _: () = assert!(LINK_BANKS + RELAYED + SCENE <= SRAM);
+    const _: () = assert!(LINK_BANKS + RELAYED + LINK_STATE + SCENE <= SRAM);
     const _: () = assert!(SCENE <= links_core::wire::MAX_SCENE);
     // Every SceneImage a node's bank holds fits one film bank of the RC.
     const _: () = assert!(FILM_BANK >= crate::link::PROFILE.node.bank(0));
@@ -384,18 +406,20 @@ mod tests {
         use super::link::{NODES, PROFILE, RENDER_NODES};
         use super::plan::{FILM_BANK, RELAYED, SCENE};
         let per_bus = PROFILE.link.nodes_per_bus as usize;
+        // A reply cell per exchange in flight, four frame buffers, the relay batches kept.
+        use links_core::relay::{LANDINGS, REPLY_CELL, SLOTS, TWO_LINK_LANDINGS, TWO_LINK_SLOTS};
+        use links_core::wire::MAX_MESSAGE;
         let relayed = core::mem::size_of::<links_core::relay::RelayedBuffers>();
-        assert_eq!(
-            relayed,
-            (links_core::relay::SLOTS + 3) * links_core::wire::MAX_MESSAGE
-        );
+        assert_eq!(relayed, SLOTS * REPLY_CELL + (4 + LANDINGS) * MAX_MESSAGE);
+        assert_eq!(relayed, 13_632);
         if cfg!(feature = "relay-root") {
             let links = PROFILE.link.root_links as usize;
             let two = core::mem::size_of::<super::plan::TwoLinkFrames>();
             assert_eq!(
                 two,
-                (links_core::relay::TWO_LINK_SLOTS + 3) * links_core::wire::MAX_MESSAGE
+                TWO_LINK_SLOTS * REPLY_CELL + (4 + TWO_LINK_LANDINGS) * MAX_MESSAGE
             );
+            assert_eq!(two, 16_232);
             let expected = if links == 2 { 2 * two } else { relayed };
             // A leaf relay brings its bus's nodes; a middle relay the 32 its report holds
             // (4 leaf relays of 8), as the simulator's firmware tree builds 256 nodes.
@@ -419,20 +443,23 @@ mod tests {
                 3 * links * PROFILE.dma_bank_bytes()
             );
             if cfg!(feature = "board-f407") {
-                // Two root links (SPI1, SPI2): 128 KB - 2 x 3 DMA banks - 2 x 17,336 B (8
-                // node exchanges in flight on each), in whole KB; a film's second bank is
-                // what the first (a node's 61,440-byte bank) leaves: 24,576 B (34,816 with
-                // one link of 16 exchanges in flight, 58,368 with one exchange in flight).
+                // Two root links (SPI1, SPI2): 128 KB - 2 x 3 DMA banks - 2 x 16,232 B (32
+                // node exchanges in flight on each) - 2 KB of the links' state, in whole
+                // KB; a film's second bank is what the first (a node's 61,440-byte bank)
+                // leaves: 24,576 B (as with 8 exchanges in flight a link, each in a frame
+                // buffer of its own; 58,368 with one exchange in flight).
                 assert_eq!(links, 2);
+                assert_eq!(super::plan::LINK_STATE, 2048);
                 let nodes = if levels == 2 { 256 } else { 64 };
                 assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (nodes, 86_016, 61_440));
                 // The backup line's 6-bit addresses reach a 256-node tree's first 64.
                 assert_eq!(super::backup_line::ROLL_CALL_NODES, 64);
             }
             if cfg!(feature = "board-g0b1") {
-                // 80 KB - 3 DMA banks - 29,944 B = 47,212 -> 46 KB; the first film bank is a
-                // node's 40 KB bank, as without the relays (the second: 6 KB).
-                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 47_104, 40_960));
+                // 80 KB - 3 DMA banks - 13,632 B = 63,524 -> 62 KB; the first film bank is a
+                // node's 40 KB bank, as without the relays (the second: 22 KB; 6 KB while
+                // each exchange in flight kept a frame buffer).
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (64, 63_488, 40_960));
             }
         } else {
             assert_eq!((RENDER_NODES, RELAYED), (NODES, 0));

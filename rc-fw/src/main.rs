@@ -139,8 +139,19 @@ mod fw {
         relayed: RelayedBuffers,
         #[cfg(all(feature = "relay-root", feature = "board-f407"))]
         relayed: [rc_fw::plan::TwoLinkFrames; 2],
+        /// The two `RelayedBus`es' state (their slot tables: `TWO_LINK_SLOTS` exchanges in
+        /// flight on each), here rather than in the serial task's future in the CCM, which
+        /// has no room for it (written once in `main`).
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        link_state: core::mem::MaybeUninit<Link>,
         scene: [u8; SCENE],
     }
+    #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+    const _: () = assert!(core::mem::size_of::<Link>() <= rc_fw::plan::LINK_STATE);
+    /// The root logic's link where it is not in SRAM: in the CCM (a `MasterFront`, or one
+    /// link's `RelayedBus`).
+    #[cfg(not(all(feature = "relay-root", feature = "board-f407")))]
+    static LINK: StaticCell<Link> = StaticCell::new();
 
     static USB_QUEUE: UsbPipe = Pipe::new();
     /// The OTG core's receive buffer (the G0's USB peripheral has its own packet memory).
@@ -345,7 +356,7 @@ mod fw {
     #[embassy_executor::task]
     async fn serial_task(
         mut rx: Receiver<'static, UsbDriver>,
-        mut link: Link,
+        link: &'static mut Link,
         scene: &'static mut [u8],
         line: &'static Line,
     ) {
@@ -361,10 +372,9 @@ mod fw {
             while let Ok(n) = rx.read_packet(&mut pkt).await {
                 for &b in &pkt[..n] {
                     let step = session.feed(b);
-                    on_step(step, &mut link, &mut session, &mut last, line).await;
+                    on_step(step, link, &mut session, &mut last, line).await;
                     if session.film.current.is_none() && session.film.loading.is_some() {
-                        film_frames(&mut rx, &mut link, &mut session, &mut film_enc, &mut last)
-                            .await;
+                        film_frames(&mut rx, link, &mut session, &mut film_enc, &mut last).await;
                     }
                 }
             }
@@ -559,10 +569,17 @@ mod fw {
             let front2 = MasterFront::new(&BUS2, half, half, [ctx0, ctx1], crx);
             let [f0, f1] = &mut sram.relayed;
             let timeout = rc_fw::link::RELAY_TIMEOUT_US;
+            let depth = rc_fw::link::RELAY_DEPTH;
             let a = unwrap!(RelayedBus::new(front, f0, 0, per));
-            let a = a.with_slots().with_timeout(Clock, timeout);
+            let a = a
+                .with_slots()
+                .with_timeout(Clock, timeout)
+                .with_depth(depth);
             let b = unwrap!(RelayedBus::new(front2, f1, half * per, per));
-            let b = b.with_slots().with_timeout(Clock, timeout);
+            let b = b
+                .with_slots()
+                .with_timeout(Clock, timeout)
+                .with_depth(depth);
             (unwrap!(TwoLinks::new(a, b)), port, port2)
         };
 
@@ -600,6 +617,10 @@ mod fw {
         spawner.spawn(unwrap!(backup_task(line)));
         spawner.spawn(unwrap!(usb_task(device)));
         spawner.spawn(unwrap!(usb_tx_task(tx)));
+        #[cfg(not(all(feature = "relay-root", feature = "board-f407")))]
+        let link: &'static mut Link = LINK.init(link);
+        #[cfg(all(feature = "relay-root", feature = "board-f407"))]
+        let link: &'static mut Link = sram.link_state.write(link);
         spawner.spawn(unwrap!(serial_task(rx, link, &mut sram.scene, line)));
     }
 }

@@ -817,8 +817,11 @@ mod tests {
         assert_eq!(policy_text(star.policy), "decreasing=6,128");
         assert_eq!(tree.clone().with_board_relays().relay, RelayCode::Firmware);
         let two_levels = config(BoardProfile::F407, 256, None, None, None, b);
-        // Two levels too: `rc-fw --features relay-root-mid` drives middle relays.
+        // Two levels too: `rc-fw --features relay-root-mid` drives middle relays on the
+        // F407's two root links; it is not built for the F207's one.
         assert_eq!(two_levels.with_board_relays().relay, RelayCode::Firmware);
+        let f207 = config(BoardProfile::F207, 256, None, None, None, b);
+        assert_eq!(f207.with_board_relays().relay, RelayCode::Model);
         // The serial backup line is simulated with the model only.
         let line = SimConfig {
             backup_line: true,

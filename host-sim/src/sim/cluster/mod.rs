@@ -253,13 +253,20 @@ impl SimConfig {
 
     /// This configuration with the relay code the board runs: the firmware's
     /// ([`RelayCode::Firmware`]) where the board's root of relays is built for the tree
-    /// and the code can run it (one or two levels of relays, as `rc-fw --features
-    /// relay-root` and `relay-root-mid` build the root; the firmware link, the same node
-    /// count behind every relay, no serial backup line; `relay_run::check`), the model
-    /// otherwise.
+    /// and the code can run it (one level of relays, as `rc-fw --features relay-root`
+    /// builds the root, or two on a board whose root drives two links, as `relay-root-mid`
+    /// builds it for the F407; the firmware link, the same node count behind every relay,
+    /// no serial backup line; `relay_run::check`), the model otherwise.
     pub fn with_board_relays(self) -> Self {
         if self.topology == Topology::Star {
             return self;
+        }
+        let two_levels = self.tree().is_some_and(|t| t.is_ok_and(|t| t.levels() > 1));
+        if two_levels && self.profile.link.root_links < 2 {
+            return Self {
+                relay: RelayCode::Model,
+                ..self
+            };
         }
         let firmware = Self {
             relay: RelayCode::Firmware,

@@ -36,8 +36,8 @@ use super::timeline::SharedTimeline;
 use super::{Collect, SimConfig, SimError};
 use links_core::relay::{
     root_timeout_us, run_relay, RelayBuffers, RelayError, RelayReport, RelayedBuffers, RelayedBus,
-    RelayedCounters, RelayedFrames, TwoLinks, MAX_RELAYS, MAX_RELAY_NODES, MID_RELAY_TIMEOUT_US,
-    TWO_LINK_SLOTS,
+    RelayedCounters, RelayedFrames, TwoLinks, DEPTH, MAX_RELAYS, MAX_RELAY_NODES, MID_DEPTH,
+    MID_RELAY_TIMEOUT_US, TWO_LINK_LANDINGS, TWO_LINK_SLOTS,
 };
 use links_core::root::{run_bus, RootError};
 use links_core::spi::{Bank, BANK};
@@ -410,13 +410,15 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
             })
             .await
         } else {
-            // Two links, as `rc-fw --features relay-root` drives them: `TwoLinks` over a
-            // `RelayedBus` on each (TWO_LINK_SLOTS exchanges in flight on each).
+            // Two links, as `rc-fw --features relay-root` (and `relay-root-mid`) drives them:
+            // `TwoLinks` over a `RelayedBus` on each (TWO_LINK_SLOTS exchanges in flight on
+            // each; MID_DEPTH per middle relay under two levels, DEPTH per leaf relay).
             let second_first = link.links.star.borrow().bus_nodes(1).0.saturating_mul(per);
+            let depth = if link.mid.is_some() { MID_DEPTH } else { DEPTH };
             on_master_bus(&root_wire, 0, end0, async move |bus0| {
                 on_master_bus(&wire1, 1, end1, async move |bus1| {
                     let mut bufs = Box::new([
-                        RelayedFrames::<{ TWO_LINK_SLOTS + 2 }>::new(),
+                        RelayedFrames::<TWO_LINK_SLOTS, TWO_LINK_LANDINGS>::new(),
                         RelayedFrames::new(),
                     ]);
                     let [b0, b1] = &mut *bufs;
@@ -428,8 +430,9 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                         return Err(failed);
                     };
                     let Ok(mut two) = TwoLinks::new(
-                        r0.with_timeout(timeout_clock, root_timeout),
-                        r1.with_timeout(clock2, root_timeout),
+                        r0.with_timeout(timeout_clock, root_timeout)
+                            .with_depth(depth),
+                        r1.with_timeout(clock2, root_timeout).with_depth(depth),
                     ) else {
                         return Err(failed);
                     };

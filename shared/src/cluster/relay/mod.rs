@@ -34,8 +34,12 @@
 //! relays' buses work at once. `run_bus` composes a reply for every node the bus may begin
 //! an exchange with ([`RootBus::ready`]) and takes each frame when it comes back
 //! ([`RootBus::arrived`], [`RootBus::finish_node`]) without waiting for the others. Each
-//! reply waits in its own buffer of [`RelayedBuffers`] (going down once, as above) until the
-//! node's frame comes up into the same buffer; the root's link takes, in turn round the
+//! reply waits in its own cell of [`RelayedBuffers`] ([`REPLY_CELL`] bytes; a longer one, a
+//! scene repair, in a frame buffer) until it is down and the node's frame is up; the frame
+//! stays in the relay batch it came in (one of [`LANDINGS`]) until the root logic takes
+//! it, so an exchange in flight costs a cell, not a frame buffer. The root of two levels
+//! keeps [`MID_DEPTH`] exchanges in flight per middle relay. The root's link takes, in turn
+//! round the
 //! relays whose line is up, (1) a relay with a reply to take down for the
 //! first time, (2) one whose node's frame may be up, (3) one with nothing in flight and no
 //! waiting node the root knows of (it has news). A relay sends one node frame up per batch,
@@ -64,8 +68,8 @@ pub use batch::{
 };
 pub use node::{run_relay, RelayBuffers, RelayReport};
 pub use root::{
-    RelayedBuffers, RelayedBus, RelayedCounters, RelayedFrames, DEPTH, MAX_RELAYS, SLOTS,
-    TWO_LINK_SLOTS,
+    RelayedBuffers, RelayedBus, RelayedCounters, RelayedFrames, DEPTH, LANDINGS, MAX_LANDINGS,
+    MAX_RELAYS, MID_DEPTH, REPLY_CELL, SLOTS, TWO_LINK_LANDINGS, TWO_LINK_SLOTS,
 };
 pub use two::TwoLinks;
 

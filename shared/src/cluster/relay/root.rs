@@ -15,14 +15,45 @@ use embassy_futures::select::{select, Either};
 /// per link in its CCM.
 pub const MAX_RELAYS: usize = 8;
 
-/// Most node exchanges a [`RelayedBus`] keeps in flight at once (each holds one frame
-/// buffer of [`RelayedBuffers`]: its reply until the node's frame comes back into it).
+/// Most node exchanges a [`RelayedBus`] keeps in flight at once unless told otherwise
+/// ([`RelayedBus::with_slots`]; each holds a reply cell of [`RelayedBuffers`] until its
+/// reply is down and the node's frame has come back).
 pub const SLOTS: usize = 16;
 
 /// Node exchanges in flight on each link when the root drives its relays on two links
-/// ([`super::TwoLinks`]): the one link's [`SLOTS`] shared out, each link's buffers
-/// `RelayedFrames<{ TWO_LINK_SLOTS + 2 }>`.
-pub const TWO_LINK_SLOTS: usize = SLOTS / 2;
+/// ([`super::TwoLinks`], each link's buffers `RelayedFrames<TWO_LINK_SLOTS>`): four middle
+/// relays of a two-level tree at [`MID_DEPTH`] each (four leaf relays of a one-level tree
+/// use 8 of them, at [`DEPTH`]).
+pub const TWO_LINK_SLOTS: usize = 32;
+
+/// Node exchanges in flight per middle relay at the root of two levels (`rc-fw --features
+/// relay-root-mid`, and the simulator's): a middle relay's 32 nodes behind 4 leaf relays,
+/// 2 at a time on each leaf bus, so the root keeps each leaf relay's 2 going.
+pub const MID_DEPTH: u16 = 8;
+
+/// Bytes of a reply kept in its exchange's own cell: the longest job hand-out (`Down::Work`
+/// with its two jobs, envelope and CRC: at most 56 bytes, a test checks it) fits; a longer reply (a
+/// scene repair) waits in a full frame buffer.
+pub const REPLY_CELL: usize = 64;
+
+/// Full frame buffers of a [`RelayedBus`]: one to compose in, one for the broadcast waiting
+/// to go, two for replies longer than a cell (one at a time is let begin, so a broadcast
+/// always finds a buffer).
+pub const FRAMES: usize = 4;
+
+/// Relay batches a [`RelayedBus`] keeps while the root logic has not taken every node frame
+/// in them (the next exchange lands in a free one; none free, the link waits), unless its
+/// buffers say otherwise ([`RelayedFrames`]'s second parameter): a middle relay's.
+pub const LANDINGS: usize = 4;
+
+/// Relay batches kept on each of the root's two links ([`super::TwoLinks`]): its CPU takes
+/// the node frames of 4 middle relays, and with [`LANDINGS`] the link waited for it (256
+/// nodes, steady: 200.91x with 4, 209.64x with 5, 209.28x with 6, 212.05x with 8; the
+/// middle relays gain nothing from more than 4).
+pub const TWO_LINK_LANDINGS: usize = 5;
+
+/// Most relay batches a [`RelayedBus`] keeps.
+pub const MAX_LANDINGS: usize = 8;
 
 /// Node exchanges in flight per relay unless told otherwise ([`RelayedBus::with_depth`]):
 /// one being clocked on the relay's bus, one more whose reply is already down (or goes
@@ -49,36 +80,50 @@ pub struct RelayedCounters {
     pub most_in_flight: u32,
 }
 
-/// The buffers of a [`RelayedBus`]: `FRAMES` frame buffers and the link's receive buffer,
-/// all of [`MAX_MESSAGE`] bytes (the firmware places them in SRAM beside the scene, since
-/// all-zero bytes are a valid value). `FRAMES - 2` node exchanges may be in flight at once
-/// (at most [`SLOTS`]).
-pub struct RelayedFrames<const FRAMES: usize> {
-    /// One frame buffer per node exchange in flight, one for the broadcast waiting to go
-    /// and one to compose the next frame in: an exchange's buffer holds its reply until the
-    /// node's frame comes back into it.
+/// The buffers of a [`RelayedBus`] with up to `CELLS` node exchanges in flight (the
+/// firmware places them in SRAM beside the scene, since all-zero bytes are a valid value):
+/// a reply cell per exchange, [`FRAMES`] full frame buffers, [`LANDINGS`] relay batches.
+/// Replies are short and a batch carries several node frames, so an exchange costs
+/// [`REPLY_CELL`] bytes, not a frame buffer of its own (`RelayedFrames<32, 5>`: 16,232
+/// bytes, against 55,160 with a frame buffer per exchange).
+pub struct RelayedFrames<const CELLS: usize, const LANDS: usize = LANDINGS> {
+    /// Each exchange's reply (slot `i`'s in cell `i`) until it is down and its frame up.
+    pub cells: [[u8; REPLY_CELL]; CELLS],
+    /// One to compose the next frame in, one for the broadcast waiting to go, and the
+    /// replies longer than a cell.
     pub frames: [[u8; MAX_MESSAGE]; FRAMES],
-    /// What the link's last relay exchange brought.
-    pub rx: [u8; MAX_MESSAGE],
+    /// What the link's relay exchanges brought: each kept until the root logic has taken
+    /// its last node frame.
+    pub landings: [[u8; MAX_MESSAGE]; LANDS],
 }
 
-/// The buffers of a [`RelayedBus`] with [`SLOTS`] node exchanges in flight (`SLOTS + 3`
-/// frames: 29,944 bytes with [`SLOTS`] = 16, 6,304 with one exchange in flight before).
-pub type RelayedBuffers = RelayedFrames<{ SLOTS + 2 }>;
+/// The buffers of a [`RelayedBus`] with [`SLOTS`] node exchanges in flight (13,632 bytes;
+/// 29,944 while each exchange kept a frame buffer).
+pub type RelayedBuffers = RelayedFrames<SLOTS>;
 
-impl<const FRAMES: usize> RelayedFrames<FRAMES> {
+impl<const CELLS: usize, const LANDS: usize> RelayedFrames<CELLS, LANDS> {
     pub const fn new() -> Self {
         RelayedFrames {
+            cells: [[0; REPLY_CELL]; CELLS],
             frames: [[0; MAX_MESSAGE]; FRAMES],
-            rx: [0; MAX_MESSAGE],
+            landings: [[0; MAX_MESSAGE]; LANDS],
         }
     }
 }
 
-impl<const FRAMES: usize> Default for RelayedFrames<FRAMES> {
+impl<const CELLS: usize, const LANDS: usize> Default for RelayedFrames<CELLS, LANDS> {
     fn default() -> Self {
         Self::new()
     }
+}
+
+/// Where an exchange's reply waits to go down.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reply {
+    /// In its slot's cell.
+    Cell,
+    /// In frame buffer `n` (longer than a cell).
+    Frame(u8),
 }
 
 /// Where a node exchange in flight is.
@@ -89,19 +134,19 @@ enum Stage {
     /// when a batch of a later exchange still reports the node waiting (the relay never
     /// got it). Given up at `deadline` (µs, with a time-out).
     Asked {
+        reply: Reply,
         len: u16,
         sent_in: Option<u16>,
         deadline: u64,
     },
-    /// The node's frame (`len` bytes) is in the buffer.
-    Answered { len: u16 },
+    /// The node's frame is `len` bytes at `at` in landing buffer `landing`.
+    Answered { landing: u8, at: u16, len: u16 },
 }
 
-/// A node exchange in flight: the node, its frame buffer, its stage.
+/// A node exchange in flight: the node, its stage.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Slot {
     node: NodeId,
-    buf: u8,
     stage: Stage,
 }
 
@@ -127,6 +172,17 @@ enum Cast {
     Done(Result<(), LinkError>),
 }
 
+/// Where link operation `op` lands: a relay exchange's batch in landing buffer `landing`; a
+/// broadcast brings nothing.
+fn landing_of(landings: &mut [[u8; MAX_MESSAGE]], landing: u8, op: LinkOp) -> &mut [u8] {
+    match op {
+        LinkOp::Gather(_) => landings
+            .get_mut(landing as usize)
+            .map_or(&mut [][..], |l| &mut l[..]),
+        LinkOp::Broadcast => &mut [],
+    }
+}
+
 /// The nodes behind `relays` relays on `link` (relay `r` is the link's node `link_first +
 /// r`; its nodes are `first + r * per_relay ..`), as one [`RootBus`] for `run_bus`, with
 /// up to [`DEPTH`] node exchanges in flight per relay ([`RootBus::in_flight`]).
@@ -136,10 +192,15 @@ enum Cast {
 /// ([`crate::spi::MasterFront`]) is; a dropped exchange is taken before the next one.
 pub struct RelayedBus<'m, L, C = NoClock, const S: usize = SLOTS> {
     link: L,
-    /// The frame buffers (`slots + 2` of them are used) and the receive buffer.
-    frames: &'m mut [[u8; MAX_MESSAGE]],
-    rx: &'m mut [u8; MAX_MESSAGE],
-    /// Node exchanges in flight at most, over all relays (the buffers': at most [`SLOTS`]).
+    /// The buffers ([`RelayedFrames`]).
+    cells: &'m mut [[u8; REPLY_CELL]],
+    frames: &'m mut [[u8; MAX_MESSAGE]; FRAMES],
+    landings: &'m mut [[u8; MAX_MESSAGE]],
+    /// Per landing buffer: node frames in it the root logic has not taken.
+    held: [u16; MAX_LANDINGS],
+    /// The landing buffer the relay exchange in flight lands in.
+    landing: u8,
+    /// Node exchanges in flight at most, over all relays (the cells', at most `S`).
     slot_count: u16,
     /// How long a node exchange may wait for its frame (µs; 0: for ever), by `clock`.
     clock: C,
@@ -179,21 +240,22 @@ pub struct RelayedBus<'m, L, C = NoClock, const S: usize = SLOTS> {
 
 impl<'m, L: RootBus> RelayedBus<'m, L> {
     /// The nodes `first..first + relays * per_relay` behind every relay on `link`, with
-    /// `FRAMES - 2` node exchanges in flight at most (3 to `SLOTS + 2` frames; more are
-    /// not used).
-    pub fn new<const FRAMES: usize>(
+    /// `CELLS` node exchanges in flight at most (at most [`SLOTS`] before
+    /// [`RelayedBus::with_slots`]).
+    pub fn new<const CELLS: usize, const LANDS: usize>(
         link: L,
-        buf: &'m mut RelayedFrames<FRAMES>,
+        buf: &'m mut RelayedFrames<CELLS, LANDS>,
         first: NodeId,
         per_relay: u16,
     ) -> Result<Self, RelayError> {
         const {
+            assert!(CELLS >= 1, "a relayed bus needs a reply cell");
             assert!(
-                FRAMES >= 3,
-                "a relayed bus needs a slot and two spare frames"
-            )
+                LANDS >= 2 && LANDS <= MAX_LANDINGS,
+                "a relayed bus keeps 2 to MAX_LANDINGS relay batches"
+            );
         };
-        let slot_count = (FRAMES - 2).min(SLOTS) as u16;
+        let slot_count = CELLS.min(SLOTS) as u16;
         let relays = link.nodes().1;
         let total = relays as u32 * per_relay as u32;
         if relays as usize > MAX_RELAYS || per_relay > MAX_RELAY_NODES {
@@ -208,11 +270,18 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
                 most: u16::MAX as u32,
             });
         }
-        let RelayedFrames { frames, rx } = buf;
+        let RelayedFrames {
+            cells,
+            frames,
+            landings,
+        } = buf;
         Ok(RelayedBus {
             link,
-            frames: &mut frames[..slot_count as usize + 2],
-            rx,
+            cells,
+            frames,
+            landings,
+            held: [0; MAX_LANDINGS],
+            landing: 0,
             slot_count,
             clock: NoClock,
             timeout_us: 0,
@@ -266,11 +335,15 @@ impl<'m, L, C, const S: usize> RelayedBus<'m, L, C, S> {
         timeout_us: u64,
         slots: [Option<Slot>; T],
     ) -> RelayedBus<'m, L, C2, T> {
+        let slot_count = (self.cells.len() as u16).min(T as u16);
         RelayedBus {
             link: self.link,
+            cells: self.cells,
             frames: self.frames,
-            rx: self.rx,
-            slot_count: self.slot_count.min(T as u16),
+            landings: self.landings,
+            held: self.held,
+            landing: self.landing,
+            slot_count,
             clock,
             timeout_us,
             first: self.first,
@@ -358,10 +431,39 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             .fold(0, |m, (_, b)| m | b)
     }
 
+    /// Whether frame buffer `b` is taken: by the broadcast waiting to go, or by a reply
+    /// longer than a cell waiting to go down.
+    fn frame_taken(&self, b: u8) -> bool {
+        matches!(self.cast, Some(Cast::Queued { buf, .. }) if buf == b)
+            || self
+                .slots
+                .iter()
+                .flatten()
+                .any(|s| matches!(s.stage, Stage::Asked { reply: Reply::Frame(f), .. } if f == b))
+    }
+
+    /// Frame buffers not taken (the one composed in among them).
+    fn untaken_frames(&self) -> usize {
+        (0..FRAMES as u8).filter(|&b| !self.frame_taken(b)).count()
+    }
+
+    /// A landing buffer the next relay exchange may land in: none of its node frames
+    /// waiting for the root logic, not the one an exchange in flight lands in.
+    fn free_landing(&self) -> Option<u8> {
+        (0..self.landings.len() as u8).find(|&l| {
+            self.held[l as usize] == 0
+                && !(matches!(self.dangling, Some(LinkOp::Gather(_))) && l == self.landing)
+        })
+    }
+
     /// A node an exchange may begin with now: waiting, none in flight with it, its relay
-    /// below `depth`, a slot free.
+    /// below `depth`, a slot free, and frame buffers enough for a reply longer than a cell
+    /// while one is left for a broadcast (the one composed in, and two more).
     fn ready_in(&self) -> Option<NodeId> {
         self.free_slot()?;
+        if self.untaken_frames() < 3 {
+            return None;
+        }
         let total = self.relays * self.per_relay;
         (0..total)
             .map(|k| (self.next_scan + k) % total)
@@ -430,6 +532,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         if self.cast == Some(Cast::OnLink) {
             return None;
         }
+        // Every relay exchange may bring node frames: it needs a landing buffer.
+        self.free_landing()?;
         let (link_first, _) = self.link.nodes();
         let relays = self.relays.max(1);
         let mut best: Option<(u8, u16)> = None;
@@ -488,6 +592,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 // relay's batches stop reporting its node waiting.
                 let (first, per) = (self.first, self.per_relay.max(1));
                 let base = first.wrapping_add(r.wrapping_mul(per));
+                let landing = self.free_landing().ok_or(LinkError::Busy)?;
                 let mut w =
                     BatchWriter::new(self.link.tx_bank()).map_err(|_| LinkError::Aborted)?;
                 let mut carried = [false; S];
@@ -495,10 +600,12 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 for (i, s) in self.slots.iter().enumerate() {
                     let Some(Slot {
                         node,
-                        buf,
                         stage:
                             Stage::Asked {
-                                len, sent_in: None, ..
+                                reply,
+                                len,
+                                sent_in: None,
+                                ..
                             },
                     }) = *s
                     else {
@@ -508,7 +615,14 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                     if node < base || local >= per {
                         continue;
                     }
-                    let data = self.frames[buf as usize].get(..len as usize).unwrap_or(&[]);
+                    let data = match reply {
+                        Reply::Cell => self.cells.get(i).and_then(|c| c.get(..len as usize)),
+                        Reply::Frame(b) => self
+                            .frames
+                            .get(b as usize)
+                            .and_then(|f| f.get(..len as usize)),
+                    }
+                    .unwrap_or(&[]);
                     if w.push(Record {
                         kind: Kind::Request,
                         node: local,
@@ -542,6 +656,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                     }
                 }
                 self.dangling = Some(LinkOp::Gather(r));
+                self.landing = landing;
                 self.next_link = (r + 1) % self.relays.max(1);
                 self.counters.link_exchanges += 1;
                 self.counters.gathering += u32::from(requests == 0);
@@ -570,7 +685,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         let Some(op) = self.dangling else {
             return Ok(());
         };
-        let got = self.link.finish(&mut self.rx[..]).await;
+        let into = landing_of(self.landings, self.landing, op);
+        let got = self.link.finish(into).await;
         self.landed(op, got)
     }
 
@@ -582,6 +698,15 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         }
         if let Some(op) = self.pick() {
             return self.begin(op);
+        }
+        if self.free_landing().is_none() {
+            // Every landing buffer holds node frames the root logic has not taken: nothing
+            // can come up until it does, or a time-out passes.
+            match self.deadline() {
+                Some(t) => self.clock.at_us(t).await,
+                None => core::future::pending::<()>().await,
+            }
+            return Ok(());
         }
         let relay = match self.deadline() {
             None => self.link.wait_ready().await,
@@ -606,7 +731,11 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         // Records name a relay's nodes by their index on its bus.
         let per = self.per_relay;
         let base = self.first.wrapping_add(r.wrapping_mul(per));
-        let (frames, rx) = (&mut *self.frames, &*self.rx);
+        let landing = self.landing;
+        let Some(rx) = self.landings.get(landing as usize) else {
+            return;
+        };
+        let held = &mut self.held[landing as usize];
         let Ok(Relayed::Batch { waiting, records }) = parse(rx.get(..got).unwrap_or(&[])) else {
             self.counters.bad_batches += 1;
             return;
@@ -633,15 +762,15 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                         .find(|s| s.node == node && matches!(s.stage, Stage::Asked { .. }));
                     match slot {
                         Some(s) => {
-                            if let Some(dst) = frames
-                                .get_mut(s.buf as usize)
-                                .and_then(|f| f.get_mut(..data.len()))
-                            {
-                                dst.copy_from_slice(data);
-                                s.stage = Stage::Answered {
-                                    len: data.len() as u16,
-                                };
-                            }
+                            // The frame stays where it landed; its reply is no longer
+                            // needed (a cell or frame buffer freed).
+                            let at = data.as_ptr() as usize - rx.as_ptr() as usize;
+                            s.stage = Stage::Answered {
+                                landing,
+                                at: at as u16,
+                                len: data.len() as u16,
+                            };
+                            *held += 1;
                         }
                         None => self.counters.stray_frames += 1,
                     }
@@ -734,10 +863,22 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 self.waiting[r as usize] &= !b;
                 self.next_scan = (node - self.first + 1) % (self.relays * self.per_relay);
                 let deadline = self.clock.now_us().saturating_add(self.timeout_us);
+                // A reply that fits its cell moves there; a longer one keeps its buffer.
+                let composed = self
+                    .frames
+                    .get(self.compose as usize)
+                    .and_then(|f| f.get(..len));
+                let reply = match (composed, self.cells.get_mut(i)) {
+                    (Some(src), Some(cell)) if len <= REPLY_CELL => {
+                        cell[..len].copy_from_slice(src);
+                        Reply::Cell
+                    }
+                    _ => Reply::Frame(self.compose),
+                };
                 self.slots[i] = Some(Slot {
                     node,
-                    buf: self.compose,
                     stage: Stage::Asked {
+                        reply,
                         len: len as u16,
                         sent_in: None,
                         deadline,
@@ -753,15 +894,10 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 });
             }
         }
-        // The next frame goes into a buffer no exchange or broadcast holds (there are
-        // slot_count + 2).
-        let cast = match self.cast {
-            Some(Cast::Queued { buf, .. }) => Some(buf),
-            _ => None,
-        };
-        let owned = |b: u8| Some(b) == cast || self.slots.iter().flatten().any(|s| s.buf == b);
-        self.compose = (0..=self.slot_count as u8 + 1)
-            .find(|&b| !owned(b))
+        // The next frame goes into a buffer no exchange or broadcast holds (`ready` lets
+        // an exchange begin only while two are left besides the one composed in).
+        self.compose = (0..FRAMES as u8)
+            .find(|&b| !self.frame_taken(b))
             .unwrap_or(0);
         // Put it on the link now if the link is free.
         self.poll();
@@ -836,14 +972,22 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 return Err(LinkError::Aborted);
             };
             match slot.stage {
-                Stage::Answered { len } => {
+                Stage::Answered { landing, at, len } => {
                     self.slots[i] = None;
-                    let n = len as usize;
+                    if let Some(h) = self.held.get_mut(landing as usize) {
+                        *h = h.saturating_sub(1);
+                    }
+                    let (at, n) = (at as usize, len as usize);
                     let max = rx.len() as u32;
                     let dst = rx
                         .get_mut(..n)
                         .ok_or(LinkError::TooLong { len: n as u32, max })?;
-                    dst.copy_from_slice(&self.frames[slot.buf as usize][..n]);
+                    let src = self
+                        .landings
+                        .get(landing as usize)
+                        .and_then(|l| l.get(at..at + n))
+                        .ok_or(LinkError::Aborted)?;
+                    dst.copy_from_slice(src);
                     return Ok(n);
                 }
                 Stage::Asked { deadline, .. }
@@ -879,7 +1023,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
 
     fn poll(&mut self) {
         if let Some(op) = self.dangling {
-            match poll_once(self.link.finish(&mut self.rx[..])) {
+            let into = landing_of(self.landings, self.landing, op);
+            match poll_once(self.link.finish(into)) {
                 Poll::Pending => return,
                 Poll::Ready(got) => {
                     // A failed relay exchange is asked again; a failed broadcast is
@@ -932,6 +1077,8 @@ mod tests {
         requests: Vec<[u32; 4]>,
         /// Down halves still to be lost (as to a bit error).
         lose_down: u32,
+        /// Per relay and node index: the last request's bytes.
+        got: Vec<[Vec<u8>; 4]>,
     }
 
     impl<'c> Relays<'c> {
@@ -948,6 +1095,7 @@ mod tests {
                 waits: vec![0; n],
                 requests: vec![[0; 4]; n],
                 lose_down: 0,
+                got: vec![Default::default(); n],
             }
         }
     }
@@ -1000,6 +1148,7 @@ mod tests {
                 for rec in records.flatten() {
                     if let Some(c) = self.requests[r as usize].get_mut(rec.node as usize) {
                         *c += 1;
+                        self.got[r as usize][rec.node as usize] = rec.data.to_vec();
                     }
                 }
             }
@@ -1018,6 +1167,132 @@ mod tests {
                 }
             }
             Ok(n)
+        }
+    }
+
+    /// Start an exchange with every node the bus lets begin one with, each reply `len`
+    /// bytes of the node's number; returns the nodes started.
+    fn start_ready(bus: &mut RelayedBus<'_, Relays<'_>, &Jump>, len: usize) -> Vec<NodeId> {
+        let mut started = Vec::new();
+        while let Some(n) = bus.ready() {
+            bus.tx_bank()[..len].fill(n as u8);
+            bus.start(Transfer::Exchange(n), len).unwrap();
+            started.push(n);
+        }
+        started
+    }
+
+    /// A node frame stays in the relay batch it came in until the root logic takes it; with
+    /// every landing buffer holding frames not taken the link stops gathering (nothing is
+    /// lost or overwritten), and goes on once they are taken.
+    #[test]
+    fn frames_wait_in_their_batches_and_full_landings_hold_the_link_back() {
+        let clock = Jump(Cell::new(0));
+        let mut relays = Relays::new(&clock, vec![true]);
+        relays.waits = vec![u32::MAX];
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let bus = RelayedBus::new(relays, &mut *bufs, 0, 32).unwrap();
+        let mut bus = bus.with_timeout(&clock, 1_000_000).with_depth(SLOTS as u16);
+        let mut started = Vec::new();
+        for _ in 0..4 * MAX_LANDINGS {
+            bus.poll();
+            started.extend(start_ready(&mut bus, 2));
+        }
+        assert!(
+            bus.held[..LANDINGS].iter().all(|&h| h > 0),
+            "{:?}",
+            bus.held
+        );
+        let exchanges = bus.counters.link_exchanges;
+        for _ in 0..8 {
+            bus.poll();
+        }
+        assert_eq!(bus.counters.link_exchanges, exchanges, "held back");
+        // Every frame that came up is intact; the rest come once those are taken.
+        let mut rx = [0u8; MAX_MESSAGE];
+        let mut taken = Vec::new();
+        while taken.len() < started.len() {
+            let node = block_on(bus.wait_ready());
+            assert_eq!(block_on(bus.finish_node(node, &mut rx)), Ok(2));
+            assert_eq!(rx[..2], [0xAA, node as u8]);
+            taken.push(node);
+        }
+        taken.sort_unstable();
+        let mut want = started.clone();
+        want.sort_unstable();
+        assert_eq!(taken, want);
+        assert!(started.len() >= SLOTS);
+        assert_eq!(bus.held, [0; MAX_LANDINGS]);
+        assert_eq!((bus.counters.stray_frames, bus.counters.timeouts), (0, 0));
+    }
+
+    /// A reply longer than a cell (a scene repair) waits in a frame buffer and goes down
+    /// whole; while one does, one more may begin, so a broadcast always finds a buffer.
+    #[test]
+    fn a_reply_longer_than_a_cell_waits_in_a_frame_buffer() {
+        let clock = Jump(Cell::new(0));
+        let mut relays = Relays::new(&clock, vec![true]);
+        relays.waits = vec![0b1111];
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let bus = RelayedBus::new(relays, &mut *bufs, 0, 4).unwrap();
+        let mut bus = bus.with_timeout(&clock, 1_000_000).with_depth(4);
+        bus.poll();
+        bus.poll();
+        let long = REPLY_CELL + 100;
+        assert_eq!(start_ready(&mut bus, long), [0, 1]);
+        assert_eq!(bus.untaken_frames(), 2);
+        assert_eq!(bus.ready(), None, "nodes 2 and 3 wait for a frame buffer");
+        // The requests go down whole; the frames come back, freeing both buffers.
+        let mut rx = [0u8; MAX_MESSAGE];
+        for _ in 0..2 {
+            let node = block_on(bus.wait_ready());
+            assert_eq!(block_on(bus.finish_node(node, &mut rx)), Ok(2));
+        }
+        assert_eq!(bus.link.requests[0][..2], [1, 1]);
+        assert_eq!(bus.link.got[0][..2], [vec![0u8; long], vec![1u8; long]]);
+        assert_eq!(bus.untaken_frames(), FRAMES);
+        assert_eq!(start_ready(&mut bus, 2), [2, 3]);
+    }
+
+    /// The longest job hand-out fits a reply cell, so only scene repairs (and the root's
+    /// broadcasts) take a frame buffer.
+    #[test]
+    fn the_longest_job_hand_out_fits_a_reply_cell() {
+        use crate::cluster::wire::{encode, Job, Region, JOB_QUEUE};
+        let job = |region| {
+            Some(Job {
+                id: u32::MAX,
+                frame: u16::MAX,
+                region,
+            })
+        };
+        let widest = [
+            Region::Span {
+                start: u32::MAX,
+                len: u32::MAX,
+            },
+            Region::Rect {
+                x: u16::MAX,
+                y: u16::MAX,
+                w: u16::MAX,
+                h: u16::MAX,
+            },
+        ];
+        let mut buf = [0u8; MAX_MESSAGE];
+        for region in widest {
+            let msg = Down::Work {
+                jobs: [job(region); JOB_QUEUE],
+            };
+            let n = encode(u16::MAX, u16::MAX, &msg, &mut buf).unwrap();
+            assert_eq!(
+                n,
+                if matches!(region, Region::Span { .. }) {
+                    52
+                } else {
+                    56
+                }
+            );
+            assert!(n <= REPLY_CELL);
         }
     }
 
