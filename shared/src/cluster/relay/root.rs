@@ -500,6 +500,11 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     /// The earliest time-out of an exchange in flight, or of a broadcast waiting for the
     /// relays' reports.
     fn deadline(&self) -> Option<u64> {
+        self.deadline_after(0)
+    }
+
+    /// The earliest of those time-outs after `t`.
+    fn deadline_after(&self, t: u64) -> Option<u64> {
         if self.timeout_us == 0 {
             return None;
         }
@@ -511,6 +516,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 Stage::Answered { .. } => None,
             })
             .chain(self.cast_until)
+            .filter(|&d| d > t)
             .min()
     }
 
@@ -701,8 +707,9 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         }
         if self.free_landing().is_none() {
             // Every landing buffer holds node frames the root logic has not taken: nothing
-            // can come up until it does, or a time-out passes.
-            match self.deadline() {
+            // can come up until it does, or a time-out still to come passes (one passed
+            // already is the caller's to take: waiting for it again would spin).
+            match self.deadline_after(self.clock.now_us()) {
                 Some(t) => self.clock.at_us(t).await,
                 None => core::future::pending::<()>().await,
             }
@@ -860,6 +867,11 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 if self.on_relay(r).0 >= self.depth {
                     return Err(LinkError::Busy);
                 }
+                // A reply longer than a cell keeps its frame buffer: it may, while that
+                // leaves one for a broadcast besides the next to compose in.
+                if len > REPLY_CELL && self.untaken_frames() < 3 {
+                    return Err(LinkError::Busy);
+                }
                 self.waiting[r as usize] &= !b;
                 self.next_scan = (node - self.first + 1) % (self.relays * self.per_relay);
                 let deadline = self.clock.now_us().saturating_add(self.timeout_us);
@@ -888,17 +900,21 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 self.counters.most_in_flight = self.counters.most_in_flight.max(busy);
             }
             Transfer::Broadcast => {
+                // (Always true: an exchange leaves two.)
+                if self.untaken_frames() < 2 {
+                    return Err(LinkError::Busy);
+                }
                 self.cast = Some(Cast::Queued {
                     buf: self.compose,
                     len,
                 });
             }
         }
-        // The next frame goes into a buffer no exchange or broadcast holds (`ready` lets
-        // an exchange begin only while two are left besides the one composed in).
-        self.compose = (0..FRAMES as u8)
-            .find(|&b| !self.frame_taken(b))
-            .unwrap_or(0);
+        // The next frame goes into a buffer no exchange or broadcast holds (one is left:
+        // checked above).
+        if let Some(b) = (0..FRAMES as u8).find(|&b| !self.frame_taken(b)) {
+            self.compose = b;
+        }
         // Put it on the link now if the link is free.
         self.poll();
         Ok(())
@@ -917,8 +933,15 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                         // reports that in its batches); one that does not report within
                         // CAST_WAIT_US (a report lost to a bit error, a relay that stopped)
                         // is not waited for again until it reports. Without a time-out
-                        // (no clock) broadcasts are not held back.
-                        if self.timeout_us == 0 || (0..self.relays).all(|r| !self.lags(r)) {
+                        // (no clock) broadcasts are not held back; nor while every landing
+                        // holds node frames the root logic has not taken (no report can come
+                        // up before it takes them: a relay that lags drops the broadcast,
+                        // and its nodes have it repaired).
+                        let stalled = self.free_landing().is_none();
+                        if self.timeout_us == 0
+                            || stalled
+                            || (0..self.relays).all(|r| !self.lags(r))
+                        {
                             self.cast_until = None;
                             self.begin(LinkOp::Broadcast)?;
                             continue;
@@ -940,11 +963,17 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 }
             }
         }
-        let node = self
-            .arrived_in()
-            .or_else(|| self.slots.iter().flatten().map(|s| s.node).next())
-            .ok_or(LinkError::Aborted)?;
-        self.finish_node(node, rx).await
+        // The first exchange to end (not a chosen one: its frame may come after others
+        // that fill the landings).
+        loop {
+            if let Some(node) = self.arrived_in() {
+                return self.finish_node(node, rx).await;
+            }
+            if self.slots.iter().all(Option::is_none) {
+                return Err(LinkError::Aborted);
+            }
+            self.pump().await?;
+        }
     }
 
     fn in_flight(&self) -> u16 {
@@ -997,6 +1026,11 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                     self.counters.timeouts += 1;
                     return Ok(0);
                 }
+                // Every landing holds frames of other exchanges: they are to be taken
+                // first (`RootBus::arrived`), or this one could wait for ever.
+                Stage::Asked { .. } if self.dangling.is_none() && self.free_landing().is_none() => {
+                    return Err(LinkError::Busy)
+                }
                 Stage::Asked { .. } => self.pump().await?,
             }
         }
@@ -1044,16 +1078,27 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
 mod tests {
     use super::*;
     use core::cell::Cell;
+    use core::task::Poll;
     use embassy_futures::block_on;
 
     /// Time that jumps to whatever is waited for.
     struct Jump(Cell<u64>);
+
+    std::thread_local! {
+        /// Waits on a `Jump` clock (a loop that waits for a time already passed spins).
+        static WAITS: Cell<u32> = const { Cell::new(0) };
+    }
 
     impl RootClock for &Jump {
         fn now_us(&self) -> u64 {
             self.0.get()
         }
         async fn at_us(&self, t: u64) {
+            let waits = WAITS.with(|w| {
+                w.set(w.get() + 1);
+                w.get()
+            });
+            assert!(waits < 100_000, "waited for {t} µs {waits} times: a spin");
             self.0.set(self.0.get().max(t));
         }
     }
@@ -1079,6 +1124,9 @@ mod tests {
         lose_down: u32,
         /// Per relay and node index: the last request's bytes.
         got: Vec<[Vec<u8>; 4]>,
+        /// (relay, node, exchanges): the node's frame comes up only after that many more
+        /// exchanges with its relay.
+        late: Vec<(usize, NodeId, u32)>,
     }
 
     impl<'c> Relays<'c> {
@@ -1096,6 +1144,7 @@ mod tests {
                 requests: vec![[0; 4]; n],
                 lose_down: 0,
                 got: vec![Default::default(); n],
+                late: Vec::new(),
             }
         }
     }
@@ -1133,7 +1182,18 @@ mod tests {
                 return Ok(0);
             };
             let mut w = BatchWriter::new(rx).map_err(|_| LinkError::Aborted)?;
-            for node in self.owed[r as usize].drain(..) {
+            for l in self.late.iter_mut().filter(|l| l.0 == r as usize) {
+                l.2 = l.2.saturating_sub(1);
+            }
+            let held: Vec<NodeId> = (self.late.iter())
+                .filter(|l| l.0 == r as usize && l.2 > 0)
+                .map(|l| l.1)
+                .collect();
+            let owed = core::mem::take(&mut self.owed[r as usize]);
+            let (keep, go): (Vec<NodeId>, Vec<NodeId>) =
+                owed.into_iter().partition(|n| held.contains(n));
+            self.owed[r as usize] = keep;
+            for node in go {
                 self.done[r as usize].push(node);
                 w.push(Record {
                     kind: Kind::Frame,
@@ -1252,6 +1312,135 @@ mod tests {
         assert_eq!(bus.link.got[0][..2], [vec![0u8; long], vec![1u8; long]]);
         assert_eq!(bus.untaken_frames(), FRAMES);
         assert_eq!(start_ready(&mut bus, 2), [2, 3]);
+    }
+
+    /// One relay of 32 waiting nodes, `started` exchanges begun (node 0's frame late by
+    /// `late` exchanges), then every landing filled with frames not taken.
+    fn full_landings<'b, 'c>(
+        clock: &'c Jump,
+        bufs: &'b mut RelayedBuffers,
+        timeout_us: u64,
+        late: u32,
+    ) -> RelayedBus<'b, Relays<'c>, &'c Jump> {
+        let mut relays = Relays::new(clock, vec![true]);
+        relays.waits = vec![u32::MAX];
+        relays.late = vec![(0, 0, late)];
+        let bus = RelayedBus::new(relays, bufs, 0, 32).unwrap();
+        let mut bus = bus.with_timeout(clock, timeout_us).with_depth(SLOTS as u16);
+        for _ in 0..4 * MAX_LANDINGS {
+            bus.poll();
+            start_ready(&mut bus, 2);
+        }
+        assert!(
+            bus.held[..LANDINGS].iter().all(|&h| h > 0),
+            "{:?}",
+            bus.held
+        );
+        let node0 = bus.slots.iter().flatten().find(|s| s.node == 0);
+        assert!(late == 0 || matches!(node0.map(|s| s.stage), Some(Stage::Asked { .. })));
+        bus
+    }
+
+    /// With the landings full of other frames, the exchange asked first is not waited for
+    /// (its frame cannot come up before they are taken): `finish_node` says so (Busy, and
+    /// `run_bus` takes the others first), and `finish` takes the first frame back instead,
+    /// so nothing hangs and the late frame is not timed out.
+    #[test]
+    fn a_late_frame_is_not_waited_for_while_the_others_fill_the_landings() {
+        for timeout_us in [0, 1_000_000] {
+            let clock = Jump(Cell::new(0));
+            let mut bufs = Box::new(RelayedBuffers::new());
+            let mut bus = full_landings(&clock, &mut bufs, timeout_us, 40);
+            let mut rx = [0u8; MAX_MESSAGE];
+            let first = embassy_futures::poll_once(bus.finish_node(0, &mut rx));
+            assert_eq!(first, Poll::Ready(Err(LinkError::Busy)));
+            let mut taken = Vec::new();
+            while bus.flying() > 0 {
+                let got = {
+                    let mut fin = core::pin::pin!(bus.finish(&mut rx));
+                    (0..1000).find_map(|_| match embassy_futures::poll_once(fin.as_mut()) {
+                        Poll::Ready(r) => Some(r),
+                        Poll::Pending => None,
+                    })
+                };
+                assert_eq!(got, Some(Ok(2)), "timeout {timeout_us}: finish hung");
+                taken.push(rx[1]);
+            }
+            assert_eq!(taken.last(), Some(&0), "node 0's frame comes last");
+            assert_eq!(bus.counters.timeouts, 0);
+        }
+    }
+
+    /// A broadcast waits for the relays' reports that they passed the ones before on; with
+    /// every landing full none can come up, so it goes at once instead of waiting
+    /// CAST_WAIT_US and marking the relay deaf.
+    #[test]
+    fn a_broadcast_does_not_wait_for_reports_that_cannot_come_up() {
+        let clock = Jump(Cell::new(0));
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let mut bus = full_landings(&clock, &mut bufs, 1_000_000, 0);
+        let mut rx = [0u8; MAX_MESSAGE];
+        for k in 0..3u8 {
+            let t = clock.0.get();
+            bus.tx_bank()[..2].copy_from_slice(&[9, k]);
+            bus.start(Transfer::Broadcast, 2).unwrap();
+            assert_eq!(block_on(bus.finish(&mut rx)), Ok(0));
+            assert!(clock.0.get() - t <= 100, "broadcast {k} waited");
+        }
+        assert_eq!((bus.link.broadcasts, bus.deaf), (3, 0));
+    }
+
+    /// A time-out that passed while every landing was full is the caller's to take: the
+    /// bus waits for news without waiting for that time again and again (a spin).
+    #[test]
+    fn a_passed_time_out_is_not_waited_for_again() {
+        let clock = Jump(Cell::new(0));
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let mut bus = full_landings(&clock, &mut bufs, 1_000, 40);
+        clock.0.set(5_000);
+        WAITS.with(|w| w.set(0));
+        {
+            let mut news = core::pin::pin!(bus.wait_news());
+            for _ in 0..100 {
+                assert_eq!(embassy_futures::poll_once(news.as_mut()), Poll::Pending);
+            }
+        }
+        assert_eq!(WAITS.with(Cell::get), 0);
+        let mut rx = [0u8; MAX_MESSAGE];
+        assert_eq!(block_on(bus.finish_node(0, &mut rx)), Ok(0));
+        assert_eq!(bus.counters.timeouts, 1);
+    }
+
+    /// Replies longer than a cell never take the last two frame buffers, whoever begins
+    /// them (a middle relay begins the root's requests without asking `ready`): a third is
+    /// refused (the root asks again), short ones still go, a broadcast still finds a buffer
+    /// and the long replies waiting are intact.
+    #[test]
+    fn long_replies_never_take_the_last_frame_buffers() {
+        let clock = Jump(Cell::new(0));
+        let relays = Relays::new(&clock, vec![false, false, false]);
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let bus = RelayedBus::new(relays, &mut *bufs, 0, 4).unwrap();
+        let mut bus = bus.with_timeout(&clock, 1_000_000);
+        let long = REPLY_CELL + 10;
+        assert_eq!(bus.begin_exchange(0, &vec![1; long]), Ok(()));
+        assert_eq!(bus.begin_exchange(1, &vec![2; long]), Ok(()));
+        assert_eq!(bus.begin_exchange(4, &vec![3; long]), Err(LinkError::Busy));
+        assert_eq!(bus.begin_exchange(8, &[0xEE; 10]), Ok(()));
+        bus.tx_bank()[..2].copy_from_slice(&[0xBB, 0xBB]);
+        assert_eq!(bus.start(Transfer::Broadcast, 2), Ok(()));
+        for (node, byte) in [(0, 1u8), (1, 2)] {
+            let slot = bus.slots.iter().flatten().find(|s| s.node == node).unwrap();
+            let Stage::Asked {
+                reply: Reply::Frame(b),
+                ..
+            } = slot.stage
+            else {
+                panic!("node {node}: {:?}", slot.stage);
+            };
+            assert!(bus.frames[b as usize][..long].iter().all(|&x| x == byte));
+        }
+        assert_eq!(bus.slots.iter().flatten().count(), 3);
     }
 
     /// The longest job hand-out fits a reply cell, so only scene repairs (and the root's

@@ -2,7 +2,7 @@
 //! transfers (broadcasts and exchanges), overlapping them with double buffering.
 
 use super::*;
-use crate::cluster::link::{NodeId, RootBus, Transfer};
+use crate::cluster::link::{LinkError, NodeId, RootBus, Transfer};
 use crate::cluster::wire::{self, Down, MAX_MESSAGE, SCENE_CHUNK};
 use core::cell::RefCell;
 use embassy_futures::select::{select4, Either4};
@@ -408,7 +408,11 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
         if root.borrow().finished() {
             // Take the exchanges still in flight (each ends, or times out), then `Stop`.
             while let Some(node) = bus.arrived().or(bus.pending()) {
-                take_node(node, bus, &mut rx[..], clock, root, sink).await?;
+                match take_node(node, bus, &mut rx[..], clock, root, sink).await {
+                    // Others' frames came first and are to be taken before this one.
+                    Err(RootError::Link(LinkError::Busy)) if bus.arrived().is_some() => {}
+                    r => r?,
+                }
             }
             return stop(&mut st, &mut rx[..], bus, clock, root, sink).await;
         }
