@@ -2,9 +2,10 @@
 //! [`RelayCode::Firmware`]): a relay tree of one or two levels run by the code the boards
 //! run (`links_core::relay`), in virtual time.
 //!
-//! - **The root** (`rc-fw --features relay-root`): `run_bus` over
-//!   [`RelayedBus`]`::new(link, ..).with_timeout(clock, root_timeout_us(levels))` (up to
-//!   `links_core::relay::DEPTH` node exchanges in flight per child), on two links through
+//! - **The root** (`rc-fw --features relay-root`, over two levels `relay-root-mid`):
+//!   `run_bus` over [`RelayedBus`]`::new(link, ..).with_timeout(clock,
+//!   root_timeout_us(levels))` (up to `links_core::relay::DEPTH` node exchanges in flight per
+//!   leaf relay, `MID_DEPTH` per middle relay), on two links through
 //!   [`TwoLinks`] as the F407 drives them, where each `link` is the split master of an
 //!   emulated SPI bus of its own whose "nodes" are the root's children (the same
 //!   [`super::spi_bus`] emulation and board-profile timing as every bus), its CPU charged
@@ -12,9 +13,8 @@
 //! - **Two levels: each middle relay** (`rc-fw --features relay-mid`): `run_relay` between a
 //!   slave link on the root's bus and a [`RelayedBus`] over the split master of its own
 //!   bus, whose "nodes" are 4 leaf relays (its report to the root has bits for 32 nodes),
-//!   given up after `MID_RELAY_TIMEOUT_US`. Built only with the firmware's relay code:
-//!   no root build drives middle relays yet, so the board's default for two levels is the
-//!   model (`SimConfig::with_board_relays`).
+//!   given up after `MID_RELAY_TIMEOUT_US`. Built only with the firmware's relay code,
+//!   the F407's default for two levels (`SimConfig::with_board_relays`).
 //! - **Each leaf relay** (`rc-fw --features relay`): `run_relay` between a slave link on its
 //!   parent's bus (`SlaveTask` + `SlaveHandle`) and the split master of its own leaf bus,
 //!   its CPU charged by [`LinkCpu`].
