@@ -73,12 +73,29 @@ pub mod link {
     };
     /// As the root of a relay tree: node exchanges in flight per relay (`RelayedBus::
     /// with_depth`): a leaf relay's 2 (`relay::DEPTH`, one on its bus and one reply down),
-    /// a middle relay's 8 (`relay::MID_DEPTH`: 2 for each of its 4 leaf relays), as the
-    /// simulator's firmware relay tree keeps them.
+    /// a middle relay's 32 (`relay::MID_DEPTH`: one per node behind it, replies ahead), as
+    /// the simulator's firmware relay tree keeps them.
     pub const RELAY_DEPTH: u16 = if RELAY_LEVELS == 2 {
         links_core::relay::MID_DEPTH
     } else {
         links_core::relay::DEPTH
+    };
+    /// As the root of relays on two links: node exchanges in flight on each link (its
+    /// `RelayedBus`'s slot table): `relay::TWO_LINK_SLOTS`, or under two levels one for
+    /// every node behind the link's middle relays (`relay::TWO_LEVEL_SLOTS`).
+    pub const RELAY_SLOTS: usize = if RELAY_LEVELS == 2 {
+        links_core::relay::TWO_LEVEL_SLOTS
+    } else {
+        links_core::relay::TWO_LINK_SLOTS
+    };
+    /// As the root of two levels: how long a reply sent ahead of a node's line may wait at
+    /// its leaf relay besides the time-out (`RelayedBus::with_ahead`): the node's silence
+    /// bound (it renders a run meanwhile). 0 (none sent ahead) with one level: measured no
+    /// gain there (`docs/cluster.md`, "Replies held ahead").
+    pub const RELAY_AHEAD_US: u64 = if RELAY_LEVELS == 2 {
+        PROFILE.node_timeout_us
+    } else {
+        0
     };
     /// The NCs the root logic hands work to: those on its bus, or, as the root of a relay
     /// tree (`relay-root`), the nodes behind its relays.

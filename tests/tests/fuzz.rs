@@ -3056,6 +3056,7 @@ fn relay_session(
             down: &mut bufs.0,
             up: &mut bufs.1,
             node: &mut bufs.2,
+            ahead: &mut [],
         };
         let fut = relay::run_relay(&mut parent, &mut bus, buffers);
         let mut fut = pin!(fut);

@@ -85,6 +85,7 @@ fn relay(root_bus: SharedBus, r: usize, bus: SharedBus) -> Task<RelayReport> {
             down: leak([0u8; MAX_MESSAGE]),
             up: leak([0u8; MAX_MESSAGE]),
             node: leak([0u8; MAX_MESSAGE]),
+            ahead: &mut [],
         };
         let logic = run_relay(&mut parent, &mut front, buffers);
         let links = select(

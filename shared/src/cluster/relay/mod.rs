@@ -69,7 +69,8 @@ pub use batch::{
 pub use node::{run_relay, RelayBuffers, RelayReport};
 pub use root::{
     RelayedBuffers, RelayedBus, RelayedCounters, RelayedFrames, DEPTH, LANDINGS, MAX_LANDINGS,
-    MAX_RELAYS, MID_DEPTH, REPLY_CELL, SLOTS, TWO_LINK_LANDINGS, TWO_LINK_SLOTS,
+    MAX_RELAYS, MID_DEPTH, MID_SLOTS, REPLY_CELL, SLOTS, TWO_LEVEL_SLOTS, TWO_LINK_LANDINGS,
+    TWO_LINK_SLOTS,
 };
 pub use two::TwoLinks;
 

@@ -1,7 +1,7 @@
 //! The relay's logic: [`run_relay`], a node on its parent's link and the root of its bus.
 
 use super::batch::{parse, BatchWriter, Kind, Record, Relayed};
-use super::{bit, RelayError, MAX_RELAY_NODES};
+use super::{bit, RelayError, MAX_RELAY_NODES, REPLY_CELL};
 use crate::cluster::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
 use crate::cluster::wire::{self, Down, MAX_MESSAGE};
 use embassy_futures::select::{select, Either};
@@ -14,6 +14,11 @@ pub struct RelayBuffers<'m> {
     pub up: &'m mut [u8; MAX_MESSAGE],
     /// A node's frame from the exchange just clocked.
     pub node: &'m mut [u8; MAX_MESSAGE],
+    /// A leaf relay's cell per node of its bus for a reply the root sent ahead of the
+    /// node's line ([`super::RelayedBus::with_ahead`]): the node is clocked with it the
+    /// moment its line rises. Empty: no reply is held ahead (such requests are dropped, and
+    /// the root sends them again once the node waits).
+    pub ahead: &'m mut [[u8; REPLY_CELL]],
 }
 
 /// What a relay did.
@@ -30,6 +35,8 @@ pub struct RelayReport {
     pub stray_requests: u32,
     /// Parent frames that failed to decode (dropped).
     pub bad_frames: u32,
+    /// Of `routed`: node exchanges clocked with a reply held ahead, as the line rose.
+    pub ahead: u32,
 }
 
 /// Per-node progress, as bitmaps over the relay's bus (bit `i`: node `first + i`).
@@ -47,6 +54,10 @@ struct Nodes {
     /// A node frame clocked when the batch had no room left for it (its node and length,
     /// in the relay's `node` buffer): it opens the next batch.
     held: Option<(NodeId, u16)>,
+    /// A leaf relay's: a reply the root sent ahead of the node's line waits in its cell
+    /// (`ahead_len` bytes).
+    ahead: u32,
+    ahead_len: [u8; MAX_RELAY_NODES as usize],
 }
 
 /// Run a relay until the root's `Stop` has been passed on: forward the parent's broadcasts
@@ -71,7 +82,12 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
             most: MAX_RELAY_NODES as u32,
         });
     }
-    let RelayBuffers { down, up, node } = buf;
+    let RelayBuffers {
+        down,
+        up,
+        node,
+        ahead: cells,
+    } = buf;
     let mut up = BatchWriter::new(&mut up[..])?;
     let mut report = RelayReport::default();
     let mut nodes = Nodes::default();
@@ -84,13 +100,17 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         if overlapped {
             collect(bus, &mut nodes, &mut up, node, &mut report).await?;
         }
-        // 1. Nodes whose line is up and that are not being served wait to be asked.
+        // 1. A node with a reply held ahead is clocked as its line rises; the others whose
+        // line is up and that are not being served wait to be asked.
+        if nodes.ahead != 0 {
+            clock_ahead(bus, &mut nodes, cells, &mut up, node, &mut report).await?;
+        }
         let mut fresh = 0u32;
         let mut busy_line = false;
         for i in 0..count {
             if bus.line(first + i) {
                 let b = 1u32 << i;
-                if (nodes.waiting | nodes.flying | nodes.answered) & b == 0 {
+                if (nodes.waiting | nodes.flying | nodes.answered | nodes.ahead) & b == 0 {
                     fresh |= b;
                 } else {
                     busy_line = true;
@@ -168,7 +188,8 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
                 nodes.answered &= !nodes.in_post;
                 nodes.in_post = 0;
                 let frame = &down[..len.min(MAX_MESSAGE)];
-                serve(bus, frame, &mut nodes, &mut up, node, &mut report).await?;
+                let bufs = (&mut up, &mut *node, &mut *cells);
+                serve(bus, frame, &mut nodes, bufs, &mut report).await?;
             }
         }
     }
@@ -202,8 +223,11 @@ async fn serve<B: RootBus>(
     bus: &mut B,
     frame: &[u8],
     nodes: &mut Nodes,
-    up: &mut BatchWriter<'_>,
-    rx: &mut [u8; MAX_MESSAGE],
+    (up, rx, cells): (
+        &mut BatchWriter<'_>,
+        &mut [u8; MAX_MESSAGE],
+        &mut [[u8; REPLY_CELL]],
+    ),
     report: &mut RelayReport,
 ) -> Result<(), RelayError> {
     let (first, count) = bus.nodes();
@@ -226,8 +250,23 @@ async fn serve<B: RootBus>(
             continue;
         };
         // Records name the node by its index on this bus.
+        let overlapped = bus.in_flight() > 1;
         let b = match bit(0, count, node) {
             Some(b) if nodes.waiting & b != 0 => b,
+            // A reply sent ahead of the node's line: a middle relay begins the exchange
+            // (its leaf relay holds it), a leaf relay keeps it in the node's cell.
+            Some(b) if overlapped && (nodes.flying | nodes.answered) & b == 0 => b,
+            Some(b) if (nodes.answered | nodes.ahead) & b == 0 => {
+                match cells.get_mut(node as usize) {
+                    Some(cell) if data.len() <= REPLY_CELL => {
+                        cell[..data.len()].copy_from_slice(data);
+                        nodes.ahead_len[node as usize] = data.len() as u8;
+                        nodes.ahead |= b;
+                    }
+                    _ => report.stray_requests += 1,
+                }
+                continue;
+            }
             _ => {
                 report.stray_requests += 1;
                 continue;
@@ -238,7 +277,7 @@ async fn serve<B: RootBus>(
         if nodes.held.is_some() {
             continue;
         }
-        if bus.in_flight() > 1 {
+        if overlapped {
             // A middle relay: begin the exchange; its frame goes up when it comes back. A
             // bus with no room for it now leaves the node waiting (the root asks again).
             if bus.begin_exchange(first + node as NodeId, data).is_ok() {
@@ -252,8 +291,44 @@ async fn serve<B: RootBus>(
             .await?;
         queue_frame(up, nodes, node, &rx[..], got)?;
         nodes.waiting &= !b;
+        // (A reply held ahead for it is stale now.)
+        nodes.ahead &= !b;
         nodes.answered |= b;
         report.routed += 1;
+    }
+    Ok(())
+}
+
+/// A leaf relay: clock every node whose reply waits ahead in its cell and whose line is up,
+/// and queue its frame (while no frame is held for the next batch).
+async fn clock_ahead<B: RootBus>(
+    bus: &mut B,
+    nodes: &mut Nodes,
+    cells: &[[u8; REPLY_CELL]],
+    up: &mut BatchWriter<'_>,
+    rx: &mut [u8; MAX_MESSAGE],
+    report: &mut RelayReport,
+) -> Result<(), RelayError> {
+    let (first, count) = bus.nodes();
+    for i in 0..count.min(MAX_RELAY_NODES) {
+        let b = 1u32 << i;
+        if nodes.held.is_some() {
+            break;
+        }
+        if nodes.ahead & b == 0 || !bus.line(first + i) {
+            continue;
+        }
+        let len = nodes.ahead_len[i as usize] as usize;
+        let reply = cells
+            .get(i as usize)
+            .and_then(|c| c.get(..len))
+            .unwrap_or(&[]);
+        let got = bus.exchange(first + i, reply, &mut rx[..]).await?;
+        queue_frame(up, nodes, i, &rx[..], got)?;
+        nodes.ahead &= !b;
+        nodes.answered |= b;
+        report.routed += 1;
+        report.ahead += 1;
     }
     Ok(())
 }

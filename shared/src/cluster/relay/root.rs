@@ -16,20 +16,29 @@ use embassy_futures::select::{select, Either};
 pub const MAX_RELAYS: usize = 8;
 
 /// Most node exchanges a [`RelayedBus`] keeps in flight at once unless told otherwise
-/// ([`RelayedBus::with_slots`]; each holds a reply cell of [`RelayedBuffers`] until its
-/// reply is down and the node's frame has come back).
+/// ([`RelayedBus::with_slots`]; each holds a reply cell of [`RelayedBuffers`], or a frame
+/// buffer, until its reply is down and, unless it went ahead, the node's frame is back).
 pub const SLOTS: usize = 16;
 
-/// Node exchanges in flight on each link when the root drives its relays on two links
-/// ([`super::TwoLinks`], each link's buffers `RelayedFrames<TWO_LINK_SLOTS>`): four middle
-/// relays of a two-level tree at [`MID_DEPTH`] each (four leaf relays of a one-level tree
-/// use 8 of them, at [`DEPTH`]).
+/// Reply cells, and node exchanges in flight, on each link when the root drives its relays
+/// on two links ([`super::TwoLinks`], each link's buffers `RelayedFrames<TWO_LINK_SLOTS>`):
+/// four leaf relays of a one-level tree use 8 of them, at [`DEPTH`]. Under two levels the
+/// link keeps [`TWO_LEVEL_SLOTS`] exchanges, most of them ahead and holding no cell.
 pub const TWO_LINK_SLOTS: usize = 32;
 
 /// Node exchanges in flight per middle relay at the root of two levels (`rc-fw --features
-/// relay-root-mid`, and the simulator's): a middle relay's 32 nodes behind 4 leaf relays,
-/// 2 at a time on each leaf bus, so the root keeps each leaf relay's 2 going.
-pub const MID_DEPTH: u16 = 8;
+/// relay-root-mid`, and the simulator's): one for each of a middle relay's 32 nodes, since
+/// their replies go ahead ([`RelayedBus::with_ahead`]) and wait at the leaf relays while
+/// the nodes render (8 before replies went ahead: 2 on each of its 4 leaf buses).
+pub const MID_DEPTH: u16 = MAX_RELAY_NODES;
+
+/// Node exchanges in flight on each of the two links of the root of two levels: one for
+/// every node behind its 4 middle relays ([`MID_DEPTH`] each).
+pub const TWO_LEVEL_SLOTS: usize = MAX_RELAYS / 2 * MAX_RELAY_NODES as usize;
+
+/// Node exchanges in flight at a middle relay ([`RelayedBus`] over its leaf relays, with
+/// replies ahead): one for each of the nodes behind it.
+pub const MID_SLOTS: usize = MAX_RELAY_NODES as usize;
 
 /// Bytes of a reply kept in its exchange's own cell: the longest job hand-out (`Down::Work`
 /// with its two jobs, envelope and CRC: at most 56 bytes, a test checks it) fits; a longer reply (a
@@ -78,6 +87,11 @@ pub struct RelayedCounters {
     pub timeouts: u32,
     /// The most node exchanges that were in flight at once.
     pub most_in_flight: u32,
+    /// Node exchanges begun ahead of the node's line ([`RelayedBus::with_ahead`]).
+    pub ahead: u32,
+    /// Of those, the ones whose reply never reached the relay: ended empty (the node,
+    /// waiting there, was composed a new one).
+    pub lost_ahead: u32,
 }
 
 /// The buffers of a [`RelayedBus`] with up to `CELLS` node exchanges in flight (the
@@ -120,10 +134,14 @@ impl<const CELLS: usize, const LANDS: usize> Default for RelayedFrames<CELLS, LA
 /// Where an exchange's reply waits to go down.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Reply {
-    /// In its slot's cell.
-    Cell,
+    /// In cell `n`.
+    Cell(u8),
     /// In frame buffer `n` (longer than a cell).
     Frame(u8),
+    /// Down and let go: a reply sent ahead of its node's line waits at the relay, and its
+    /// buffer here serves the next (lost on the way, the exchange ends empty and the root
+    /// logic composes the node a new one).
+    Gone,
 }
 
 /// Where a node exchange in flight is.
@@ -132,15 +150,20 @@ enum Stage {
     /// The reply (`len` bytes) waits to go down (`sent_in` None), or went down in the
     /// relay's exchange number `sent_in` ([`RelayedBus`]'s `gathers`); it goes down again
     /// when a batch of a later exchange still reports the node waiting (the relay never
-    /// got it). Given up at `deadline` (µs, with a time-out).
+    /// got it). Given up at `deadline` (µs, with a time-out). `ahead`: begun before the
+    /// node's line rose ([`RelayedBus::with_ahead`]).
     Asked {
         reply: Reply,
         len: u16,
         sent_in: Option<u16>,
         deadline: u64,
+        ahead: bool,
     },
     /// The node's frame is `len` bytes at `at` in landing buffer `landing`.
     Answered { landing: u8, at: u16, len: u16 },
+    /// A reply sent ahead never reached the relay (its node waits there unasked): the
+    /// exchange ends empty.
+    Lost,
 }
 
 /// A node exchange in flight: the node, its stage.
@@ -200,11 +223,15 @@ pub struct RelayedBus<'m, L, C = NoClock, const S: usize = SLOTS> {
     held: [u16; MAX_LANDINGS],
     /// The landing buffer the relay exchange in flight lands in.
     landing: u8,
-    /// Node exchanges in flight at most, over all relays (the cells', at most `S`).
+    /// Node exchanges in flight at most, over all relays (`S`; each holds a cell, or a
+    /// frame buffer, until its reply is down and, unless it went ahead, its frame up).
     slot_count: u16,
     /// How long a node exchange may wait for its frame (µs; 0: for ever), by `clock`.
     clock: C,
     timeout_us: u64,
+    /// How long an exchange begun ahead of its node's line may wait (µs; 0: none begun
+    /// ahead, [`RelayedBus::with_ahead`]).
+    ahead_us: u64,
     first: NodeId,
     per_relay: u16,
     relays: u16,
@@ -255,7 +282,7 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
                 "a relayed bus keeps 2 to MAX_LANDINGS relay batches"
             );
         };
-        let slot_count = CELLS.min(SLOTS) as u16;
+        let slot_count = SLOTS as u16;
         let relays = link.nodes().1;
         let total = relays as u32 * per_relay as u32;
         if relays as usize > MAX_RELAYS || per_relay > MAX_RELAY_NODES {
@@ -285,6 +312,7 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
             slot_count,
             clock: NoClock,
             timeout_us: 0,
+            ahead_us: 0,
             first,
             per_relay,
             relays,
@@ -335,7 +363,7 @@ impl<'m, L, C, const S: usize> RelayedBus<'m, L, C, S> {
         timeout_us: u64,
         slots: [Option<Slot>; T],
     ) -> RelayedBus<'m, L, C2, T> {
-        let slot_count = (self.cells.len() as u16).min(T as u16);
+        let slot_count = T as u16;
         RelayedBus {
             link: self.link,
             cells: self.cells,
@@ -346,6 +374,7 @@ impl<'m, L, C, const S: usize> RelayedBus<'m, L, C, S> {
             slot_count,
             clock,
             timeout_us,
+            ahead_us: self.ahead_us,
             first: self.first,
             per_relay: self.per_relay,
             relays: self.relays,
@@ -379,6 +408,31 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         self
     }
 
+    /// Let the root logic begin an exchange with a node whose line is not up
+    /// ([`RootBus::ask_ahead`]): its reply goes down to its relay, which clocks the node the
+    /// moment its line rises. Such an exchange waits up to `ahead_us` for the node's frame
+    /// (a node renders a run meanwhile) besides the time-out. The relays below must hold
+    /// replies ahead (leaf relays: [`super::RelayBuffers`]' `ahead` cells).
+    pub fn with_ahead(mut self, ahead_us: u64) -> Self {
+        self.ahead_us = ahead_us;
+        self
+    }
+
+    /// Whether an exchange with `node` may begin now whether or not it waits: none in
+    /// flight with it, its relay below `depth`, a slot free, frame buffers enough for a
+    /// reply longer than a cell while one is left for a broadcast (the one composed in,
+    /// and two more), no broadcast queued.
+    fn may_begin(&self, node: NodeId) -> bool {
+        self.cast.is_none()
+            && self.free_slot().is_some()
+            && self.free_cell().is_some()
+            && self.untaken_frames() >= 3
+            && self.slot_of(node).is_none()
+            && self
+                .place(node)
+                .is_some_and(|(r, _)| self.on_relay(r).0 < self.depth)
+    }
+
     /// Relay index and bit of `node`.
     fn place(&self, node: NodeId) -> Option<(u16, u32)> {
         let k = node.checked_sub(self.first)?;
@@ -388,6 +442,15 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
 
     fn relay_of(&self, node: NodeId) -> Option<u16> {
         self.place(node).map(|(r, _)| r)
+    }
+
+    /// A reply cell no exchange holds.
+    fn free_cell(&self) -> Option<u8> {
+        (0..self.cells.len().min(u8::MAX as usize) as u8).find(|&c| {
+            !self.slots.iter().flatten().any(
+                |s| matches!(s.stage, Stage::Asked { reply: Reply::Cell(d), .. } if d == c),
+            )
+        })
     }
 
     /// A slot no exchange holds, among the buffers' `slot_count`.
@@ -461,6 +524,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     /// while one is left for a broadcast (the one composed in, and two more).
     fn ready_in(&self) -> Option<NodeId> {
         self.free_slot()?;
+        self.free_cell()?;
         if self.untaken_frames() < 3 {
             return None;
         }
@@ -482,7 +546,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     fn ended(&self) -> impl Iterator<Item = &Slot> {
         let now = (self.timeout_us > 0).then(|| self.clock.now_us());
         self.slots.iter().flatten().filter(move |s| match s.stage {
-            Stage::Answered { .. } => true,
+            Stage::Answered { .. } | Stage::Lost => true,
             Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
         })
     }
@@ -513,7 +577,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             .flatten()
             .filter_map(|s| match s.stage {
                 Stage::Asked { deadline, .. } => Some(deadline),
-                Stage::Answered { .. } => None,
+                Stage::Answered { .. } | Stage::Lost => None,
             })
             .chain(self.cast_until)
             .filter(|&d| d > t)
@@ -622,11 +686,15 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                         continue;
                     }
                     let data = match reply {
-                        Reply::Cell => self.cells.get(i).and_then(|c| c.get(..len as usize)),
+                        Reply::Cell(c) => self
+                            .cells
+                            .get(c as usize)
+                            .and_then(|c| c.get(..len as usize)),
                         Reply::Frame(b) => self
                             .frames
                             .get(b as usize)
                             .and_then(|f| f.get(..len as usize)),
+                        Reply::Gone => None,
                     }
                     .unwrap_or(&[]);
                     if w.push(Record {
@@ -652,12 +720,22 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 };
                 for (s, c) in self.slots.iter_mut().zip(carried) {
                     if let Some(Slot {
-                        stage: Stage::Asked { sent_in, .. },
+                        stage:
+                            Stage::Asked {
+                                sent_in,
+                                reply,
+                                ahead,
+                                ..
+                            },
                         ..
                     }) = s
                     {
                         if c {
                             *sent_in = Some(number);
+                            // A reply ahead waits at the relay: its buffer is let go.
+                            if *ahead {
+                                *reply = Reply::Gone;
+                            }
                         }
                     }
                 }
@@ -808,9 +886,15 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             if s.node < base || local >= per || local >= MAX_RELAY_NODES {
                 continue;
             }
-            if let Stage::Asked { sent_in, .. } = &mut s.stage {
+            if let Stage::Asked { sent_in, reply, .. } = &mut s.stage {
                 if sent_in.is_some_and(|k| k != number) && waiting & (1u32 << local) != 0 {
-                    *sent_in = None;
+                    if *reply == Reply::Gone {
+                        // A reply ahead, let go: the exchange ends empty; the node, waiting,
+                        // is composed a new one.
+                        s.stage = Stage::Lost;
+                    } else {
+                        *sent_in = None;
+                    }
                 }
             }
         }
@@ -843,6 +927,10 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
             .is_some_and(|(r, b)| self.waiting[r as usize] & b != 0)
     }
 
+    fn ask_ahead(&self, node: NodeId) -> bool {
+        self.ahead_us > 0 && self.may_begin(node)
+    }
+
     fn tx_bank(&mut self) -> &mut [u8] {
         &mut self.frames[self.compose as usize][..MAX_ROUTED]
     }
@@ -872,18 +960,27 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 if len > REPLY_CELL && self.untaken_frames() < 3 {
                     return Err(LinkError::Busy);
                 }
+                let cell = self.free_cell().filter(|_| len <= REPLY_CELL);
+                if len <= REPLY_CELL && cell.is_none() {
+                    return Err(LinkError::Busy);
+                }
+                // Begun ahead of the node's line: it may wait while the node renders.
+                let ahead = self.ahead_us > 0 && self.waiting[r as usize] & b == 0;
                 self.waiting[r as usize] &= !b;
                 self.next_scan = (node - self.first + 1) % (self.relays * self.per_relay);
-                let deadline = self.clock.now_us().saturating_add(self.timeout_us);
+                let wait = self.timeout_us + if ahead { self.ahead_us } else { 0 };
+                let deadline = self.clock.now_us().saturating_add(wait);
+                self.counters.ahead += u32::from(ahead);
                 // A reply that fits its cell moves there; a longer one keeps its buffer.
                 let composed = self
                     .frames
                     .get(self.compose as usize)
                     .and_then(|f| f.get(..len));
-                let reply = match (composed, self.cells.get_mut(i)) {
-                    (Some(src), Some(cell)) if len <= REPLY_CELL => {
+                let into = cell.and_then(|c| Some((c, self.cells.get_mut(c as usize)?)));
+                let reply = match (composed, into) {
+                    (Some(src), Some((c, cell))) => {
                         cell[..len].copy_from_slice(src);
-                        Reply::Cell
+                        Reply::Cell(c)
                     }
                     _ => Reply::Frame(self.compose),
                 };
@@ -894,6 +991,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                         len: len as u16,
                         sent_in: None,
                         deadline,
+                        ahead,
                     },
                 });
                 let busy = self.slots.iter().flatten().count() as u32;
@@ -1018,6 +1116,11 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                         .ok_or(LinkError::Aborted)?;
                     dst.copy_from_slice(src);
                     return Ok(n);
+                }
+                Stage::Lost => {
+                    self.slots[i] = None;
+                    self.counters.lost_ahead += 1;
+                    return Ok(0);
                 }
                 Stage::Asked { deadline, .. }
                     if self.timeout_us > 0 && self.clock.now_us() >= deadline =>

@@ -140,6 +140,8 @@ impl BusState {
     /// Compose the next transfer into `tx`: the reply to `ready` (its ready line is up: the
     /// node is alive), else the roll call `wake`, else the next piece of the scene; returns
     /// what it is and its length.
+    /// `ahead`: the reply to `ready` goes ahead of its line ([`RootState::will_post`]).
+    #[allow(clippy::too_many_arguments)]
     fn compose<C: RootClock, S: SceneSource + ?Sized>(
         &mut self,
         ready: Option<NodeId>,
@@ -148,12 +150,13 @@ impl BusState {
         clock: &C,
         root: &RefCell<RootState>,
         scenes: &S,
+        ahead: bool,
     ) -> Result<(Sent, usize), RootError> {
         Ok(match (ready, wake) {
             (Some(node), _) => {
                 let mut r = root.borrow_mut();
                 r.heard(node, clock.now_us());
-                (Sent::Exchange(node), r.reply(node, scenes, tx))
+                (Sent::Exchange(node), r.reply(node, scenes, tx, ahead))
             }
             (None, Some(frame)) => (
                 Sent::Broadcast,
@@ -336,7 +339,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                 continue;
             }
         }
-        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes)?;
+        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes, false)?;
         let crc_bytes = root.borrow_mut().take_crc_work();
         if crc_bytes > 0 {
             clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;
@@ -416,13 +419,19 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
             }
             return stop(&mut st, &mut rx[..], bus, clock, root, sink).await;
         }
-        // 1. A node's frame came back: take it.
+        // 1. A node's frame came back: take it. A node that will post again (it holds
+        // jobs) has its next reply composed now, where the bus holds replies ahead of a
+        // node's line ([`RootBus::ask_ahead`]).
+        let mut ahead = None;
         if let Some(node) = bus.arrived() {
             take_node(node, bus, &mut rx[..], clock, root, sink).await?;
-            continue;
+            if !(bus.ask_ahead(node) && root.borrow_mut().will_post(node)) {
+                continue;
+            }
+            ahead = Some(node);
         }
         // 2. Choose the next transfer and compose it.
-        let ready = bus.ready();
+        let ready = ahead.or_else(|| bus.ready());
         let mut wake: Option<u16> = None;
         if ready.is_none() {
             let (can_send, sent);
@@ -438,7 +447,8 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
                 continue;
             }
         }
-        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes)?;
+        let tx = bus.tx_bank();
+        let (next, n) = st.compose(ready, wake, tx, clock, root, scenes, ahead.is_some())?;
         let crc_bytes = root.borrow_mut().take_crc_work();
         if crc_bytes > 0 {
             clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;
