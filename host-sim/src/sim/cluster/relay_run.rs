@@ -419,6 +419,7 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
             // each; MID_DEPTH per middle relay under two levels, DEPTH per leaf relay).
             let second_first = link.links.star.borrow().bus_nodes(1).0.saturating_mul(per);
             let (depth, ahead_us) = match link.mid {
+                Some(_) if std::env::var("DBG_ROOT").is_ok() => (8, 0),
                 Some(_) => (MID_DEPTH, ahead_us),
                 None => (DEPTH, 0),
             };
@@ -518,15 +519,15 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                 let out = on_slave_link(&root_wire, m, slots, &mut banks, async move |shared| {
                     let mut parent = shared.handle();
                     on_master_bus(&mid_wire, m as usize, end, async move |bus| {
-                        let mut frames = Box::new(RelayedBuffers::new());
+                        let mut frames = Box::new(RelayedFrames::<MID_SLOTS>::new());
                         let mut bufs = Box::new([[0u8; MAX_MESSAGE]; 3]);
                         let [down, up, node] = &mut *bufs;
                         // An exchange in flight for every node behind it, replies ahead.
                         let mut leaves = RelayedBus::new(bus, &mut *frames, 0, per_leaf)?
                             .with_slots::<MID_SLOTS>()
                             .with_timeout(timeout_clock, MID_RELAY_TIMEOUT_US)
-                            .with_ahead(ahead_us)
-                            .with_depth(per_leaf);
+                            .with_ahead(if std::env::var("DBG_MIDAHEAD").is_ok() { 0 } else { ahead_us })
+                            .with_depth(if std::env::var("DBG_MIDDEPTH").is_ok() { DEPTH } else { per_leaf });
                         let buffers = RelayBuffers {
                             down,
                             up,
@@ -555,5 +556,7 @@ fn add_counters(a: &mut RelayedCounters, b: &RelayedCounters) {
     a.stray_frames += b.stray_frames;
     a.timeouts += b.timeouts;
     a.most_in_flight = a.most_in_flight.max(b.most_in_flight);
+    a.ahead += b.ahead;
+    a.lost_ahead += b.lost_ahead;
 }
 

@@ -37,6 +37,10 @@ pub struct RelayReport {
     pub bad_frames: u32,
     /// Of `routed`: node exchanges clocked with a reply held ahead, as the line rose.
     pub ahead: u32,
+    /// Replies sent ahead that found no room (a middle relay's bus had none in flight to
+    /// spare; a leaf relay has no cell for it, or it is longer than one): dropped, the
+    /// exchange ends empty at the root once the node waits.
+    pub dropped_ahead: u32,
 }
 
 /// Per-node progress, as bitmaps over the relay's bus (bit `i`: node `first + i`).
@@ -240,30 +244,33 @@ async fn serve<B: RootBus>(
         }
     };
     for r in records {
-        let Ok(Record {
-            kind: Kind::Request,
-            node,
-            data,
-        }) = r
-        else {
-            report.bad_frames += 1;
-            continue;
+        let (ahead, node, data) = match r {
+            Ok(Record {
+                kind: kind @ (Kind::Request | Kind::Ahead),
+                node,
+                data,
+            }) => (kind == Kind::Ahead, node, data),
+            _ => {
+                report.bad_frames += 1;
+                continue;
+            }
         };
         // Records name the node by its index on this bus.
         let overlapped = bus.in_flight() > 1;
         let b = match bit(0, count, node) {
             Some(b) if nodes.waiting & b != 0 => b,
-            // A reply sent ahead of the node's line: a middle relay begins the exchange
-            // (its leaf relay holds it), a leaf relay keeps it in the node's cell.
-            Some(b) if overlapped && (nodes.flying | nodes.answered) & b == 0 => b,
-            Some(b) if (nodes.answered | nodes.ahead) & b == 0 => {
+            // A reply sent ahead of the node's line (only these: a request sent again may
+            // come after its node was served): a middle relay begins the exchange (its
+            // leaf relay holds it), a leaf relay keeps it in the node's cell.
+            Some(b) if ahead && overlapped && (nodes.flying | nodes.answered) & b == 0 => b,
+            Some(b) if ahead && !overlapped && (nodes.answered | nodes.ahead) & b == 0 => {
                 match cells.get_mut(node as usize) {
                     Some(cell) if data.len() <= REPLY_CELL => {
                         cell[..data.len()].copy_from_slice(data);
                         nodes.ahead_len[node as usize] = data.len() as u8;
                         nodes.ahead |= b;
                     }
-                    _ => report.stray_requests += 1,
+                    _ => report.dropped_ahead += 1,
                 }
                 continue;
             }
@@ -279,10 +286,13 @@ async fn serve<B: RootBus>(
         }
         if overlapped {
             // A middle relay: begin the exchange; its frame goes up when it comes back. A
-            // bus with no room for it now leaves the node waiting (the root asks again).
+            // bus with no room for it now leaves the node waiting (the root asks again; a
+            // reply ahead is dropped: the root asks anew once the node waits).
             if bus.begin_exchange(first + node as NodeId, data).is_ok() {
                 nodes.waiting &= !b;
                 nodes.flying |= b;
+            } else if ahead {
+                report.dropped_ahead += 1;
             }
             continue;
         }

@@ -150,13 +150,12 @@ enum Stage {
     /// The reply (`len` bytes) waits to go down (`sent_in` None), or went down in the
     /// relay's exchange number `sent_in` ([`RelayedBus`]'s `gathers`); it goes down again
     /// when a batch of a later exchange still reports the node waiting (the relay never
-    /// got it). Given up at `deadline` (µs, with a time-out). `ahead`: begun before the
-    /// node's line rose ([`RelayedBus::with_ahead`]).
+    /// got it). Given up at its slot's `deadline` (with a time-out). `ahead`: begun before
+    /// the node's line rose ([`RelayedBus::with_ahead`]).
     Asked {
         reply: Reply,
         len: u16,
         sent_in: Option<u16>,
-        deadline: u64,
         ahead: bool,
     },
     /// The node's frame is `len` bytes at `at` in landing buffer `landing`.
@@ -166,12 +165,16 @@ enum Stage {
     Lost,
 }
 
-/// A node exchange in flight: the node, its stage.
+/// A node exchange in flight: the node, its stage, when it is given up (µs, with a
+/// time-out; beside the stage, not in it, so a slot takes 24 bytes, not 32).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Slot {
+    deadline: u64,
     node: NodeId,
     stage: Stage,
 }
+
+const _: () = assert!(core::mem::size_of::<Option<Slot>>() <= 24);
 
 /// An operation on the root's link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -547,7 +550,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         let now = (self.timeout_us > 0).then(|| self.clock.now_us());
         self.slots.iter().flatten().filter(move |s| match s.stage {
             Stage::Answered { .. } | Stage::Lost => true,
-            Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
+            Stage::Asked { .. } => now.is_some_and(|t| t >= s.deadline),
         })
     }
 
@@ -576,7 +579,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             .iter()
             .flatten()
             .filter_map(|s| match s.stage {
-                Stage::Asked { deadline, .. } => Some(deadline),
+                Stage::Asked { .. } => Some(s.deadline),
                 Stage::Answered { .. } | Stage::Lost => None,
             })
             .chain(self.cast_until)
@@ -675,8 +678,9 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                                 reply,
                                 len,
                                 sent_in: None,
-                                ..
+                                ahead,
                             },
+                        ..
                     }) = *s
                     else {
                         continue;
@@ -698,7 +702,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                     }
                     .unwrap_or(&[]);
                     if w.push(Record {
-                        kind: Kind::Request,
+                        kind: if ahead { Kind::Ahead } else { Kind::Request },
                         node: local,
                         data,
                     })
@@ -990,9 +994,9 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                         reply,
                         len: len as u16,
                         sent_in: None,
-                        deadline,
                         ahead,
                     },
+                    deadline,
                 });
                 let busy = self.slots.iter().flatten().count() as u32;
                 self.counters.most_in_flight = self.counters.most_in_flight.max(busy);
@@ -1122,8 +1126,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                     self.counters.lost_ahead += 1;
                     return Ok(0);
                 }
-                Stage::Asked { deadline, .. }
-                    if self.timeout_us > 0 && self.clock.now_us() >= deadline =>
+                Stage::Asked { .. }
+                    if self.timeout_us > 0 && self.clock.now_us() >= slot.deadline =>
                 {
                     self.slots[i] = None;
                     self.counters.timeouts += 1;
@@ -1666,5 +1670,63 @@ mod tests {
             assert_eq!(bus.link().requests[0][..2], expect, "lost {lost}");
             assert_eq!(bus.counters.timeouts, 0);
         }
+    }
+
+    /// A reply sent ahead of its node's line goes down once and lets its cell go (one cell
+    /// serves any number of them); it waits at the relay past the time-out, up to the
+    /// time ahead besides; one that never reached the relay (the relay then reports its
+    /// node waiting) ends empty, and the node, waiting, is asked anew.
+    #[test]
+    fn a_reply_ahead_lets_its_cell_go_and_one_lost_ends_empty() {
+        let clock = Jump(Cell::new(0));
+        let link = Relays::new(&clock, vec![true]);
+        let mut bufs = Box::new(RelayedFrames::<1>::new());
+        let mut bus = RelayedBus::new(link, &mut bufs, 0, 4)
+            .unwrap()
+            .with_timeout(&clock, 1_000)
+            .with_depth(4);
+        let mut rx = [0u8; MAX_MESSAGE];
+        // Without `with_ahead`, nothing begins before a node's line.
+        assert!(!bus.ask_ahead(0));
+        let mut bus = bus.with_ahead(10_000);
+        assert!(bus.ask_ahead(0));
+        // Node 0's frame will come up only some exchanges after its reply went down.
+        bus.link.late.push((0, 0, 30));
+        bus.tx_bank()[..3].copy_from_slice(&[7, 0, 0]);
+        assert_eq!(bus.start(Transfer::Exchange(0), 3), Ok(()));
+        // It went on the link at once (the link was free): the one cell is free again.
+        assert_eq!(bus.dangling, Some(LinkOp::Gather(0)));
+        assert!(bus.ask_ahead(1), "the reply is down: its cell is free");
+        block_on(bus.settle()).unwrap();
+        // Node 1's reply ahead is lost on the way, and node 1 then waits at the relay.
+        bus.link.lose_down = 1;
+        bus.tx_bank()[..3].copy_from_slice(&[7, 1, 1]);
+        assert_eq!(bus.start(Transfer::Exchange(1), 3), Ok(()));
+        block_on(bus.settle()).unwrap();
+        assert_eq!(bus.link().requests[0][..2], [1, 1]);
+        bus.link.waits[0] = 0b10;
+        // The exchanges go on (the link is asked again): node 1's ends empty, node 0's
+        // frame comes up though its time-out (1 ms) has passed.
+        let mut ended = Vec::new();
+        while ended.len() < 2 {
+            let n = block_on(bus.wait_ready());
+            if bus.arrived() == Some(n) {
+                let got = block_on(bus.finish_node(n, &mut rx)).unwrap();
+                ended.push((n, got));
+            }
+        }
+        ended.sort();
+        assert_eq!(ended, [(0, 2), (1, 0)]);
+        assert!(clock.0.get() > 1_000, "node 0 was waited for past the time-out");
+        assert_eq!(bus.counters.ahead, 2);
+        assert_eq!(bus.counters.lost_ahead, 1);
+        assert_eq!(bus.counters.timeouts, 0);
+        // Node 1, waiting, is the bus's to ask now, with its line: not ahead.
+        assert_eq!(bus.ready(), Some(1));
+        bus.tx_bank()[..3].copy_from_slice(&[7, 1, 2]);
+        assert_eq!(bus.start(Transfer::Exchange(1), 3), Ok(()));
+        assert_eq!(block_on(bus.finish_node(1, &mut rx)), Ok(2));
+        assert_eq!(bus.counters.ahead, 2);
+        assert_eq!(bus.link().got[0][1], [7, 1, 2]);
     }
 }

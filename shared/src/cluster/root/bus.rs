@@ -140,8 +140,6 @@ impl BusState {
     /// Compose the next transfer into `tx`: the reply to `ready` (its ready line is up: the
     /// node is alive), else the roll call `wake`, else the next piece of the scene; returns
     /// what it is and its length.
-    /// `ahead`: the reply to `ready` goes ahead of its line ([`RootState::will_post`]).
-    #[allow(clippy::too_many_arguments)]
     fn compose<C: RootClock, S: SceneSource + ?Sized>(
         &mut self,
         ready: Option<NodeId>,
@@ -150,13 +148,12 @@ impl BusState {
         clock: &C,
         root: &RefCell<RootState>,
         scenes: &S,
-        ahead: bool,
     ) -> Result<(Sent, usize), RootError> {
         Ok(match (ready, wake) {
             (Some(node), _) => {
                 let mut r = root.borrow_mut();
                 r.heard(node, clock.now_us());
-                (Sent::Exchange(node), r.reply(node, scenes, tx, ahead))
+                (Sent::Exchange(node), r.reply(node, scenes, tx))
             }
             (None, Some(frame)) => (
                 Sent::Broadcast,
@@ -339,7 +336,7 @@ pub async fn run_bus<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pixel
                 continue;
             }
         }
-        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes, false)?;
+        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes)?;
         let crc_bytes = root.borrow_mut().take_crc_work();
         if crc_bytes > 0 {
             clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;
@@ -447,8 +444,7 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
                 continue;
             }
         }
-        let tx = bus.tx_bank();
-        let (next, n) = st.compose(ready, wake, tx, clock, root, scenes, ahead.is_some())?;
+        let (next, n) = st.compose(ready, wake, bus.tx_bank(), clock, root, scenes)?;
         let crc_bytes = root.borrow_mut().take_crc_work();
         if crc_bytes > 0 {
             clock.worked(RcWork::Checksum { bytes: crc_bytes }).await;

@@ -8,14 +8,11 @@ use crate::cluster::wire::{self, Down, SceneState, Up, SCENE_CHUNK};
 
 impl RootState {
     /// Compose the RC's half of an exchange with `node` into `tx`; returns its length.
-    /// `ahead`: composed ahead of the node's line, its jobs topped up already
-    /// ([`RootState::will_post`]).
     pub(super) fn reply<S: SceneSource + ?Sized>(
         &mut self,
         node: NodeId,
         scenes: &S,
         tx: &mut [u8],
-        ahead: bool,
     ) -> usize {
         if node >= self.cfg.nodes {
             return 0;
@@ -109,9 +106,7 @@ impl RootState {
             // A node that missed the Stop broadcast learns it here.
             return wire::encode(seq, ack, &Down::Stop, tx).unwrap_or(0);
         }
-        if !ahead {
-            self.assign(node);
-        }
+        self.assign(node);
         let jobs = self.nodes[node as usize].jobs;
         wire::encode(seq, ack, &Down::Work { jobs }, tx).unwrap_or(0)
     }

@@ -6,12 +6,6 @@ use crate::cluster::link::NodeId;
 use crate::cluster::sched::Scheduler;
 use crate::cluster::wire::{Job, Region, JOB_QUEUE};
 
-/// A reply composed ahead queues a second job for a node only while more than this many
-/// times as many jobs as nodes remain ([`RootState::will_post`]; 256 nodes, photo1, steady
-/// state / single frame: 1: 237.06x / 136.97x, 2: 235.43x / 150.60x, 4: 223.71x /
-/// 167.60x, never: 223.78x / 167.83x).
-pub const AHEAD_PREFETCH: u32 = 2;
-
 impl RootState {
     /// A job held by a dead node, as (node, queue index), oldest frame first.
     pub(super) fn orphan(&self) -> Option<(usize, usize)> {
@@ -104,20 +98,14 @@ impl RootState {
 
     /// Whether `node` will post again without being asked, for a reply composed ahead of
     /// its line ([`crate::cluster::link::RootBus::ask_ahead`]): it holds jobs once its list
-    /// is topped up as for any reply, except that a node still holding a job is queued a
-    /// second only while more than [`AHEAD_PREFETCH`] times as many jobs as nodes remain
-    /// (a reply ahead waits while the node renders a run, so its job is committed a run
-    /// early: near the end of a frame that idles others; `docs/cluster.md`, "Replies held
-    /// ahead").
+    /// is topped up, as composing any reply does. (Topping up a node still holding a job
+    /// later than other replies do, only while more than 2 or 4 times as many jobs as nodes
+    /// remain, measured no better: `docs/cluster.md`, "Replies held ahead".)
     pub(super) fn will_post(&mut self, node: NodeId) -> bool {
         if node >= self.cfg.nodes || self.finished() {
             return false;
         }
-        let holds = self.nodes[node as usize].jobs.iter().any(Option::is_some);
-        let plenty = self.sched.remaining() > AHEAD_PREFETCH * self.cfg.nodes as u32;
-        if !holds || plenty {
-            self.assign(node);
-        }
+        self.assign(node);
         self.nodes[node as usize].jobs.iter().any(Option::is_some)
     }
 

@@ -38,7 +38,6 @@ mod ports;
 mod state;
 
 pub use bus::run_bus;
-pub use handout::AHEAD_PREFETCH;
 pub use config::{RootConfig, RootError, RootReport};
 pub use ports::{NoClock, PixelSink, RcWork, RootClock, SceneSource};
 pub use state::RootState;
