@@ -41,7 +41,11 @@ fn main() {
     let one_steady = steady_state_interval(&img, &one_cfg, 4).expect("runs");
     println!("1 node: {one:.4} s, steady {one_steady:.4} s/frame");
     for &n in &counts {
-        let codes: &[RelayCode] = if std::env::var("LINKS_SKIP_MODEL").is_ok() { &[RelayCode::Firmware] } else { &[RelayCode::Model, RelayCode::Firmware] };
+        let codes: &[RelayCode] = if std::env::var("LINKS_SKIP_MODEL").is_ok() {
+            &[RelayCode::Firmware]
+        } else {
+            &[RelayCode::Model, RelayCode::Firmware]
+        };
         for &relay in codes {
             let board = SimConfig::buildable(BoardProfile::F407, n);
             let cfg = SimConfig {

@@ -66,8 +66,9 @@ struct Sram {
     /// A leaf relay's reply cell per NC, for replies sent ahead.
     #[cfg(not(feature = "relay-mid"))]
     ahead: [[u8; REPLY_CELL]; NODES],
+    /// A middle relay's `RelayedBus` buffers: a reply cell for each node behind it.
     #[cfg(feature = "relay-mid")]
-    leaves: links_core::relay::RelayedBuffers,
+    leaves: links_core::relay::RelayedFrames<{ links_core::relay::MID_SLOTS }>,
 }
 
 static BUS: MasterShared<'static> = MasterShared::new();
@@ -140,7 +141,7 @@ async fn relay_task(
     parent: &'static SlaveShared<'static>,
     bus: MasterFront<'static, 'static>,
     bufs: &'static mut [[u8; MAX_MESSAGE]; 3],
-    leaves: &'static mut links_core::relay::RelayedBuffers,
+    leaves: &'static mut links_core::relay::RelayedFrames<{ links_core::relay::MID_SLOTS }>,
 ) {
     use links_core::relay::{RelayedBus, MID_RELAY_TIMEOUT_US, MID_SLOTS};
     match RelayedBus::new(bus, leaves, 0, NODES as u16) {

@@ -283,7 +283,11 @@ fn replies_sent_ahead_wait_at_the_relays_and_the_frame_is_the_same() {
     // (A node here posts again before its reply ahead is down, mostly: the relay clocks
     // it as soon as the reply arrives; the 256-node simulation has them wait in cells.)
     assert!(c.ahead > 0 && ahead <= c.ahead, "{c:?} {ahead}");
-    assert_eq!((c.lost_ahead, c.stray_frames, c.timeouts), (0, 0, 0), "{c:?}");
+    assert_eq!(
+        (c.lost_ahead, c.stray_frames, c.timeouts),
+        (0, 0, 0),
+        "{c:?}"
+    );
     let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
     assert_eq!(routed, run.root.exchanges);
     assert!(run.relays.iter().all(|r| r.stray_requests == 0));

@@ -131,7 +131,9 @@ fn two_levels_of_firmware_relays_render_the_single_node_frame() {
         (256, 8, Policy::RELAYED),
         (256, 8, Policy::Static { shape: Split::Rect }),
     ] {
-        if std::env::var("DBG_NOISY").is_ok() { continue; }
+        if std::env::var("DBG_NOISY").is_ok() {
+            continue;
+        }
         let r = run(
             &img,
             SimConfig {
@@ -180,12 +182,14 @@ fn two_levels_of_firmware_relays_render_the_single_node_frame() {
         let link = r.link.expect("the firmware link ran");
         assert!(!link.any(), "{what}: {link:?}");
     }
-    if std::env::var("DBG_SKIP").is_ok() { 
-    for (nodes, mids, policy) in [
-        (128u16, 4usize, Policy::RELAYED),
-        (256, 8, Policy::RELAYED),
-        (256, 8, Policy::Static { shape: Split::Rect }),
-    ] { let _ = (nodes, mids, policy); }
+    if std::env::var("DBG_SKIP").is_ok() {
+        for (nodes, mids, policy) in [
+            (128u16, 4usize, Policy::RELAYED),
+            (256, 8, Policy::RELAYED),
+            (256, 8, Policy::Static { shape: Split::Rect }),
+        ] {
+            let _ = (nodes, mids, policy);
+        }
     }
     let r = run(
         &img,

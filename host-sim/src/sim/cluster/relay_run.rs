@@ -431,7 +431,8 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                     ]);
                     let [b0, b1] = &mut *bufs;
                     let (Ok(r0), Ok(r1)) = (
-                        RelayedBus::new(bus0, b0, 0, per).map(|b| b.with_slots::<TWO_LEVEL_SLOTS>()),
+                        RelayedBus::new(bus0, b0, 0, per)
+                            .map(|b| b.with_slots::<TWO_LEVEL_SLOTS>()),
                         RelayedBus::new(bus1, b1, second_first, per)
                             .map(|b| b.with_slots::<TWO_LEVEL_SLOTS>()),
                     ) else {
@@ -526,8 +527,16 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                         let mut leaves = RelayedBus::new(bus, &mut *frames, 0, per_leaf)?
                             .with_slots::<MID_SLOTS>()
                             .with_timeout(timeout_clock, MID_RELAY_TIMEOUT_US)
-                            .with_ahead(if std::env::var("DBG_MIDAHEAD").is_ok() { 0 } else { ahead_us })
-                            .with_depth(if std::env::var("DBG_MIDDEPTH").is_ok() { DEPTH } else { per_leaf });
+                            .with_ahead(if std::env::var("DBG_MIDAHEAD").is_ok() {
+                                0
+                            } else {
+                                ahead_us
+                            })
+                            .with_depth(if std::env::var("DBG_MIDDEPTH").is_ok() {
+                                DEPTH
+                            } else {
+                                per_leaf
+                            });
                         let buffers = RelayBuffers {
                             down,
                             up,
@@ -559,4 +568,3 @@ fn add_counters(a: &mut RelayedCounters, b: &RelayedCounters) {
     a.ahead += b.ahead;
     a.lost_ahead += b.lost_ahead;
 }
-

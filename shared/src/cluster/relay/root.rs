@@ -450,9 +450,11 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     /// A reply cell no exchange holds.
     fn free_cell(&self) -> Option<u8> {
         (0..self.cells.len().min(u8::MAX as usize) as u8).find(|&c| {
-            !self.slots.iter().flatten().any(
-                |s| matches!(s.stage, Stage::Asked { reply: Reply::Cell(d), .. } if d == c),
-            )
+            !self
+                .slots
+                .iter()
+                .flatten()
+                .any(|s| matches!(s.stage, Stage::Asked { reply: Reply::Cell(d), .. } if d == c))
         })
     }
 
@@ -1681,7 +1683,7 @@ mod tests {
         let clock = Jump(Cell::new(0));
         let link = Relays::new(&clock, vec![true]);
         let mut bufs = Box::new(RelayedFrames::<1>::new());
-        let mut bus = RelayedBus::new(link, &mut bufs, 0, 4)
+        let bus = RelayedBus::new(link, &mut bufs, 0, 4)
             .unwrap()
             .with_timeout(&clock, 1_000)
             .with_depth(4);
@@ -1717,7 +1719,10 @@ mod tests {
         }
         ended.sort();
         assert_eq!(ended, [(0, 2), (1, 0)]);
-        assert!(clock.0.get() > 1_000, "node 0 was waited for past the time-out");
+        assert!(
+            clock.0.get() > 1_000,
+            "node 0 was waited for past the time-out"
+        );
         assert_eq!(bus.counters.ahead, 2);
         assert_eq!(bus.counters.lost_ahead, 1);
         assert_eq!(bus.counters.timeouts, 0);
