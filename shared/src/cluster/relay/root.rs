@@ -598,8 +598,12 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
 
     /// The link operation worth starting now, if the link is free: the pending broadcast;
     /// else, round the link from `next_link`, a relay whose line is up that (1) has a reply
-    /// to take down for the first time, (2) has one down whose frame may be up, (3) has no
-    /// exchange in flight and no waiting node the root knows of (it has news).
+    /// to take down for the first time, or else (2) has one down whose frame may be up, or
+    /// has no exchange in flight and no waiting node the root knows of (it has news). The
+    /// two of (2) take turns: a relay whose frames may be up keeps its line up (it reports
+    /// its other nodes waiting) for as long as its exchange takes below it, so ranking it
+    /// first would never gather a relay with news, and the root would never learn of that
+    /// relay's waiting nodes.
     fn pick(&self) -> Option<LinkOp> {
         if self.dangling.is_some() {
             return None;
@@ -621,10 +625,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             let lagging = matches!(self.cast, Some(Cast::Queued { .. })) && self.lags(r);
             let class = if unsent || lagging {
                 0
-            } else if asked {
+            } else if asked || (n == 0 && self.waiting[r as usize] == 0) {
                 1
-            } else if n == 0 && self.waiting[r as usize] == 0 {
-                2
             } else {
                 continue;
             };
@@ -1635,6 +1637,30 @@ mod tests {
             assert_eq!(block_on(bus.finish(&mut rx)), Ok(0));
         }
         assert_eq!(bus.link().broadcasts, 3);
+    }
+
+    /// A relay whose frame may be up (its line up meanwhile) does not keep the link from a
+    /// relay with news the root has not heard: both are gathered in turn, so the root learns
+    /// of the second relay's waiting node while the first one's frame is still late.
+    #[test]
+    fn a_relay_with_news_is_gathered_while_another_ones_frame_is_late() {
+        let clock = Jump(Cell::new(0));
+        let mut link = Relays::new(&clock, vec![true, true]);
+        // Relay 0's node 0 answers only after many exchanges; relay 1's node (2) waits.
+        link.late = vec![(0, 0, 1_000)];
+        link.waits[1] = 0b1;
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let mut bus = RelayedBus::new(link, &mut bufs, 0, 2)
+            .unwrap()
+            .with_timeout(&clock, 1_000_000);
+        bus.tx_bank()[..2].copy_from_slice(&[7, 0]);
+        assert_eq!(bus.start(Transfer::Exchange(0), 2), Ok(()));
+        for _ in 0..8 {
+            bus.poll();
+        }
+        assert!(bus.line(2), "relay 1 was never gathered: {:?}", bus.gathers);
+        assert_eq!(bus.ready(), Some(2));
+        assert_eq!(bus.flying(), 1);
     }
 
     /// A request goes down once when the relay gets it, and again only when a batch
