@@ -416,10 +416,10 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
         } else {
             // Two links, as `rc-fw --features relay-root` (and `relay-root-mid`) drives them:
             // `TwoLinks` over a `RelayedBus` on each (TWO_LINK_SLOTS exchanges in flight on
-            // each; MID_DEPTH per middle relay under two levels, DEPTH per leaf relay).
+            // each, DEPTH per leaf relay; under two levels MID_DEPTH per middle relay,
+            // TWO_LEVEL_SLOTS a link, replies ahead).
             let second_first = link.links.star.borrow().bus_nodes(1).0.saturating_mul(per);
             let (depth, ahead_us) = match link.mid {
-                Some(_) if std::env::var("DBG_ROOT").is_ok() => (8, 0),
                 Some(_) => (MID_DEPTH, ahead_us),
                 None => (DEPTH, 0),
             };
@@ -527,16 +527,8 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                         let mut leaves = RelayedBus::new(bus, &mut *frames, 0, per_leaf)?
                             .with_slots::<MID_SLOTS>()
                             .with_timeout(timeout_clock, MID_RELAY_TIMEOUT_US)
-                            .with_ahead(if std::env::var("DBG_MIDAHEAD").is_ok() {
-                                0
-                            } else {
-                                ahead_us
-                            })
-                            .with_depth(if std::env::var("DBG_MIDDEPTH").is_ok() {
-                                DEPTH
-                            } else {
-                                per_leaf
-                            });
+                            .with_ahead(ahead_us)
+                            .with_depth(per_leaf);
                         let buffers = RelayBuffers {
                             down,
                             up,
