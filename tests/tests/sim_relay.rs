@@ -332,3 +332,29 @@ fn what_the_firmware_root_cannot_drive_is_refused_with_the_reason() {
         "8 nodes are one bus on the F407"
     );
 }
+
+/// A node behind two levels of relays dies mid-frame: its work goes to the others and the
+/// frame is exact. A reply ahead of a dead node's line ends empty (its middle relay gives it
+/// up); before a reply was sent ahead only after a frame came up, the root asked the dead
+/// node ahead again after each empty end, hearing from it each time, and the frame never
+/// finished (found by a review).
+#[test]
+fn a_node_that_dies_behind_two_levels_costs_its_work_not_the_frame() {
+    let img = image("photo1.ron", 1024, 1024);
+    let want = reference(&img);
+    let t0 = run(&img, firmware(128)).time_s;
+    let r = run(
+        &img,
+        SimConfig {
+            deaths: vec![NodeDeath {
+                node: 5,
+                at_s: 0.03 * t0,
+            }],
+            ..firmware(128)
+        },
+    );
+    assert!(r.frames[0] == want, "node 5 died at {:.4} s", 0.03 * t0);
+    assert_eq!(r.root.timeouts, 1, "node 5 declared dead once");
+    let f = r.relayed.as_ref().expect("the firmware's relay code ran");
+    assert!(f.root.ahead > 0, "{:?}", f.root);
+}

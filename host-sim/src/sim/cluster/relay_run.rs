@@ -385,7 +385,7 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
     let root_timeout = root_timeout_us(if link.mid.is_some() { 2 } else { 1 });
     // Under two levels replies go ahead and wait at the leaf relays while the nodes render
     // a run: as long as a node may be silent.
-    let ahead_us = cfg.profile.node_timeout_us;
+    let ahead_us = (cfg.node_timeout_s * 1e6) as u64;
     let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
     // Each root link's master end; the root's one CPU is shared.
     let [end0, end1] = [0, 1].map(|_| MasterEnd {

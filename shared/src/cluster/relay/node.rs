@@ -111,11 +111,14 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         }
         let mut fresh = 0u32;
         let mut busy_line = false;
+        let mut ahead_up = false;
         for i in 0..count {
             if bus.line(first + i) {
                 let b = 1u32 << i;
                 if (nodes.waiting | nodes.flying | nodes.answered | nodes.ahead) & b == 0 {
                     fresh |= b;
+                } else if nodes.ahead & b != 0 && nodes.held.is_none() && !posted {
+                    ahead_up = true;
                 } else {
                     busy_line = true;
                 }
@@ -167,6 +170,10 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         // 3. Wait for the parent, or (when no line is up) for a node's line; a middle
         // relay's bus moves meanwhile and says when it has news (also while a frame is
         // held for the next batch: its exchanges in flight go on).
+        if ahead_up && !posted {
+            // A held reply's line rose after `clock_ahead` looked: clock it now.
+            continue;
+        }
         let got = if overlapped {
             match select(parent.recv(&mut down[..]), bus.wait_news()).await {
                 Either::First(got) => got?,
@@ -263,7 +270,9 @@ async fn serve<B: RootBus>(
             // come after its node was served): a middle relay begins the exchange (its
             // leaf relay holds it), a leaf relay keeps it in the node's cell.
             Some(b) if ahead && overlapped && (nodes.flying | nodes.answered) & b == 0 => b,
-            Some(b) if ahead && !overlapped && (nodes.answered | nodes.ahead) & b == 0 => {
+            // A newer one replaces a reply still held (the exchange it was for was given up
+            // above, which sent this one).
+            Some(b) if ahead && !overlapped && nodes.answered & b == 0 => {
                 match cells.get_mut(node as usize) {
                     Some(cell) if data.len() <= REPLY_CELL => {
                         cell[..data.len()].copy_from_slice(data);
@@ -393,4 +402,138 @@ async fn collect<B: RootBus>(
         report.routed += 1;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cluster::link::Transfer;
+    use core::cell::Cell;
+    use core::task::Poll;
+    use std::collections::VecDeque;
+    use std::vec::Vec;
+
+    /// A parent that hands the relay its scripted frames as exchanges, then nothing.
+    struct Parent {
+        script: VecDeque<Vec<u8>>,
+        posts: u32,
+    }
+    impl NodeLink for Parent {
+        fn post(&mut self, _frame: &[u8]) -> Result<(), LinkError> {
+            self.posts += 1;
+            Ok(())
+        }
+        async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError> {
+            match self.script.pop_front() {
+                Some(f) => {
+                    rx[..f.len()].copy_from_slice(&f);
+                    Ok(Incoming::Exchanged { len: f.len() })
+                }
+                None => core::future::pending().await,
+            }
+        }
+    }
+
+    /// A leaf bus of 2 nodes: node 0's line rises at its `rise_at`-th look (and stays up
+    /// until it is clocked).
+    struct Bus {
+        looks: Cell<u32>,
+        rise_at: u32,
+        clocked: u32,
+        started: bool,
+        tx: [u8; MAX_MESSAGE],
+    }
+    impl Bus {
+        fn up(&self, node: NodeId) -> bool {
+            if node != 0 || self.clocked > 0 {
+                return false;
+            }
+            self.looks.set(self.looks.get() + 1);
+            self.looks.get() >= self.rise_at
+        }
+    }
+    impl RootBus for Bus {
+        fn nodes(&self) -> (NodeId, u16) {
+            (0, 2)
+        }
+        async fn wait_ready(&mut self) -> NodeId {
+            loop {
+                if self.up(0) {
+                    return 0;
+                }
+                core::future::pending::<()>().await;
+            }
+        }
+        fn ready(&self) -> Option<NodeId> {
+            None
+        }
+        fn line(&self, node: NodeId) -> bool {
+            self.up(node)
+        }
+        fn tx_bank(&mut self) -> &mut [u8] {
+            &mut self.tx
+        }
+        fn start(&mut self, t: Transfer, _len: usize) -> Result<(), LinkError> {
+            if let Transfer::Exchange(_) = t {
+                self.started = true;
+            }
+            Ok(())
+        }
+        async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+            if core::mem::take(&mut self.started) {
+                self.clocked += 1;
+                rx[..2].copy_from_slice(&[0xAA, 0]);
+                return Ok(2);
+            }
+            Ok(0)
+        }
+    }
+
+    /// Node 0's line rises between `clock_ahead`'s look at it and the scan of
+    /// step 1 (it is then "busy", `nodes.ahead`): with nothing to post, the relay waits
+    /// on its parent alone (its line down: the parent never gathers it) and never clocks
+    /// the node.
+    #[test]
+    fn a_line_rising_right_after_clock_ahead_looked_is_still_clocked() {
+        let mut frame = [0u8; MAX_MESSAGE];
+        let mut w = BatchWriter::new(&mut frame[..]).unwrap();
+        w.push(Record {
+            kind: Kind::Ahead,
+            node: 0,
+            data: &[7, 0, 0],
+        })
+        .unwrap();
+        let down_frame = w.bytes().to_vec();
+        let mut parent = Parent {
+            script: VecDeque::from([down_frame]),
+            posts: 0,
+        };
+        // Looks at node 0's line: 1 (scan, before the record), 2 (clock_ahead), 3 (scan).
+        let mut bus = Bus {
+            looks: Cell::new(0),
+            rise_at: 3,
+            clocked: 0,
+            started: false,
+            tx: [0; MAX_MESSAGE],
+        };
+        let (mut d, mut u, mut n) = ([0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE]);
+        let mut cells = [[0u8; REPLY_CELL]; 2];
+        let bufs = RelayBuffers {
+            down: &mut d,
+            up: &mut u,
+            node: &mut n,
+            ahead: &mut cells,
+        };
+        {
+            let fut = run_relay(&mut parent, &mut bus, bufs);
+            let mut fut = core::pin::pin!(fut);
+            for _ in 0..100 {
+                assert!(matches!(
+                    embassy_futures::poll_once(fut.as_mut()),
+                    Poll::Pending
+                ));
+            }
+        }
+        assert_eq!(bus.clocked, 1, "node 0, its line up, was never clocked");
+    }
 }

@@ -101,7 +101,8 @@ pub struct RelayedCounters {
 /// [`REPLY_CELL`] bytes, not a frame buffer of its own (`RelayedFrames<32, 5>`: 16,232
 /// bytes, against 55,160 with a frame buffer per exchange).
 pub struct RelayedFrames<const CELLS: usize, const LANDS: usize = LANDINGS> {
-    /// Each exchange's reply (slot `i`'s in cell `i`) until it is down and its frame up.
+    /// Replies waiting to go down (any free cell; an exchange holds its cell until its
+    /// frame is up, or, a reply ahead, until it is down).
     pub cells: [[u8; REPLY_CELL]; CELLS],
     /// One to compose the next frame in, one for the broadcast waiting to go, and the
     /// replies longer than a cell.
@@ -337,9 +338,10 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
     }
 
     /// The same bus keeping state for `T` node exchanges in flight instead of [`SLOTS`]
-    /// (fewer also bound what its buffers allow): the root of relays on two links keeps
-    /// [`TWO_LINK_SLOTS`] on each, in the CCM the state lives in. Before the first
-    /// exchange (it starts with none in flight).
+    /// (each also needs a free reply cell to begin, unless its reply is longer than one):
+    /// the root of relays on two links keeps [`TWO_LINK_SLOTS`] on each, or
+    /// [`TWO_LEVEL_SLOTS`] under two levels. Before the first exchange (it starts with none
+    /// in flight).
     pub fn with_slots<const T: usize>(self) -> RelayedBus<'m, L, NoClock, T> {
         let timeout_us = self.timeout_us;
         self.rebuilt(NoClock, timeout_us, [None; T])

@@ -374,7 +374,7 @@ async fn take_node<B: RootBus, C: RootClock, P: PixelSink>(
     clock: &C,
     root: &RefCell<RootState>,
     sink: &RefCell<P>,
-) -> Result<(), RootError> {
+) -> Result<usize, RootError> {
     let got = bus.finish_node(node, rx).await?;
     complete(
         Sent::Exchange(node),
@@ -384,7 +384,7 @@ async fn take_node<B: RootBus, C: RootClock, P: PixelSink>(
         sink,
     )
     .await;
-    Ok(())
+    Ok(got)
 }
 
 /// [`run_bus`] on a bus that keeps several exchanges in flight ([`RootBus::in_flight`] > 1,
@@ -411,7 +411,9 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
                 match take_node(node, bus, &mut rx[..], clock, root, sink).await {
                     // Others' frames came first and are to be taken before this one.
                     Err(RootError::Link(LinkError::Busy)) if bus.arrived().is_some() => {}
-                    r => r?,
+                    r => {
+                        r?;
+                    }
                 }
             }
             return stop(&mut st, &mut rx[..], bus, clock, root, sink).await;
@@ -421,8 +423,10 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
         // node's line ([`RootBus::ask_ahead`]).
         let mut ahead = None;
         if let Some(node) = bus.arrived() {
-            take_node(node, bus, &mut rx[..], clock, root, sink).await?;
-            if !(bus.ask_ahead(node) && root.borrow_mut().will_post(node)) {
+            let got = take_node(node, bus, &mut rx[..], clock, root, sink).await?;
+            // (Not after an exchange that ended empty, a time-out or a reply ahead lost: that
+            // is no word from the node, which may be dead.)
+            if !(got > 0 && bus.ask_ahead(node) && root.borrow_mut().will_post(node)) {
                 continue;
             }
             ahead = Some(node);
