@@ -6,6 +6,7 @@
 //! ```sh
 //! cargo run --release -p links-host --example relay_speedup -- 16 32 64
 //! cargo run --release -p links-host --example relay_speedup -- --buses 1 --policy 6,192 64
+//! cargo run --release -p links-host --example relay_speedup -- --firmware-only 256
 //! ```
 
 use links_core::board::BoardProfile;
@@ -15,14 +16,17 @@ use links_host::cluster::{simulate_frame, SimConfig};
 use links_host::studies::cluster_sweep::steady_state_interval;
 
 fn main() {
-    // Node counts, and optionally `--buses B` (the root's links; the board's by default)
-    // and `--policy FACTOR,MIN` (decreasing sizes; the relay tree's 6,192 by default).
+    // Node counts, and optionally `--buses B` (the root's links; the board's by default),
+    // `--policy FACTOR,MIN` (decreasing sizes; the relay tree's 6,192 by default) and
+    // `--firmware-only` (not the model: half the time).
     let mut counts: Vec<u16> = Vec::new();
-    let (mut buses, mut policy) = (None, None);
+    let (mut buses, mut policy, mut codes) =
+        (None, None, &[RelayCode::Model, RelayCode::Firmware][..]);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--buses" => buses = args.next().and_then(|b| b.parse().ok()),
+            "--firmware-only" => codes = &[RelayCode::Firmware],
             "--policy" => {
                 let v = args.next().unwrap_or_default();
                 let (f, m) = v.split_once(',').expect("--policy FACTOR,MIN");
@@ -41,7 +45,7 @@ fn main() {
     let one_steady = steady_state_interval(&img, &one_cfg, 4).expect("runs");
     println!("1 node: {one:.4} s, steady {one_steady:.4} s/frame");
     for &n in &counts {
-        for relay in [RelayCode::Model, RelayCode::Firmware] {
+        for &relay in codes {
             let board = SimConfig::buildable(BoardProfile::F407, n);
             let cfg = SimConfig {
                 relay,

@@ -73,12 +73,29 @@ pub mod link {
     };
     /// As the root of a relay tree: node exchanges in flight per relay (`RelayedBus::
     /// with_depth`): a leaf relay's 2 (`relay::DEPTH`, one on its bus and one reply down),
-    /// a middle relay's 8 (`relay::MID_DEPTH`: 2 for each of its 4 leaf relays), as the
-    /// simulator's firmware relay tree keeps them.
+    /// a middle relay's 32 (`relay::MID_DEPTH`: one per node behind it, replies ahead), as
+    /// the simulator's firmware relay tree keeps them.
     pub const RELAY_DEPTH: u16 = if RELAY_LEVELS == 2 {
         links_core::relay::MID_DEPTH
     } else {
         links_core::relay::DEPTH
+    };
+    /// As the root of relays on two links: node exchanges in flight on each link (its
+    /// `RelayedBus`'s slot table): `relay::TWO_LINK_SLOTS`, or under two levels one for
+    /// every node behind the link's middle relays (`relay::TWO_LEVEL_SLOTS`).
+    pub const RELAY_SLOTS: usize = if RELAY_LEVELS == 2 {
+        links_core::relay::TWO_LEVEL_SLOTS
+    } else {
+        links_core::relay::TWO_LINK_SLOTS
+    };
+    /// As the root of two levels: how long a reply sent ahead of a node's line may wait at
+    /// its leaf relay besides the time-out (`RelayedBus::with_ahead`): the node's silence
+    /// bound (it renders a run meanwhile). 0 (none sent ahead) with one level: measured no
+    /// gain there (`docs/cluster.md`, "Replies held ahead").
+    pub const RELAY_AHEAD_US: u64 = if RELAY_LEVELS == 2 {
+        PROFILE.node_timeout_us
+    } else {
+        0
     };
     /// The NCs the root logic hands work to: those on its bus, or, as the root of a relay
     /// tree (`relay-root`), the nodes behind its relays.
@@ -134,11 +151,13 @@ pub mod plan {
     };
     /// As the root of relays on two links (the F407's `relay-root`): room for the two
     /// `RelayedBus`es' state (their slot tables), which `main` keeps in SRAM (a compile-time
-    /// assertion there checks it fits); the CCM has no room for it.
-    pub const LINK_STATE: usize = if crate::link::ROOT_LINKS == 2 {
-        2048
-    } else {
-        0
+    /// assertion there checks it fits); the CCM has no room for it. Under two levels each
+    /// link keeps an exchange for every node behind it (`link::RELAY_SLOTS`, 24 bytes a
+    /// slot): 6,616 bytes in all.
+    pub const LINK_STATE: usize = match (crate::link::ROOT_LINKS, crate::link::RELAY_LEVELS) {
+        (2, 2) => 7 * 1024,
+        (2, _) => 2048,
+        _ => 0,
     };
     /// The uploaded SceneImage (in SRAM; the USB FIFO is read by the CPU, the nodes get it
     /// through the TX bank): what the DMA banks (and the relay buffers and state) leave, in
@@ -444,14 +463,19 @@ mod tests {
             );
             if cfg!(feature = "board-f407") {
                 // Two root links (SPI1, SPI2): 128 KB - 2 x 3 DMA banks - 2 x 16,232 B (32
-                // node exchanges in flight on each) - 2 KB of the links' state, in whole
-                // KB; a film's second bank is what the first (a node's 61,440-byte bank)
-                // leaves: 24,576 B (as with 8 exchanges in flight a link, each in a frame
-                // buffer of its own; 58,368 with one exchange in flight).
+                // reply cells on each) - the links' state (2 KB; under two levels 7 KB, an
+                // exchange in flight for every node: replies go ahead), in whole KB; a
+                // film's second bank is what the first (a node's 61,440-byte bank) leaves:
+                // 24,576 B (19,456 under two levels; 58,368 with one exchange in flight
+                // a link). photo1-orbit's frames are 18 KB.
                 assert_eq!(links, 2);
-                assert_eq!(super::plan::LINK_STATE, 2048);
-                let nodes = if levels == 2 { 256 } else { 64 };
-                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (nodes, 86_016, 61_440));
+                let (nodes, state, scene) = if levels == 2 {
+                    (256, 7 * 1024, 80_896)
+                } else {
+                    (64, 2048, 86_016)
+                };
+                assert_eq!(super::plan::LINK_STATE, state);
+                assert_eq!((RENDER_NODES, SCENE, FILM_BANK), (nodes, scene, 61_440));
                 // The backup line's 6-bit addresses reach a 256-node tree's first 64.
                 assert_eq!(super::backup_line::ROLL_CALL_NODES, 64);
             }

@@ -82,14 +82,10 @@ mod fw {
     type Link = MasterFront<'static, 'static>;
     #[cfg(all(feature = "relay-root", not(feature = "board-f407")))]
     type Link = RelayedBus<'static, MasterFront<'static, 'static>, Clock>;
-    /// Each link's state keeps `TWO_LINK_SLOTS` exchanges in flight (its buffers' count).
+    /// Each link's state keeps `rc_fw::link::RELAY_SLOTS` exchanges in flight.
     #[cfg(all(feature = "relay-root", feature = "board-f407"))]
-    type Relayed = RelayedBus<
-        'static,
-        MasterFront<'static, 'static>,
-        Clock,
-        { links_core::relay::TWO_LINK_SLOTS },
-    >;
+    type Relayed =
+        RelayedBus<'static, MasterFront<'static, 'static>, Clock, { rc_fw::link::RELAY_SLOTS }>;
     #[cfg(all(feature = "relay-root", feature = "board-f407"))]
     type Link = TwoLinks<Relayed, Relayed>;
 
@@ -139,7 +135,7 @@ mod fw {
         relayed: RelayedBuffers,
         #[cfg(all(feature = "relay-root", feature = "board-f407"))]
         relayed: [rc_fw::plan::TwoLinkFrames; 2],
-        /// The two `RelayedBus`es' state (their slot tables: `TWO_LINK_SLOTS` exchanges in
+        /// The two `RelayedBus`es' state (their slot tables: `RELAY_SLOTS` exchanges in
         /// flight on each), here rather than in the serial task's future in the CCM, which
         /// has no room for it (written once in `main`).
         #[cfg(all(feature = "relay-root", feature = "board-f407"))]
@@ -570,16 +566,19 @@ mod fw {
             let [f0, f1] = &mut sram.relayed;
             let timeout = rc_fw::link::RELAY_TIMEOUT_US;
             let depth = rc_fw::link::RELAY_DEPTH;
+            let ahead = rc_fw::link::RELAY_AHEAD_US;
             let a = unwrap!(RelayedBus::new(front, f0, 0, per));
             let a = a
                 .with_slots()
                 .with_timeout(Clock, timeout)
-                .with_depth(depth);
+                .with_depth(depth)
+                .with_ahead(ahead);
             let b = unwrap!(RelayedBus::new(front2, f1, half * per, per));
             let b = b
                 .with_slots()
                 .with_timeout(Clock, timeout)
-                .with_depth(depth);
+                .with_depth(depth)
+                .with_ahead(ahead);
             (unwrap!(TwoLinks::new(a, b)), port, port2)
         };
 

@@ -10,7 +10,12 @@
 //! A middle relay of a two-level tree (`--features relay-mid`) runs the same logic with
 //! leaf relays as its bus devices ([`BUS_DEVICES`]): `run_relay` over a `RelayedBus` on
 //! SPI2, its buffers in SRAM, each node exchange given up after
-//! `links_core::relay::MID_RELAY_TIMEOUT_US` (below the root's time-out).
+//! `links_core::relay::MID_RELAY_TIMEOUT_US` (below the root's time-out), or, begun ahead of
+//! its node's line, after the node's silence bound besides.
+//!
+//! A leaf relay keeps a reply cell per NC for replies the root of two levels sends ahead of
+//! the node's line (`RelayBuffers::ahead`): the NC is clocked with it the moment its line
+//! rises.
 
 use defmt::{info, unwrap, warn};
 use embassy_executor::{InterruptExecutor, Spawner};
@@ -22,7 +27,7 @@ use embassy_stm32::spi::{self, Spi};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::{bind_interrupts, dma, interrupt};
 use links_core::link::RootBus;
-use links_core::relay::{run_relay, RelayBuffers};
+use links_core::relay::{run_relay, RelayBuffers, REPLY_CELL};
 use links_core::spi::{
     Bank, MasterFront, MasterShared, MasterTask, SlaveBanks, SlaveShared, SlaveTask,
 };
@@ -58,8 +63,12 @@ struct Sram {
     parent: [Bank; 5],
     bus: [Bank; 3],
     relay: [[u8; MAX_MESSAGE]; 3],
+    /// A leaf relay's reply cell per NC, for replies sent ahead.
+    #[cfg(not(feature = "relay-mid"))]
+    ahead: [[u8; REPLY_CELL]; NODES],
+    /// A middle relay's `RelayedBus` buffers: a reply cell for each node behind it.
     #[cfg(feature = "relay-mid")]
-    leaves: links_core::relay::RelayedBuffers,
+    leaves: links_core::relay::RelayedFrames<{ links_core::relay::MID_SLOTS }>,
 }
 
 static BUS: MasterShared<'static> = MasterShared::new();
@@ -95,11 +104,17 @@ async fn relay_forever<B: RootBus>(
     parent: &'static SlaveShared<'static>,
     bus: &mut B,
     bufs: &'static mut [[u8; MAX_MESSAGE]; 3],
+    ahead: &'static mut [[u8; REPLY_CELL]],
 ) {
     let mut handle = parent.handle();
     loop {
         let [down, up, node] = &mut *bufs;
-        let buffers = RelayBuffers { down, up, node };
+        let buffers = RelayBuffers {
+            down,
+            up,
+            node,
+            ahead: &mut *ahead,
+        };
         match run_relay(&mut handle, bus, buffers).await {
             Ok(r) => info!("relayed: {}", r),
             Err(e) => warn!("relay: {}", e),
@@ -114,8 +129,9 @@ async fn relay_task(
     parent: &'static SlaveShared<'static>,
     mut bus: MasterFront<'static, 'static>,
     bufs: &'static mut [[u8; MAX_MESSAGE]; 3],
+    ahead: &'static mut [[u8; REPLY_CELL]; NODES],
 ) {
-    relay_forever(parent, &mut bus, bufs).await
+    relay_forever(parent, &mut bus, bufs, ahead).await
 }
 
 /// As a middle relay: the bus's devices are leaf relays, driven through a `RelayedBus`.
@@ -125,13 +141,20 @@ async fn relay_task(
     parent: &'static SlaveShared<'static>,
     bus: MasterFront<'static, 'static>,
     bufs: &'static mut [[u8; MAX_MESSAGE]; 3],
-    leaves: &'static mut links_core::relay::RelayedBuffers,
+    leaves: &'static mut links_core::relay::RelayedFrames<{ links_core::relay::MID_SLOTS }>,
 ) {
-    use links_core::relay::{RelayedBus, MID_RELAY_TIMEOUT_US};
+    use links_core::relay::{RelayedBus, MID_RELAY_TIMEOUT_US, MID_SLOTS};
     match RelayedBus::new(bus, leaves, 0, NODES as u16) {
         Ok(b) => {
-            let mut leaves = b.with_timeout(rc_fw::port::Clock, MID_RELAY_TIMEOUT_US);
-            relay_forever(parent, &mut leaves, bufs).await
+            // An exchange in flight for every node behind it: the root sends replies ahead,
+            // and they wait at the leaf relays while the nodes render (as long as a node
+            // may be silent).
+            let mut leaves = b
+                .with_slots::<MID_SLOTS>()
+                .with_timeout(rc_fw::port::Clock, MID_RELAY_TIMEOUT_US)
+                .with_ahead(rc_fw::link::PROFILE.node_timeout_us)
+                .with_depth(NODES as u16);
+            relay_forever(parent, &mut leaves, bufs, &mut []).await
         }
         Err(e) => warn!("middle relay: {}", e),
     }
@@ -176,7 +199,12 @@ async fn main(spawner: Spawner) {
     // `main` runs once, so this expansion does: the only reference to the region.
     let sram: &'static mut Sram = links_board::take_sram!(Sram);
     #[cfg(not(feature = "relay-mid"))]
-    let Sram { parent, bus, relay } = sram;
+    let Sram {
+        parent,
+        bus,
+        relay,
+        ahead,
+    } = sram;
     #[cfg(feature = "relay-mid")]
     let Sram {
         parent,
@@ -205,7 +233,7 @@ async fn main(spawner: Spawner) {
     links.spawn(unwrap!(parent_task(parent_port, task, shared)));
     links.spawn(unwrap!(bus_task(bus_port)));
     #[cfg(not(feature = "relay-mid"))]
-    spawner.spawn(unwrap!(relay_task(shared, front, relay)));
+    spawner.spawn(unwrap!(relay_task(shared, front, relay, ahead)));
     #[cfg(feature = "relay-mid")]
     spawner.spawn(unwrap!(relay_task(shared, front, relay, leaves)));
 }

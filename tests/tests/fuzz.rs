@@ -2889,10 +2889,10 @@ fn relay_frame(rng: &mut Rng, corpus: &[Vec<u8>]) -> Vec<u8> {
     for _ in 0..rng.below(4) {
         let src = rng.pick(corpus);
         let take = rng.below(src.len() + 1).min(w.room());
-        let kind = if rng.chance(80) {
-            relay::Kind::Request
-        } else {
-            relay::Kind::Frame
+        let kind = match rng.below(10) {
+            0..=5 => relay::Kind::Request,
+            6..=7 => relay::Kind::Ahead,
+            _ => relay::Kind::Frame,
         };
         let rec = relay::Record {
             kind,
@@ -3051,11 +3051,14 @@ fn relay_session(
         exchanges: 0,
     };
     let mut bufs = ([0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE]);
+    // A cell per node for replies held ahead (`Kind::Ahead` records).
+    let mut cells = [[0u8; relay::REPLY_CELL]; 8];
     let report = {
         let buffers = relay::RelayBuffers {
             down: &mut bufs.0,
             up: &mut bufs.1,
             node: &mut bufs.2,
+            ahead: &mut cells,
         };
         let fut = relay::run_relay(&mut parent, &mut bus, buffers);
         let mut fut = pin!(fut);

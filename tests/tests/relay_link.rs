@@ -11,7 +11,8 @@ use embassy_futures::join::join;
 use embassy_futures::select::{select, Either};
 use links_core::node::{run_node, NodeConfig, NodeReport, RealTime, Tracing};
 use links_core::relay::{
-    run_relay, RelayBuffers, RelayReport, RelayedBuffers, RelayedBus, RelayedCounters, DEPTH, SLOTS,
+    run_relay, RelayBuffers, RelayReport, RelayedBuffers, RelayedBus, RelayedCounters, DEPTH,
+    REPLY_CELL, SLOTS,
 };
 use links_core::root::{run_bus, NoClock, RootClock, RootConfig, RootReport, RootState};
 use links_core::sched::Policy;
@@ -74,7 +75,8 @@ fn node(bus: SharedBus, i: usize, scene_len: usize) -> Task<NodeReport> {
 }
 
 /// Relay `r`: a node (index `r`) on the root's bus, the root of `bus` (its nodes numbered
-/// from 0: the relay's records name its nodes by their place on its bus).
+/// from 0: the relay's records name its nodes by their place on its bus), with a cell per
+/// node for replies sent ahead.
 fn relay(root_bus: SharedBus, r: usize, bus: SharedBus) -> Task<RelayReport> {
     Box::pin(async move {
         let (pshared, ptask, mut pport) = slave_link(&root_bus, r);
@@ -85,6 +87,7 @@ fn relay(root_bus: SharedBus, r: usize, bus: SharedBus) -> Task<RelayReport> {
             down: leak([0u8; MAX_MESSAGE]),
             up: leak([0u8; MAX_MESSAGE]),
             node: leak([0u8; MAX_MESSAGE]),
+            ahead: &mut leak([[0u8; REPLY_CELL]; 8])[..],
         };
         let logic = run_relay(&mut parent, &mut front, buffers);
         let links = select(
@@ -115,16 +118,17 @@ fn tree(
     faults: Vec<(u64, Dir, usize)>,
     relay0_faults: Vec<(u64, Dir, usize)>,
 ) -> Run {
-    tree_at_depth(relays, per, faults, relay0_faults, DEPTH)
+    tree_at_depth(relays, per, faults, relay0_faults, (DEPTH, false))
 }
 
-/// [`tree`] with at most `depth` node exchanges in flight per relay.
+/// [`tree`] with at most `depth` node exchanges in flight per relay, and (`ahead`) the
+/// replies sent ahead of the nodes' lines ([`RelayedBus::with_ahead`]).
 fn tree_at_depth(
     relays: usize,
     per: usize,
     faults: Vec<(u64, Dir, usize)>,
     relay0_faults: Vec<(u64, Dir, usize)>,
-    depth: u16,
+    (depth, ahead): (u16, bool),
 ) -> Run {
     let (w, h) = (24u32, 16u32);
     let img = bundled_image("photo1.ron", w, h);
@@ -150,7 +154,8 @@ fn tree_at_depth(
     let mut bufs = Box::new(RelayedBuffers::new());
     let mut relayed = RelayedBus::new(front, &mut bufs, 0, per as u16)
         .expect("a tree that fits")
-        .with_depth(depth);
+        .with_depth(depth)
+        .with_ahead(if ahead { 1_000_000 } else { 0 });
     let rc = async {
         let logic = run_bus(0, &mut relayed, &NoClock, &root, &scenes[..], &sink);
         match select(logic, task.run(&mut port, shared)).await {
@@ -246,7 +251,7 @@ fn several_node_exchanges_are_in_flight_and_each_frame_comes_back_once() {
     // A link exchange brings at most one node frame up.
     assert!(c.link_exchanges >= run.root.exchanges, "{c:?}");
     // One exchange in flight per relay: at most two at once, the same frame.
-    let one = tree_at_depth(2, 3, Vec::new(), Vec::new(), 1);
+    let one = tree_at_depth(2, 3, Vec::new(), Vec::new(), (1, false));
     assert!(one.counters.most_in_flight <= 2, "{:?}", one.counters);
     let routed: u32 = one.relays.iter().map(|r| r.routed).sum();
     assert_eq!(routed, one.root.exchanges);
@@ -265,6 +270,39 @@ fn corrupt_bytes_on_the_root_link_cost_retries_never_the_frame() {
     let n = faults.len() as u32;
     let run = tree(2, 3, faults, Vec::new());
     assert_eq!(run.root_bus.borrow().faults_hit, n, "every fault landed");
+}
+
+#[test]
+fn replies_sent_ahead_wait_at_the_relays_and_the_frame_is_the_same() {
+    // Every node one exchange in flight: the root composes a node's next reply as its
+    // frame comes up (the node holds jobs) and the relay clocks the node with it as its
+    // line rises.
+    let run = tree_at_depth(2, 3, Vec::new(), Vec::new(), (3, true));
+    let c = run.counters;
+    let ahead: u32 = run.relays.iter().map(|r| r.ahead).sum();
+    // (A node here posts again before its reply ahead is down, mostly: the relay clocks
+    // it as soon as the reply arrives; the 256-node simulation has them wait in cells.)
+    assert!(c.ahead > 0 && ahead <= c.ahead, "{c:?} {ahead}");
+    assert_eq!(
+        (c.lost_ahead, c.stray_frames, c.timeouts),
+        (0, 0, 0),
+        "{c:?}"
+    );
+    let routed: u32 = run.relays.iter().map(|r| r.routed).sum();
+    assert_eq!(routed, run.root.exchanges);
+    assert!(run.relays.iter().all(|r| r.stray_requests == 0));
+    // With bytes corrupted on the root's link, some replies ahead never arrive: those
+    // exchanges end empty and the nodes are asked anew; the frame is the same.
+    let faults: Vec<_> = (0..10u64)
+        .map(|k| {
+            let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
+            (20 + 11 * k, dir, (k as usize * 7) % 9)
+        })
+        .collect();
+    let n = faults.len() as u32;
+    let run = tree_at_depth(2, 3, faults, Vec::new(), (3, true));
+    assert_eq!(run.root_bus.borrow().faults_hit, n, "every fault landed");
+    assert!(run.counters.ahead > 0, "{:?}", run.counters);
 }
 
 #[test]

@@ -161,6 +161,18 @@ fn two_levels_of_firmware_relays_render_the_single_node_frame() {
             f.mid
         );
         assert_eq!((f.root.timeouts, f.mid.timeouts), (0, 0), "{what}");
+        // Replies went ahead of the nodes' lines (the root composes a node's next reply
+        // as its frame comes up), through the middle relays, and waited at the leaf
+        // relays for lines to rise; none was lost.
+        let held: u32 = f.relays.iter().flatten().map(|r| r.ahead).sum();
+        assert!(
+            f.root.ahead > 0 && f.mid.ahead > 0 && held > 0,
+            "{what}: {:?} {:?} {held}",
+            f.root,
+            f.mid
+        );
+        assert!(held <= f.root.ahead, "{what}");
+        assert_eq!((f.root.lost_ahead, f.mid.lost_ahead), (0, 0), "{what}");
         assert_eq!((f.root.bad_batches, f.mid.bad_batches), (0, 0), "{what}");
         assert!(f.mid.link_exchanges >= r.root.exchanges, "{what}");
         assert_eq!(r.root.bad_messages, 0, "{what}");
@@ -319,4 +331,30 @@ fn what_the_firmware_root_cannot_drive_is_refused_with_the_reason() {
         Topology::Star,
         "8 nodes are one bus on the F407"
     );
+}
+
+/// A node behind two levels of relays dies mid-frame: its work goes to the others and the
+/// frame is exact. A reply ahead of a dead node's line ends empty (its middle relay gives it
+/// up); before a reply was sent ahead only after a frame came up, the root asked the dead
+/// node ahead again after each empty end, hearing from it each time, and the frame never
+/// finished (found by a review).
+#[test]
+fn a_node_that_dies_behind_two_levels_costs_its_work_not_the_frame() {
+    let img = image("photo1.ron", 1024, 1024);
+    let want = reference(&img);
+    let t0 = run(&img, firmware(128)).time_s;
+    let r = run(
+        &img,
+        SimConfig {
+            deaths: vec![NodeDeath {
+                node: 5,
+                at_s: 0.03 * t0,
+            }],
+            ..firmware(128)
+        },
+    );
+    assert!(r.frames[0] == want, "node 5 died at {:.4} s", 0.03 * t0);
+    assert_eq!(r.root.timeouts, 1, "node 5 declared dead once");
+    let f = r.relayed.as_ref().expect("the firmware's relay code ran");
+    assert!(f.root.ahead > 0, "{:?}", f.root);
 }

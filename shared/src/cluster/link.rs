@@ -161,6 +161,17 @@ pub trait RootBus {
         None
     }
 
+    /// Whether an exchange with `node` may begin now although its line is not up: its
+    /// reply composed ahead, as soon as the node's previous frame was taken, waits below
+    /// (at its relay) and the node is clocked the moment its line rises, so its next
+    /// exchange costs no round trip through the relays ([`crate::relay::RelayedBus::with_ahead`]).
+    /// The root logic asks only for nodes that will post again (they hold jobs). Default:
+    /// no (a direct bus clocks a node only with its line up).
+    fn ask_ahead(&self, node: NodeId) -> bool {
+        let _ = node;
+        false
+    }
+
     /// Wait for the exchange with `node` to end and take its frame, as `finish` does (the
     /// default: `finish`).
     async fn finish_node(&mut self, node: NodeId, rx: &mut [u8]) -> Result<usize, LinkError> {

@@ -37,7 +37,8 @@ use super::{Collect, SimConfig, SimError};
 use links_core::relay::{
     root_timeout_us, run_relay, RelayBuffers, RelayError, RelayReport, RelayedBuffers, RelayedBus,
     RelayedCounters, RelayedFrames, TwoLinks, DEPTH, MAX_RELAYS, MAX_RELAY_NODES, MID_DEPTH,
-    MID_RELAY_TIMEOUT_US, TWO_LINK_LANDINGS, TWO_LINK_SLOTS,
+    MID_RELAY_TIMEOUT_US, MID_SLOTS, REPLY_CELL, TWO_LEVEL_SLOTS, TWO_LINK_LANDINGS,
+    TWO_LINK_SLOTS,
 };
 use links_core::root::{run_bus, RootError};
 use links_core::spi::{Bank, BANK};
@@ -382,6 +383,9 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
     let per = link.per_relay;
     // The root waits for every level below it.
     let root_timeout = root_timeout_us(if link.mid.is_some() { 2 } else { 1 });
+    // Under two levels replies go ahead and wait at the leaf relays while the nodes render
+    // a run: as long as a node may be silent.
+    let ahead_us = (cfg.node_timeout_s * 1e6) as u64;
     let mut tasks: Vec<Option<Task<'a>>> = Vec::new();
     // Each root link's master end; the root's one CPU is shared.
     let [end0, end1] = [0, 1].map(|_| MasterEnd {
@@ -412,9 +416,13 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
         } else {
             // Two links, as `rc-fw --features relay-root` (and `relay-root-mid`) drives them:
             // `TwoLinks` over a `RelayedBus` on each (TWO_LINK_SLOTS exchanges in flight on
-            // each; MID_DEPTH per middle relay under two levels, DEPTH per leaf relay).
+            // each, DEPTH per leaf relay; under two levels MID_DEPTH per middle relay,
+            // TWO_LEVEL_SLOTS a link, replies ahead).
             let second_first = link.links.star.borrow().bus_nodes(1).0.saturating_mul(per);
-            let depth = if link.mid.is_some() { MID_DEPTH } else { DEPTH };
+            let (depth, ahead_us) = match link.mid {
+                Some(_) => (MID_DEPTH, ahead_us),
+                None => (DEPTH, 0),
+            };
             on_master_bus(&root_wire, 0, end0, async move |bus0| {
                 on_master_bus(&wire1, 1, end1, async move |bus1| {
                     let mut bufs = Box::new([
@@ -423,16 +431,20 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                     ]);
                     let [b0, b1] = &mut *bufs;
                     let (Ok(r0), Ok(r1)) = (
-                        RelayedBus::new(bus0, b0, 0, per).map(|b| b.with_slots::<TWO_LINK_SLOTS>()),
+                        RelayedBus::new(bus0, b0, 0, per)
+                            .map(|b| b.with_slots::<TWO_LEVEL_SLOTS>()),
                         RelayedBus::new(bus1, b1, second_first, per)
-                            .map(|b| b.with_slots::<TWO_LINK_SLOTS>()),
+                            .map(|b| b.with_slots::<TWO_LEVEL_SLOTS>()),
                     ) else {
                         return Err(failed);
                     };
                     let Ok(mut two) = TwoLinks::new(
                         r0.with_timeout(timeout_clock, root_timeout)
-                            .with_depth(depth),
-                        r1.with_timeout(clock2, root_timeout).with_depth(depth),
+                            .with_depth(depth)
+                            .with_ahead(ahead_us),
+                        r1.with_timeout(clock2, root_timeout)
+                            .with_depth(depth)
+                            .with_ahead(ahead_us),
                     ) else {
                         return Err(failed);
                     };
@@ -472,8 +484,17 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                 let mut parent = shared.handle();
                 on_master_bus(&leaf_wire, l as usize, end, async move |mut bus| {
                     let mut bufs = Box::new([[0u8; MAX_MESSAGE]; 3]);
+                    let mut cells = Box::new([[0u8; REPLY_CELL]; MAX_RELAY_NODES as usize]);
+                    // A reply cell per node of its bus, for replies sent ahead.
                     let [down, up, node] = &mut *bufs;
-                    run_relay(&mut parent, &mut bus, RelayBuffers { down, up, node }).await
+                    let ahead = &mut cells[..];
+                    let buffers = RelayBuffers {
+                        down,
+                        up,
+                        node,
+                        ahead,
+                    };
+                    run_relay(&mut parent, &mut bus, buffers).await
                 })
                 .await
             })
@@ -499,14 +520,22 @@ pub(super) fn relay_tasks<'a, S: AsRef<[u8]>>(
                 let out = on_slave_link(&root_wire, m, slots, &mut banks, async move |shared| {
                     let mut parent = shared.handle();
                     on_master_bus(&mid_wire, m as usize, end, async move |bus| {
-                        let mut frames = Box::new(RelayedBuffers::new());
+                        let mut frames = Box::new(RelayedFrames::<MID_SLOTS>::new());
                         let mut bufs = Box::new([[0u8; MAX_MESSAGE]; 3]);
                         let [down, up, node] = &mut *bufs;
+                        // An exchange in flight for every node behind it, replies ahead.
                         let mut leaves = RelayedBus::new(bus, &mut *frames, 0, per_leaf)?
-                            .with_timeout(timeout_clock, MID_RELAY_TIMEOUT_US);
-                        let r =
-                            run_relay(&mut parent, &mut leaves, RelayBuffers { down, up, node })
-                                .await;
+                            .with_slots::<MID_SLOTS>()
+                            .with_timeout(timeout_clock, MID_RELAY_TIMEOUT_US)
+                            .with_ahead(ahead_us)
+                            .with_depth(per_leaf);
+                        let buffers = RelayBuffers {
+                            down,
+                            up,
+                            node,
+                            ahead: &mut [],
+                        };
+                        let r = run_relay(&mut parent, &mut leaves, buffers).await;
                         add_counters(&mut mid.links.relayed.borrow_mut(), &leaves.counters);
                         r
                     })
@@ -528,4 +557,6 @@ fn add_counters(a: &mut RelayedCounters, b: &RelayedCounters) {
     a.stray_frames += b.stray_frames;
     a.timeouts += b.timeouts;
     a.most_in_flight = a.most_in_flight.max(b.most_in_flight);
+    a.ahead += b.ahead;
+    a.lost_ahead += b.lost_ahead;
 }

@@ -9,7 +9,7 @@
 //! `waiting` (up; 0 down) has bit `i` set for the relay's `i`-th node when its ready line
 //! is up and it waits to be asked (the parent then composes its reply). Records: a
 //! [`Kind::Request`] (down) is the root's reply for a node, to clock in the node's next
-//! exchange; a [`Kind::Frame`] (up) is what the node sent in that exchange; a
+//! exchange (a [`Kind::Ahead`] the same, sent before the node's line rose); a [`Kind::Frame`] (up) is what the node sent in that exchange; a
 //! [`Kind::Forwarded`] (up, node 0, 2 bytes: u16 LE) is how many root broadcasts the relay
 //! has passed on to its bus in this run (the root sends the next one only when each relay
 //! has passed on all but one, so none is dropped for want of a receive bank). Decoding
@@ -46,6 +46,10 @@ pub enum Kind {
     Frame,
     /// Up: the root broadcasts the relay has passed on so far (u16 LE; node 0).
     Forwarded,
+    /// Down: the root's reply for a node whose line is not up (yet): sent ahead, once
+    /// ([`super::RelayedBus::with_ahead`]). A leaf relay holds it and clocks the node with
+    /// it when its line rises; a middle relay begins the exchange with the leaf relay.
+    Ahead,
 }
 
 impl Kind {
@@ -54,6 +58,7 @@ impl Kind {
             Kind::Request => 1,
             Kind::Frame => 2,
             Kind::Forwarded => 3,
+            Kind::Ahead => 4,
         }
     }
 
@@ -62,6 +67,7 @@ impl Kind {
             1 => Ok(Kind::Request),
             2 => Ok(Kind::Frame),
             3 => Ok(Kind::Forwarded),
+            4 => Ok(Kind::Ahead),
             kind => Err(RelayError::UnknownKind { kind }),
         }
     }

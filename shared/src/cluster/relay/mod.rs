@@ -51,6 +51,17 @@
 //! behind its leaf relays 0..32 ([`MAX_RELAY_NODES`]: 4 leaf relays of 8 nodes), and the
 //! root's broadcasts cross it still tagged. Its time-out is [`MID_RELAY_TIMEOUT_US`]; the
 //! root above waits for both levels ([`root_timeout_us`]).
+//! Replies ahead (the root of two levels, [`RelayedBus::with_ahead`]): when a node's frame
+//! reaches the root and the node holds jobs (it will post again), the root composes its
+//! next reply at once and sends it down as a [`Kind::Ahead`] record; a middle relay begins
+//! that exchange with the leaf relay, which keeps the reply in the node's cell
+//! ([`RelayBuffers`]' `ahead`) and clocks the node the moment its line rises. So the node's
+//! next exchange (a `Poll` too) costs its leaf bus, not a round trip through both levels.
+//! Such an exchange waits while the node renders (its time-out is the node's silence bound
+//! longer); its reply is sent once and its cell let go at the root, so one that never
+//! arrives (the relay later reports the node waiting) ends empty and the node is asked
+//! anew. Every node then has an exchange in flight: the root keeps [`TWO_LEVEL_SLOTS`] a
+//! link ([`MID_DEPTH`] per middle relay), a middle relay [`MID_SLOTS`].
 //! Broadcasts go on the link when the root logic finishes them (as before: a relay forwards
 //! one on its bus before it can take the next two). The simulator runs this code (`links
 //! render --relay firmware`; `docs/cluster.md`). A relay that stops answering costs the root
@@ -69,7 +80,8 @@ pub use batch::{
 pub use node::{run_relay, RelayBuffers, RelayReport};
 pub use root::{
     RelayedBuffers, RelayedBus, RelayedCounters, RelayedFrames, DEPTH, LANDINGS, MAX_LANDINGS,
-    MAX_RELAYS, MID_DEPTH, REPLY_CELL, SLOTS, TWO_LINK_LANDINGS, TWO_LINK_SLOTS,
+    MAX_RELAYS, MID_DEPTH, MID_SLOTS, REPLY_CELL, SLOTS, TWO_LEVEL_SLOTS, TWO_LINK_LANDINGS,
+    TWO_LINK_SLOTS,
 };
 pub use two::TwoLinks;
 

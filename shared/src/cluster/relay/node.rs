@@ -1,7 +1,7 @@
 //! The relay's logic: [`run_relay`], a node on its parent's link and the root of its bus.
 
 use super::batch::{parse, BatchWriter, Kind, Record, Relayed};
-use super::{bit, RelayError, MAX_RELAY_NODES};
+use super::{bit, RelayError, MAX_RELAY_NODES, REPLY_CELL};
 use crate::cluster::link::{Incoming, LinkError, NodeId, NodeLink, RootBus};
 use crate::cluster::wire::{self, Down, MAX_MESSAGE};
 use embassy_futures::select::{select, Either};
@@ -14,6 +14,11 @@ pub struct RelayBuffers<'m> {
     pub up: &'m mut [u8; MAX_MESSAGE],
     /// A node's frame from the exchange just clocked.
     pub node: &'m mut [u8; MAX_MESSAGE],
+    /// A leaf relay's cell per node of its bus for a reply the root sent ahead of the
+    /// node's line ([`super::RelayedBus::with_ahead`]): the node is clocked with it the
+    /// moment its line rises. Empty: no reply is held ahead (such requests are dropped, and
+    /// the root sends them again once the node waits).
+    pub ahead: &'m mut [[u8; REPLY_CELL]],
 }
 
 /// What a relay did.
@@ -30,6 +35,12 @@ pub struct RelayReport {
     pub stray_requests: u32,
     /// Parent frames that failed to decode (dropped).
     pub bad_frames: u32,
+    /// Of `routed`: node exchanges clocked with a reply held ahead, as the line rose.
+    pub ahead: u32,
+    /// Replies sent ahead that found no room (a middle relay's bus had none in flight to
+    /// spare; a leaf relay has no cell for it, or it is longer than one): dropped, the
+    /// exchange ends empty at the root once the node waits.
+    pub dropped_ahead: u32,
 }
 
 /// Per-node progress, as bitmaps over the relay's bus (bit `i`: node `first + i`).
@@ -47,6 +58,10 @@ struct Nodes {
     /// A node frame clocked when the batch had no room left for it (its node and length,
     /// in the relay's `node` buffer): it opens the next batch.
     held: Option<(NodeId, u16)>,
+    /// A leaf relay's: a reply the root sent ahead of the node's line waits in its cell
+    /// (`ahead_len` bytes).
+    ahead: u32,
+    ahead_len: [u8; MAX_RELAY_NODES as usize],
 }
 
 /// Run a relay until the root's `Stop` has been passed on: forward the parent's broadcasts
@@ -71,7 +86,12 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
             most: MAX_RELAY_NODES as u32,
         });
     }
-    let RelayBuffers { down, up, node } = buf;
+    let RelayBuffers {
+        down,
+        up,
+        node,
+        ahead: cells,
+    } = buf;
     let mut up = BatchWriter::new(&mut up[..])?;
     let mut report = RelayReport::default();
     let mut nodes = Nodes::default();
@@ -84,14 +104,21 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         if overlapped {
             collect(bus, &mut nodes, &mut up, node, &mut report).await?;
         }
-        // 1. Nodes whose line is up and that are not being served wait to be asked.
+        // 1. A node with a reply held ahead is clocked as its line rises; the others whose
+        // line is up and that are not being served wait to be asked.
+        if nodes.ahead != 0 {
+            clock_ahead(bus, &mut nodes, cells, &mut up, node, &mut report).await?;
+        }
         let mut fresh = 0u32;
         let mut busy_line = false;
+        let mut ahead_up = false;
         for i in 0..count {
             if bus.line(first + i) {
                 let b = 1u32 << i;
-                if (nodes.waiting | nodes.flying | nodes.answered) & b == 0 {
+                if (nodes.waiting | nodes.flying | nodes.answered | nodes.ahead) & b == 0 {
                     fresh |= b;
+                } else if nodes.ahead & b != 0 && nodes.held.is_none() && !posted {
+                    ahead_up = true;
                 } else {
                     busy_line = true;
                 }
@@ -143,6 +170,10 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         // 3. Wait for the parent, or (when no line is up) for a node's line; a middle
         // relay's bus moves meanwhile and says when it has news (also while a frame is
         // held for the next batch: its exchanges in flight go on).
+        if ahead_up && !posted {
+            // A held reply's line rose after `clock_ahead` looked: clock it now.
+            continue;
+        }
         let got = if overlapped {
             match select(parent.recv(&mut down[..]), bus.wait_news()).await {
                 Either::First(got) => got?,
@@ -168,7 +199,8 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
                 nodes.answered &= !nodes.in_post;
                 nodes.in_post = 0;
                 let frame = &down[..len.min(MAX_MESSAGE)];
-                serve(bus, frame, &mut nodes, &mut up, node, &mut report).await?;
+                let bufs = (&mut up, &mut *node, &mut *cells);
+                serve(bus, frame, &mut nodes, bufs, &mut report).await?;
             }
         }
     }
@@ -202,8 +234,11 @@ async fn serve<B: RootBus>(
     bus: &mut B,
     frame: &[u8],
     nodes: &mut Nodes,
-    up: &mut BatchWriter<'_>,
-    rx: &mut [u8; MAX_MESSAGE],
+    (up, rx, cells): (
+        &mut BatchWriter<'_>,
+        &mut [u8; MAX_MESSAGE],
+        &mut [[u8; REPLY_CELL]],
+    ),
     report: &mut RelayReport,
 ) -> Result<(), RelayError> {
     let (first, count) = bus.nodes();
@@ -216,18 +251,38 @@ async fn serve<B: RootBus>(
         }
     };
     for r in records {
-        let Ok(Record {
-            kind: Kind::Request,
-            node,
-            data,
-        }) = r
-        else {
-            report.bad_frames += 1;
-            continue;
+        let (ahead, node, data) = match r {
+            Ok(Record {
+                kind: kind @ (Kind::Request | Kind::Ahead),
+                node,
+                data,
+            }) => (kind == Kind::Ahead, node, data),
+            _ => {
+                report.bad_frames += 1;
+                continue;
+            }
         };
         // Records name the node by its index on this bus.
+        let overlapped = bus.in_flight() > 1;
         let b = match bit(0, count, node) {
             Some(b) if nodes.waiting & b != 0 => b,
+            // A reply sent ahead of the node's line (only these: a request sent again may
+            // come after its node was served): a middle relay begins the exchange (its
+            // leaf relay holds it), a leaf relay keeps it in the node's cell.
+            Some(b) if ahead && overlapped && (nodes.flying | nodes.answered) & b == 0 => b,
+            // A newer one replaces a reply still held (the exchange it was for was given up
+            // above, which sent this one).
+            Some(b) if ahead && !overlapped && nodes.answered & b == 0 => {
+                match cells.get_mut(node as usize) {
+                    Some(cell) if data.len() <= REPLY_CELL => {
+                        cell[..data.len()].copy_from_slice(data);
+                        nodes.ahead_len[node as usize] = data.len() as u8;
+                        nodes.ahead |= b;
+                    }
+                    _ => report.dropped_ahead += 1,
+                }
+                continue;
+            }
             _ => {
                 report.stray_requests += 1;
                 continue;
@@ -238,12 +293,15 @@ async fn serve<B: RootBus>(
         if nodes.held.is_some() {
             continue;
         }
-        if bus.in_flight() > 1 {
+        if overlapped {
             // A middle relay: begin the exchange; its frame goes up when it comes back. A
-            // bus with no room for it now leaves the node waiting (the root asks again).
+            // bus with no room for it now leaves the node waiting (the root asks again; a
+            // reply ahead is dropped: the root asks anew once the node waits).
             if bus.begin_exchange(first + node as NodeId, data).is_ok() {
                 nodes.waiting &= !b;
                 nodes.flying |= b;
+            } else if ahead {
+                report.dropped_ahead += 1;
             }
             continue;
         }
@@ -252,8 +310,44 @@ async fn serve<B: RootBus>(
             .await?;
         queue_frame(up, nodes, node, &rx[..], got)?;
         nodes.waiting &= !b;
+        // (A reply held ahead for it is stale now.)
+        nodes.ahead &= !b;
         nodes.answered |= b;
         report.routed += 1;
+    }
+    Ok(())
+}
+
+/// A leaf relay: clock every node whose reply waits ahead in its cell and whose line is up,
+/// and queue its frame (while no frame is held for the next batch).
+async fn clock_ahead<B: RootBus>(
+    bus: &mut B,
+    nodes: &mut Nodes,
+    cells: &[[u8; REPLY_CELL]],
+    up: &mut BatchWriter<'_>,
+    rx: &mut [u8; MAX_MESSAGE],
+    report: &mut RelayReport,
+) -> Result<(), RelayError> {
+    let (first, count) = bus.nodes();
+    for i in 0..count.min(MAX_RELAY_NODES) {
+        let b = 1u32 << i;
+        if nodes.held.is_some() {
+            break;
+        }
+        if nodes.ahead & b == 0 || !bus.line(first + i) {
+            continue;
+        }
+        let len = nodes.ahead_len[i as usize] as usize;
+        let reply = cells
+            .get(i as usize)
+            .and_then(|c| c.get(..len))
+            .unwrap_or(&[]);
+        let got = bus.exchange(first + i, reply, &mut rx[..]).await?;
+        queue_frame(up, nodes, i, &rx[..], got)?;
+        nodes.ahead &= !b;
+        nodes.answered |= b;
+        report.routed += 1;
+        report.ahead += 1;
     }
     Ok(())
 }
@@ -308,4 +402,138 @@ async fn collect<B: RootBus>(
         report.routed += 1;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cluster::link::Transfer;
+    use core::cell::Cell;
+    use core::task::Poll;
+    use std::collections::VecDeque;
+    use std::vec::Vec;
+
+    /// A parent that hands the relay its scripted frames as exchanges, then nothing.
+    struct Parent {
+        script: VecDeque<Vec<u8>>,
+        posts: u32,
+    }
+    impl NodeLink for Parent {
+        fn post(&mut self, _frame: &[u8]) -> Result<(), LinkError> {
+            self.posts += 1;
+            Ok(())
+        }
+        async fn recv(&mut self, rx: &mut [u8]) -> Result<Incoming, LinkError> {
+            match self.script.pop_front() {
+                Some(f) => {
+                    rx[..f.len()].copy_from_slice(&f);
+                    Ok(Incoming::Exchanged { len: f.len() })
+                }
+                None => core::future::pending().await,
+            }
+        }
+    }
+
+    /// A leaf bus of 2 nodes: node 0's line rises at its `rise_at`-th look (and stays up
+    /// until it is clocked).
+    struct Bus {
+        looks: Cell<u32>,
+        rise_at: u32,
+        clocked: u32,
+        started: bool,
+        tx: [u8; MAX_MESSAGE],
+    }
+    impl Bus {
+        fn up(&self, node: NodeId) -> bool {
+            if node != 0 || self.clocked > 0 {
+                return false;
+            }
+            self.looks.set(self.looks.get() + 1);
+            self.looks.get() >= self.rise_at
+        }
+    }
+    impl RootBus for Bus {
+        fn nodes(&self) -> (NodeId, u16) {
+            (0, 2)
+        }
+        async fn wait_ready(&mut self) -> NodeId {
+            loop {
+                if self.up(0) {
+                    return 0;
+                }
+                core::future::pending::<()>().await;
+            }
+        }
+        fn ready(&self) -> Option<NodeId> {
+            None
+        }
+        fn line(&self, node: NodeId) -> bool {
+            self.up(node)
+        }
+        fn tx_bank(&mut self) -> &mut [u8] {
+            &mut self.tx
+        }
+        fn start(&mut self, t: Transfer, _len: usize) -> Result<(), LinkError> {
+            if let Transfer::Exchange(_) = t {
+                self.started = true;
+            }
+            Ok(())
+        }
+        async fn finish(&mut self, rx: &mut [u8]) -> Result<usize, LinkError> {
+            if core::mem::take(&mut self.started) {
+                self.clocked += 1;
+                rx[..2].copy_from_slice(&[0xAA, 0]);
+                return Ok(2);
+            }
+            Ok(0)
+        }
+    }
+
+    /// Node 0's line rises between `clock_ahead`'s look at it and the scan of
+    /// step 1 (it is then "busy", `nodes.ahead`): with nothing to post, the relay waits
+    /// on its parent alone (its line down: the parent never gathers it) and never clocks
+    /// the node.
+    #[test]
+    fn a_line_rising_right_after_clock_ahead_looked_is_still_clocked() {
+        let mut frame = [0u8; MAX_MESSAGE];
+        let mut w = BatchWriter::new(&mut frame[..]).unwrap();
+        w.push(Record {
+            kind: Kind::Ahead,
+            node: 0,
+            data: &[7, 0, 0],
+        })
+        .unwrap();
+        let down_frame = w.bytes().to_vec();
+        let mut parent = Parent {
+            script: VecDeque::from([down_frame]),
+            posts: 0,
+        };
+        // Looks at node 0's line: 1 (scan, before the record), 2 (clock_ahead), 3 (scan).
+        let mut bus = Bus {
+            looks: Cell::new(0),
+            rise_at: 3,
+            clocked: 0,
+            started: false,
+            tx: [0; MAX_MESSAGE],
+        };
+        let (mut d, mut u, mut n) = ([0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE], [0u8; MAX_MESSAGE]);
+        let mut cells = [[0u8; REPLY_CELL]; 2];
+        let bufs = RelayBuffers {
+            down: &mut d,
+            up: &mut u,
+            node: &mut n,
+            ahead: &mut cells,
+        };
+        {
+            let fut = run_relay(&mut parent, &mut bus, bufs);
+            let mut fut = core::pin::pin!(fut);
+            for _ in 0..100 {
+                assert!(matches!(
+                    embassy_futures::poll_once(fut.as_mut()),
+                    Poll::Pending
+                ));
+            }
+        }
+        assert_eq!(bus.clocked, 1, "node 0, its line up, was never clocked");
+    }
 }

@@ -16,20 +16,29 @@ use embassy_futures::select::{select, Either};
 pub const MAX_RELAYS: usize = 8;
 
 /// Most node exchanges a [`RelayedBus`] keeps in flight at once unless told otherwise
-/// ([`RelayedBus::with_slots`]; each holds a reply cell of [`RelayedBuffers`] until its
-/// reply is down and the node's frame has come back).
+/// ([`RelayedBus::with_slots`]; each holds a reply cell of [`RelayedBuffers`], or a frame
+/// buffer, until its reply is down and, unless it went ahead, the node's frame is back).
 pub const SLOTS: usize = 16;
 
-/// Node exchanges in flight on each link when the root drives its relays on two links
-/// ([`super::TwoLinks`], each link's buffers `RelayedFrames<TWO_LINK_SLOTS>`): four middle
-/// relays of a two-level tree at [`MID_DEPTH`] each (four leaf relays of a one-level tree
-/// use 8 of them, at [`DEPTH`]).
+/// Reply cells, and node exchanges in flight, on each link when the root drives its relays
+/// on two links ([`super::TwoLinks`], each link's buffers `RelayedFrames<TWO_LINK_SLOTS>`):
+/// four leaf relays of a one-level tree use 8 of them, at [`DEPTH`]. Under two levels the
+/// link keeps [`TWO_LEVEL_SLOTS`] exchanges, most of them ahead and holding no cell.
 pub const TWO_LINK_SLOTS: usize = 32;
 
 /// Node exchanges in flight per middle relay at the root of two levels (`rc-fw --features
-/// relay-root-mid`, and the simulator's): a middle relay's 32 nodes behind 4 leaf relays,
-/// 2 at a time on each leaf bus, so the root keeps each leaf relay's 2 going.
-pub const MID_DEPTH: u16 = 8;
+/// relay-root-mid`, and the simulator's): one for each of a middle relay's 32 nodes, since
+/// their replies go ahead ([`RelayedBus::with_ahead`]) and wait at the leaf relays while
+/// the nodes render (8 before replies went ahead: 2 on each of its 4 leaf buses).
+pub const MID_DEPTH: u16 = MAX_RELAY_NODES;
+
+/// Node exchanges in flight on each of the two links of the root of two levels: one for
+/// every node behind its 4 middle relays ([`MID_DEPTH`] each).
+pub const TWO_LEVEL_SLOTS: usize = MAX_RELAYS / 2 * MAX_RELAY_NODES as usize;
+
+/// Node exchanges in flight at a middle relay ([`RelayedBus`] over its leaf relays, with
+/// replies ahead): one for each of the nodes behind it.
+pub const MID_SLOTS: usize = MAX_RELAY_NODES as usize;
 
 /// Bytes of a reply kept in its exchange's own cell: the longest job hand-out (`Down::Work`
 /// with its two jobs, envelope and CRC: at most 56 bytes, a test checks it) fits; a longer reply (a
@@ -78,6 +87,11 @@ pub struct RelayedCounters {
     pub timeouts: u32,
     /// The most node exchanges that were in flight at once.
     pub most_in_flight: u32,
+    /// Node exchanges begun ahead of the node's line ([`RelayedBus::with_ahead`]).
+    pub ahead: u32,
+    /// Of those, the ones whose reply never reached the relay: ended empty (the node,
+    /// waiting there, was composed a new one).
+    pub lost_ahead: u32,
 }
 
 /// The buffers of a [`RelayedBus`] with up to `CELLS` node exchanges in flight (the
@@ -87,7 +101,8 @@ pub struct RelayedCounters {
 /// [`REPLY_CELL`] bytes, not a frame buffer of its own (`RelayedFrames<32, 5>`: 16,232
 /// bytes, against 55,160 with a frame buffer per exchange).
 pub struct RelayedFrames<const CELLS: usize, const LANDS: usize = LANDINGS> {
-    /// Each exchange's reply (slot `i`'s in cell `i`) until it is down and its frame up.
+    /// Replies waiting to go down (any free cell; an exchange holds its cell until its
+    /// frame is up, or, a reply ahead, until it is down).
     pub cells: [[u8; REPLY_CELL]; CELLS],
     /// One to compose the next frame in, one for the broadcast waiting to go, and the
     /// replies longer than a cell.
@@ -120,10 +135,14 @@ impl<const CELLS: usize, const LANDS: usize> Default for RelayedFrames<CELLS, LA
 /// Where an exchange's reply waits to go down.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Reply {
-    /// In its slot's cell.
-    Cell,
+    /// In cell `n`.
+    Cell(u8),
     /// In frame buffer `n` (longer than a cell).
     Frame(u8),
+    /// Down and let go: a reply sent ahead of its node's line waits at the relay, and its
+    /// buffer here serves the next (lost on the way, the exchange ends empty and the root
+    /// logic composes the node a new one).
+    Gone,
 }
 
 /// Where a node exchange in flight is.
@@ -132,23 +151,31 @@ enum Stage {
     /// The reply (`len` bytes) waits to go down (`sent_in` None), or went down in the
     /// relay's exchange number `sent_in` ([`RelayedBus`]'s `gathers`); it goes down again
     /// when a batch of a later exchange still reports the node waiting (the relay never
-    /// got it). Given up at `deadline` (µs, with a time-out).
+    /// got it). Given up at its slot's `deadline` (with a time-out). `ahead`: begun before
+    /// the node's line rose ([`RelayedBus::with_ahead`]).
     Asked {
         reply: Reply,
         len: u16,
         sent_in: Option<u16>,
-        deadline: u64,
+        ahead: bool,
     },
     /// The node's frame is `len` bytes at `at` in landing buffer `landing`.
     Answered { landing: u8, at: u16, len: u16 },
+    /// A reply sent ahead never reached the relay (its node waits there unasked): the
+    /// exchange ends empty.
+    Lost,
 }
 
-/// A node exchange in flight: the node, its stage.
+/// A node exchange in flight: the node, its stage, when it is given up (µs, with a
+/// time-out; beside the stage, not in it, so a slot takes 24 bytes, not 32).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Slot {
+    deadline: u64,
     node: NodeId,
     stage: Stage,
 }
+
+const _: () = assert!(core::mem::size_of::<Option<Slot>>() <= 24);
 
 /// An operation on the root's link.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -200,11 +227,15 @@ pub struct RelayedBus<'m, L, C = NoClock, const S: usize = SLOTS> {
     held: [u16; MAX_LANDINGS],
     /// The landing buffer the relay exchange in flight lands in.
     landing: u8,
-    /// Node exchanges in flight at most, over all relays (the cells', at most `S`).
+    /// Node exchanges in flight at most, over all relays (`S`; each holds a cell, or a
+    /// frame buffer, until its reply is down and, unless it went ahead, its frame up).
     slot_count: u16,
     /// How long a node exchange may wait for its frame (µs; 0: for ever), by `clock`.
     clock: C,
     timeout_us: u64,
+    /// How long an exchange begun ahead of its node's line may wait (µs; 0: none begun
+    /// ahead, [`RelayedBus::with_ahead`]).
+    ahead_us: u64,
     first: NodeId,
     per_relay: u16,
     relays: u16,
@@ -255,7 +286,7 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
                 "a relayed bus keeps 2 to MAX_LANDINGS relay batches"
             );
         };
-        let slot_count = CELLS.min(SLOTS) as u16;
+        let slot_count = SLOTS as u16;
         let relays = link.nodes().1;
         let total = relays as u32 * per_relay as u32;
         if relays as usize > MAX_RELAYS || per_relay > MAX_RELAY_NODES {
@@ -285,6 +316,7 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
             slot_count,
             clock: NoClock,
             timeout_us: 0,
+            ahead_us: 0,
             first,
             per_relay,
             relays,
@@ -306,9 +338,10 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
     }
 
     /// The same bus keeping state for `T` node exchanges in flight instead of [`SLOTS`]
-    /// (fewer also bound what its buffers allow): the root of relays on two links keeps
-    /// [`TWO_LINK_SLOTS`] on each, in the CCM the state lives in. Before the first
-    /// exchange (it starts with none in flight).
+    /// (each also needs a free reply cell to begin, unless its reply is longer than one):
+    /// the root of relays on two links keeps [`TWO_LINK_SLOTS`] on each, or
+    /// [`TWO_LEVEL_SLOTS`] under two levels. Before the first exchange (it starts with none
+    /// in flight).
     pub fn with_slots<const T: usize>(self) -> RelayedBus<'m, L, NoClock, T> {
         let timeout_us = self.timeout_us;
         self.rebuilt(NoClock, timeout_us, [None; T])
@@ -335,7 +368,7 @@ impl<'m, L, C, const S: usize> RelayedBus<'m, L, C, S> {
         timeout_us: u64,
         slots: [Option<Slot>; T],
     ) -> RelayedBus<'m, L, C2, T> {
-        let slot_count = (self.cells.len() as u16).min(T as u16);
+        let slot_count = T as u16;
         RelayedBus {
             link: self.link,
             cells: self.cells,
@@ -346,6 +379,7 @@ impl<'m, L, C, const S: usize> RelayedBus<'m, L, C, S> {
             slot_count,
             clock,
             timeout_us,
+            ahead_us: self.ahead_us,
             first: self.first,
             per_relay: self.per_relay,
             relays: self.relays,
@@ -379,6 +413,31 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
         self
     }
 
+    /// Let the root logic begin an exchange with a node whose line is not up
+    /// ([`RootBus::ask_ahead`]): its reply goes down to its relay, which clocks the node the
+    /// moment its line rises. Such an exchange waits up to `ahead_us` for the node's frame
+    /// (a node renders a run meanwhile) besides the time-out. The relays below must hold
+    /// replies ahead (leaf relays: [`super::RelayBuffers`]' `ahead` cells).
+    pub fn with_ahead(mut self, ahead_us: u64) -> Self {
+        self.ahead_us = ahead_us;
+        self
+    }
+
+    /// Whether an exchange with `node` may begin now whether or not it waits: none in
+    /// flight with it, its relay below `depth`, a slot free, frame buffers enough for a
+    /// reply longer than a cell while one is left for a broadcast (the one composed in,
+    /// and two more), no broadcast queued.
+    fn may_begin(&self, node: NodeId) -> bool {
+        self.cast.is_none()
+            && self.free_slot().is_some()
+            && self.free_cell().is_some()
+            && self.untaken_frames() >= 3
+            && self.slot_of(node).is_none()
+            && self
+                .place(node)
+                .is_some_and(|(r, _)| self.on_relay(r).0 < self.depth)
+    }
+
     /// Relay index and bit of `node`.
     fn place(&self, node: NodeId) -> Option<(u16, u32)> {
         let k = node.checked_sub(self.first)?;
@@ -388,6 +447,17 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
 
     fn relay_of(&self, node: NodeId) -> Option<u16> {
         self.place(node).map(|(r, _)| r)
+    }
+
+    /// A reply cell no exchange holds.
+    fn free_cell(&self) -> Option<u8> {
+        (0..self.cells.len().min(u8::MAX as usize) as u8).find(|&c| {
+            !self
+                .slots
+                .iter()
+                .flatten()
+                .any(|s| matches!(s.stage, Stage::Asked { reply: Reply::Cell(d), .. } if d == c))
+        })
     }
 
     /// A slot no exchange holds, among the buffers' `slot_count`.
@@ -461,6 +531,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     /// while one is left for a broadcast (the one composed in, and two more).
     fn ready_in(&self) -> Option<NodeId> {
         self.free_slot()?;
+        self.free_cell()?;
         if self.untaken_frames() < 3 {
             return None;
         }
@@ -482,8 +553,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     fn ended(&self) -> impl Iterator<Item = &Slot> {
         let now = (self.timeout_us > 0).then(|| self.clock.now_us());
         self.slots.iter().flatten().filter(move |s| match s.stage {
-            Stage::Answered { .. } => true,
-            Stage::Asked { deadline, .. } => now.is_some_and(|t| t >= deadline),
+            Stage::Answered { .. } | Stage::Lost => true,
+            Stage::Asked { .. } => now.is_some_and(|t| t >= s.deadline),
         })
     }
 
@@ -512,8 +583,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             .iter()
             .flatten()
             .filter_map(|s| match s.stage {
-                Stage::Asked { deadline, .. } => Some(deadline),
-                Stage::Answered { .. } => None,
+                Stage::Asked { .. } => Some(s.deadline),
+                Stage::Answered { .. } | Stage::Lost => None,
             })
             .chain(self.cast_until)
             .filter(|&d| d > t)
@@ -529,8 +600,12 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
 
     /// The link operation worth starting now, if the link is free: the pending broadcast;
     /// else, round the link from `next_link`, a relay whose line is up that (1) has a reply
-    /// to take down for the first time, (2) has one down whose frame may be up, (3) has no
-    /// exchange in flight and no waiting node the root knows of (it has news).
+    /// to take down for the first time, or else (2) has one down whose frame may be up, or
+    /// has no exchange in flight and no waiting node the root knows of (it has news). The
+    /// two of (2) take turns: a relay whose frames may be up keeps its line up (it reports
+    /// its other nodes waiting) for as long as its exchange takes below it, so ranking it
+    /// first would never gather a relay with news, and the root would never learn of that
+    /// relay's waiting nodes.
     fn pick(&self) -> Option<LinkOp> {
         if self.dangling.is_some() {
             return None;
@@ -552,10 +627,8 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             let lagging = matches!(self.cast, Some(Cast::Queued { .. })) && self.lags(r);
             let class = if unsent || lagging {
                 0
-            } else if asked {
+            } else if asked || (n == 0 && self.waiting[r as usize] == 0) {
                 1
-            } else if n == 0 && self.waiting[r as usize] == 0 {
-                2
             } else {
                 continue;
             };
@@ -611,8 +684,9 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                                 reply,
                                 len,
                                 sent_in: None,
-                                ..
+                                ahead,
                             },
+                        ..
                     }) = *s
                     else {
                         continue;
@@ -622,15 +696,19 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                         continue;
                     }
                     let data = match reply {
-                        Reply::Cell => self.cells.get(i).and_then(|c| c.get(..len as usize)),
+                        Reply::Cell(c) => self
+                            .cells
+                            .get(c as usize)
+                            .and_then(|c| c.get(..len as usize)),
                         Reply::Frame(b) => self
                             .frames
                             .get(b as usize)
                             .and_then(|f| f.get(..len as usize)),
+                        Reply::Gone => None,
                     }
                     .unwrap_or(&[]);
                     if w.push(Record {
-                        kind: Kind::Request,
+                        kind: if ahead { Kind::Ahead } else { Kind::Request },
                         node: local,
                         data,
                     })
@@ -652,12 +730,22 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
                 };
                 for (s, c) in self.slots.iter_mut().zip(carried) {
                     if let Some(Slot {
-                        stage: Stage::Asked { sent_in, .. },
+                        stage:
+                            Stage::Asked {
+                                sent_in,
+                                reply,
+                                ahead,
+                                ..
+                            },
                         ..
                     }) = s
                     {
                         if c {
                             *sent_in = Some(number);
+                            // A reply ahead waits at the relay: its buffer is let go.
+                            if *ahead {
+                                *reply = Reply::Gone;
+                            }
                         }
                     }
                 }
@@ -808,9 +896,15 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
             if s.node < base || local >= per || local >= MAX_RELAY_NODES {
                 continue;
             }
-            if let Stage::Asked { sent_in, .. } = &mut s.stage {
+            if let Stage::Asked { sent_in, reply, .. } = &mut s.stage {
                 if sent_in.is_some_and(|k| k != number) && waiting & (1u32 << local) != 0 {
-                    *sent_in = None;
+                    if *reply == Reply::Gone {
+                        // A reply ahead, let go: the exchange ends empty; the node, waiting,
+                        // is composed a new one.
+                        s.stage = Stage::Lost;
+                    } else {
+                        *sent_in = None;
+                    }
                 }
             }
         }
@@ -843,6 +937,10 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
             .is_some_and(|(r, b)| self.waiting[r as usize] & b != 0)
     }
 
+    fn ask_ahead(&self, node: NodeId) -> bool {
+        self.ahead_us > 0 && self.may_begin(node)
+    }
+
     fn tx_bank(&mut self) -> &mut [u8] {
         &mut self.frames[self.compose as usize][..MAX_ROUTED]
     }
@@ -872,18 +970,27 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                 if len > REPLY_CELL && self.untaken_frames() < 3 {
                     return Err(LinkError::Busy);
                 }
+                let cell = self.free_cell().filter(|_| len <= REPLY_CELL);
+                if len <= REPLY_CELL && cell.is_none() {
+                    return Err(LinkError::Busy);
+                }
+                // Begun ahead of the node's line: it may wait while the node renders.
+                let ahead = self.ahead_us > 0 && self.waiting[r as usize] & b == 0;
                 self.waiting[r as usize] &= !b;
                 self.next_scan = (node - self.first + 1) % (self.relays * self.per_relay);
-                let deadline = self.clock.now_us().saturating_add(self.timeout_us);
+                let wait = self.timeout_us + if ahead { self.ahead_us } else { 0 };
+                let deadline = self.clock.now_us().saturating_add(wait);
+                self.counters.ahead += u32::from(ahead);
                 // A reply that fits its cell moves there; a longer one keeps its buffer.
                 let composed = self
                     .frames
                     .get(self.compose as usize)
                     .and_then(|f| f.get(..len));
-                let reply = match (composed, self.cells.get_mut(i)) {
-                    (Some(src), Some(cell)) if len <= REPLY_CELL => {
+                let into = cell.and_then(|c| Some((c, self.cells.get_mut(c as usize)?)));
+                let reply = match (composed, into) {
+                    (Some(src), Some((c, cell))) => {
                         cell[..len].copy_from_slice(src);
-                        Reply::Cell
+                        Reply::Cell(c)
                     }
                     _ => Reply::Frame(self.compose),
                 };
@@ -893,8 +1000,9 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                         reply,
                         len: len as u16,
                         sent_in: None,
-                        deadline,
+                        ahead,
                     },
+                    deadline,
                 });
                 let busy = self.slots.iter().flatten().count() as u32;
                 self.counters.most_in_flight = self.counters.most_in_flight.max(busy);
@@ -1019,8 +1127,13 @@ impl<L: RootBus, C: RootClock, const S: usize> RootBus for RelayedBus<'_, L, C, 
                     dst.copy_from_slice(src);
                     return Ok(n);
                 }
-                Stage::Asked { deadline, .. }
-                    if self.timeout_us > 0 && self.clock.now_us() >= deadline =>
+                Stage::Lost => {
+                    self.slots[i] = None;
+                    self.counters.lost_ahead += 1;
+                    return Ok(0);
+                }
+                Stage::Asked { .. }
+                    if self.timeout_us > 0 && self.clock.now_us() >= slot.deadline =>
                 {
                     self.slots[i] = None;
                     self.counters.timeouts += 1;
@@ -1528,6 +1641,30 @@ mod tests {
         assert_eq!(bus.link().broadcasts, 3);
     }
 
+    /// A relay whose frame may be up (its line up meanwhile) does not keep the link from a
+    /// relay with news the root has not heard: both are gathered in turn, so the root learns
+    /// of the second relay's waiting node while the first one's frame is still late.
+    #[test]
+    fn a_relay_with_news_is_gathered_while_another_ones_frame_is_late() {
+        let clock = Jump(Cell::new(0));
+        let mut link = Relays::new(&clock, vec![true, true]);
+        // Relay 0's node 0 answers only after many exchanges; relay 1's node (2) waits.
+        link.late = vec![(0, 0, 1_000)];
+        link.waits[1] = 0b1;
+        let mut bufs = Box::new(RelayedBuffers::new());
+        let mut bus = RelayedBus::new(link, &mut bufs, 0, 2)
+            .unwrap()
+            .with_timeout(&clock, 1_000_000);
+        bus.tx_bank()[..2].copy_from_slice(&[7, 0]);
+        assert_eq!(bus.start(Transfer::Exchange(0), 2), Ok(()));
+        for _ in 0..8 {
+            bus.poll();
+        }
+        assert!(bus.line(2), "relay 1 was never gathered: {:?}", bus.gathers);
+        assert_eq!(bus.ready(), Some(2));
+        assert_eq!(bus.flying(), 1);
+    }
+
     /// A request goes down once when the relay gets it, and again only when a batch
     /// composed after it went down still reports its node waiting: with the down halves of
     /// the next `lost` exchanges lost, each costs the request it carried one more sending,
@@ -1563,5 +1700,66 @@ mod tests {
             assert_eq!(bus.link().requests[0][..2], expect, "lost {lost}");
             assert_eq!(bus.counters.timeouts, 0);
         }
+    }
+
+    /// A reply sent ahead of its node's line goes down once and lets its cell go (one cell
+    /// serves any number of them); it waits at the relay past the time-out, up to the
+    /// time ahead besides; one that never reached the relay (the relay then reports its
+    /// node waiting) ends empty, and the node, waiting, is asked anew.
+    #[test]
+    fn a_reply_ahead_lets_its_cell_go_and_one_lost_ends_empty() {
+        let clock = Jump(Cell::new(0));
+        let link = Relays::new(&clock, vec![true]);
+        let mut bufs = Box::new(RelayedFrames::<1>::new());
+        let bus = RelayedBus::new(link, &mut bufs, 0, 4)
+            .unwrap()
+            .with_timeout(&clock, 1_000)
+            .with_depth(4);
+        let mut rx = [0u8; MAX_MESSAGE];
+        // Without `with_ahead`, nothing begins before a node's line.
+        assert!(!bus.ask_ahead(0));
+        let mut bus = bus.with_ahead(10_000);
+        assert!(bus.ask_ahead(0));
+        // Node 0's frame will come up only some exchanges after its reply went down.
+        bus.link.late.push((0, 0, 30));
+        bus.tx_bank()[..3].copy_from_slice(&[7, 0, 0]);
+        assert_eq!(bus.start(Transfer::Exchange(0), 3), Ok(()));
+        // It went on the link at once (the link was free): the one cell is free again.
+        assert_eq!(bus.dangling, Some(LinkOp::Gather(0)));
+        assert!(bus.ask_ahead(1), "the reply is down: its cell is free");
+        block_on(bus.settle()).unwrap();
+        // Node 1's reply ahead is lost on the way, and node 1 then waits at the relay.
+        bus.link.lose_down = 1;
+        bus.tx_bank()[..3].copy_from_slice(&[7, 1, 1]);
+        assert_eq!(bus.start(Transfer::Exchange(1), 3), Ok(()));
+        block_on(bus.settle()).unwrap();
+        assert_eq!(bus.link().requests[0][..2], [1, 1]);
+        bus.link.waits[0] = 0b10;
+        // The exchanges go on (the link is asked again): node 1's ends empty, node 0's
+        // frame comes up though its time-out (1 ms) has passed.
+        let mut ended = Vec::new();
+        while ended.len() < 2 {
+            let n = block_on(bus.wait_ready());
+            if bus.arrived() == Some(n) {
+                let got = block_on(bus.finish_node(n, &mut rx)).unwrap();
+                ended.push((n, got));
+            }
+        }
+        ended.sort();
+        assert_eq!(ended, [(0, 2), (1, 0)]);
+        assert!(
+            clock.0.get() > 1_000,
+            "node 0 was waited for past the time-out"
+        );
+        assert_eq!(bus.counters.ahead, 2);
+        assert_eq!(bus.counters.lost_ahead, 1);
+        assert_eq!(bus.counters.timeouts, 0);
+        // Node 1, waiting, is the bus's to ask now, with its line: not ahead.
+        assert_eq!(bus.ready(), Some(1));
+        bus.tx_bank()[..3].copy_from_slice(&[7, 1, 2]);
+        assert_eq!(bus.start(Transfer::Exchange(1), 3), Ok(()));
+        assert_eq!(block_on(bus.finish_node(1, &mut rx)), Ok(2));
+        assert_eq!(bus.counters.ahead, 2);
+        assert_eq!(bus.link().got[0][1], [7, 1, 2]);
     }
 }

@@ -73,6 +73,14 @@ impl<A: RootBus, B: RootBus> RootBus for TwoLinks<A, B> {
         self.first.ready().or_else(|| self.second.ready())
     }
 
+    fn ask_ahead(&self, node: NodeId) -> bool {
+        if self.on_second(node) {
+            self.second.ask_ahead(node)
+        } else {
+            self.first.ask_ahead(node)
+        }
+    }
+
     fn line(&self, node: NodeId) -> bool {
         if self.on_second(node) {
             self.second.line(node)

@@ -374,7 +374,7 @@ async fn take_node<B: RootBus, C: RootClock, P: PixelSink>(
     clock: &C,
     root: &RefCell<RootState>,
     sink: &RefCell<P>,
-) -> Result<(), RootError> {
+) -> Result<usize, RootError> {
     let got = bus.finish_node(node, rx).await?;
     complete(
         Sent::Exchange(node),
@@ -384,7 +384,7 @@ async fn take_node<B: RootBus, C: RootClock, P: PixelSink>(
         sink,
     )
     .await;
-    Ok(())
+    Ok(got)
 }
 
 /// [`run_bus`] on a bus that keeps several exchanges in flight ([`RootBus::in_flight`] > 1,
@@ -411,18 +411,28 @@ async fn run_overlapped<B: RootBus, C: RootClock, S: SceneSource + ?Sized, P: Pi
                 match take_node(node, bus, &mut rx[..], clock, root, sink).await {
                     // Others' frames came first and are to be taken before this one.
                     Err(RootError::Link(LinkError::Busy)) if bus.arrived().is_some() => {}
-                    r => r?,
+                    r => {
+                        r?;
+                    }
                 }
             }
             return stop(&mut st, &mut rx[..], bus, clock, root, sink).await;
         }
-        // 1. A node's frame came back: take it.
+        // 1. A node's frame came back: take it. A node that will post again (it holds
+        // jobs) has its next reply composed now, where the bus holds replies ahead of a
+        // node's line ([`RootBus::ask_ahead`]).
+        let mut ahead = None;
         if let Some(node) = bus.arrived() {
-            take_node(node, bus, &mut rx[..], clock, root, sink).await?;
-            continue;
+            let got = take_node(node, bus, &mut rx[..], clock, root, sink).await?;
+            // (Not after an exchange that ended empty, a time-out or a reply ahead lost: that
+            // is no word from the node, which may be dead.)
+            if !(got > 0 && bus.ask_ahead(node) && root.borrow_mut().will_post(node)) {
+                continue;
+            }
+            ahead = Some(node);
         }
         // 2. Choose the next transfer and compose it.
-        let ready = bus.ready();
+        let ready = ahead.or_else(|| bus.ready());
         let mut wake: Option<u16> = None;
         if ready.is_none() {
             let (can_send, sent);

@@ -96,6 +96,19 @@ impl RootState {
         job
     }
 
+    /// Whether `node` will post again without being asked, for a reply composed ahead of
+    /// its line ([`crate::cluster::link::RootBus::ask_ahead`]): it holds jobs once its list
+    /// is topped up, as composing any reply does. (Topping up a node still holding a job
+    /// later than other replies do, only while more than 2 or 4 times as many jobs as nodes
+    /// remain, measured no better: `docs/cluster.md`, "Replies held ahead".)
+    pub(super) fn will_post(&mut self, node: NodeId) -> bool {
+        if node >= self.cfg.nodes || self.finished() {
+            return false;
+        }
+        self.assign(node);
+        self.nodes[node as usize].jobs.iter().any(Option::is_some)
+    }
+
     /// Top up a node's job list (called when composing its exchange reply).
     pub(super) fn assign(&mut self, node: NodeId) {
         loop {
