@@ -257,16 +257,20 @@ fn several_node_exchanges_are_in_flight_and_each_frame_comes_back_once() {
     assert_eq!(routed, one.root.exchanges);
 }
 
-#[test]
-fn corrupt_bytes_on_the_root_link_cost_retries_never_the_frame() {
-    // Transfers on the root's link (its relays' batches and the forwarded broadcasts),
-    // both directions.
-    let faults: Vec<_> = (0..10u64)
+/// Ten corrupted bytes on the root's link (its relays' batches and the forwarded
+/// broadcasts), both directions.
+fn root_link_faults() -> Vec<(u64, Dir, usize)> {
+    (0..10u64)
         .map(|k| {
             let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
             (20 + 11 * k, dir, (k as usize * 7) % 9)
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn corrupt_bytes_on_the_root_link_cost_retries_never_the_frame() {
+    let faults = root_link_faults();
     let n = faults.len() as u32;
     let run = tree(2, 3, faults, Vec::new());
     assert_eq!(run.root_bus.borrow().faults_hit, n, "every fault landed");
@@ -293,12 +297,7 @@ fn replies_sent_ahead_wait_at_the_relays_and_the_frame_is_the_same() {
     assert!(run.relays.iter().all(|r| r.stray_requests == 0));
     // With bytes corrupted on the root's link, some replies ahead never arrive: those
     // exchanges end empty and the nodes are asked anew; the frame is the same.
-    let faults: Vec<_> = (0..10u64)
-        .map(|k| {
-            let dir = if k % 2 == 0 { Dir::Up } else { Dir::Down };
-            (20 + 11 * k, dir, (k as usize * 7) % 9)
-        })
-        .collect();
+    let faults = root_link_faults();
     let n = faults.len() as u32;
     let run = tree_at_depth(2, 3, faults, Vec::new(), (3, true));
     assert_eq!(run.root_bus.borrow().faults_hit, n, "every fault landed");
