@@ -170,7 +170,7 @@ pub async fn run_relay<L: NodeLink, B: RootBus>(
         // 3. Wait for the parent, or (when no line is up) for a node's line; a middle
         // relay's bus moves meanwhile and says when it has news (also while a frame is
         // held for the next batch: its exchanges in flight go on).
-        if ahead_up && !posted {
+        if ahead_up {
             // A held reply's line rose after `clock_ahead` looked: clock it now.
             continue;
         }
@@ -305,16 +305,29 @@ async fn serve<B: RootBus>(
             }
             continue;
         }
-        let got = bus
-            .exchange(first + node as NodeId, data, &mut rx[..])
-            .await?;
-        queue_frame(up, nodes, node, &rx[..], got)?;
-        nodes.waiting &= !b;
-        // (A reply held ahead for it is stale now.)
-        nodes.ahead &= !b;
-        nodes.answered |= b;
-        report.routed += 1;
+        clock(bus, node, data, nodes, (up, rx), report).await?;
     }
+    Ok(())
+}
+
+/// A leaf relay: clock node `index` of its bus with `reply` and queue its frame; the node
+/// is answered (no longer waiting; a reply held ahead for it is used, or stale now).
+async fn clock<B: RootBus>(
+    bus: &mut B,
+    index: NodeId,
+    reply: &[u8],
+    nodes: &mut Nodes,
+    (up, rx): (&mut BatchWriter<'_>, &mut [u8; MAX_MESSAGE]),
+    report: &mut RelayReport,
+) -> Result<(), RelayError> {
+    let (first, _) = bus.nodes();
+    let got = bus.exchange(first + index, reply, &mut rx[..]).await?;
+    queue_frame(up, nodes, index, &rx[..], got)?;
+    let b = 1u32.checked_shl(index as u32).unwrap_or(0);
+    nodes.waiting &= !b;
+    nodes.ahead &= !b;
+    nodes.answered |= b;
+    report.routed += 1;
     Ok(())
 }
 
@@ -342,11 +355,7 @@ async fn clock_ahead<B: RootBus>(
             .get(i as usize)
             .and_then(|c| c.get(..len))
             .unwrap_or(&[]);
-        let got = bus.exchange(first + i, reply, &mut rx[..]).await?;
-        queue_frame(up, nodes, i, &rx[..], got)?;
-        nodes.ahead &= !b;
-        nodes.answered |= b;
-        report.routed += 1;
+        clock(bus, i, reply, nodes, (&mut *up, &mut *rx), report).await?;
         report.ahead += 1;
     }
     Ok(())

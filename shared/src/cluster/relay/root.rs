@@ -282,6 +282,10 @@ impl<'m, L: RootBus> RelayedBus<'m, L> {
         const {
             assert!(CELLS >= 1, "a relayed bus needs a reply cell");
             assert!(
+                CELLS <= 64,
+                "a relayed bus keeps at most 64 reply cells (a bitmap)"
+            );
+            assert!(
                 LANDS >= 2 && LANDS <= MAX_LANDINGS,
                 "a relayed bus keeps 2 to MAX_LANDINGS relay batches"
             );
@@ -424,14 +428,11 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     }
 
     /// Whether an exchange with `node` may begin now whether or not it waits: none in
-    /// flight with it, its relay below `depth`, a slot free, frame buffers enough for a
-    /// reply longer than a cell while one is left for a broadcast (the one composed in,
-    /// and two more), no broadcast queued.
+    /// flight with it, its relay below `depth`, room ([`RelayedBus::has_room`]), no
+    /// broadcast queued.
     fn may_begin(&self, node: NodeId) -> bool {
         self.cast.is_none()
-            && self.free_slot().is_some()
-            && self.free_cell().is_some()
-            && self.untaken_frames() >= 3
+            && self.has_room()
             && self.slot_of(node).is_none()
             && self
                 .place(node)
@@ -450,14 +451,28 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     }
 
     /// A reply cell no exchange holds.
+    /// (The lowest: one pass over the slots, on every `ready`, `ask_ahead` and `start`.)
     fn free_cell(&self) -> Option<u8> {
-        (0..self.cells.len().min(u8::MAX as usize) as u8).find(|&c| {
-            !self
-                .slots
-                .iter()
-                .flatten()
-                .any(|s| matches!(s.stage, Stage::Asked { reply: Reply::Cell(d), .. } if d == c))
-        })
+        let taken = self
+            .slots
+            .iter()
+            .flatten()
+            .fold(0u64, |m, s| match s.stage {
+                Stage::Asked {
+                    reply: Reply::Cell(c),
+                    ..
+                } => m | 1u64.checked_shl(c as u32).unwrap_or(0),
+                _ => m,
+            });
+        let c = (!taken).trailing_zeros() as usize;
+        (c < self.cells.len()).then_some(c as u8)
+    }
+
+    /// Room for one more exchange: a slot, a reply cell, and frame buffers enough for a
+    /// reply longer than a cell while one is left for a broadcast (the one composed in,
+    /// and two more).
+    fn has_room(&self) -> bool {
+        self.free_slot().is_some() && self.free_cell().is_some() && self.untaken_frames() >= 3
     }
 
     /// A slot no exchange holds, among the buffers' `slot_count`.
@@ -530,9 +545,7 @@ impl<L: RootBus, C: RootClock, const S: usize> RelayedBus<'_, L, C, S> {
     /// below `depth`, a slot free, and frame buffers enough for a reply longer than a cell
     /// while one is left for a broadcast (the one composed in, and two more).
     fn ready_in(&self) -> Option<NodeId> {
-        self.free_slot()?;
-        self.free_cell()?;
-        if self.untaken_frames() < 3 {
+        if !self.has_room() {
             return None;
         }
         let total = self.relays * self.per_relay;
