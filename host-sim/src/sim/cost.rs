@@ -141,15 +141,15 @@ impl CycleModel {
     pub const CORTEX_M3_F32: CycleModel = CycleModel {
         name: "cortex-m3 soft-float f32 (QEMU-calibrated)",
         per_primary_ray: 0.0,
-        per_secondary_ray: 25574.4,
-        per_shadow_ray: 13305.1,
-        per_box_test: 844.4,
-        per_triangle_test: 3231.2,
-        per_ellipsoid_test: 4233.8,
-        per_box_shape_test: 4638.2,
-        per_blob_test: 5971.3,
-        per_blob_field_eval: 16641.9,
-        per_shading: 4616.9,
+        per_secondary_ray: 23889.7,
+        per_shadow_ray: 10657.7,
+        per_box_test: 798.2,
+        per_triangle_test: 3126.6,
+        per_ellipsoid_test: 3839.2,
+        per_box_shape_test: 7007.8,
+        per_blob_test: 5815.3,
+        per_blob_field_eval: 16811.2,
+        per_shading: 0.0,
         per_clip_compare: 0.0,
         cycles_per_instruction: 1.3,
     };
@@ -200,15 +200,15 @@ impl CycleModel {
     pub const CORTEX_M0P_F32: CycleModel = CycleModel {
         name: "cortex-m0+ soft-float f32 (QEMU-calibrated)",
         per_primary_ray: 0.0,
-        per_secondary_ray: 45547.5,
-        per_shadow_ray: 23826.4,
-        per_box_test: 1566.4,
-        per_triangle_test: 5774.4,
-        per_ellipsoid_test: 8127.4,
-        per_box_shape_test: 7323.8,
-        per_blob_test: 10760.7,
-        per_blob_field_eval: 29744.6,
-        per_shading: 9045.0,
+        per_secondary_ray: 42034.1,
+        per_shadow_ray: 19100.0,
+        per_box_test: 1513.9,
+        per_triangle_test: 5568.3,
+        per_ellipsoid_test: 6959.8,
+        per_box_shape_test: 11202.9,
+        per_blob_test: 10401.1,
+        per_blob_field_eval: 30082.8,
+        per_shading: 0.0,
         per_clip_compare: 0.0,
         cycles_per_instruction: 1.3,
     };
@@ -781,7 +781,8 @@ mod tests {
         let rows = parse_rows(&committed_csv()).unwrap();
         // (target, backend, frames at least, worst error below): the q16.16 fits are within
         // 8.4 %; the M3's and the M0+'s f32 frames span every technique set, as the M4F's
-        // (whose test allows 40 %), and their worst frames are off by 36 and 37 %.
+        // (whose test allows 40 %), and their worst frames are off by 39 and 38 % (refitted
+        // in session 19: the light rectangles took 12-13% off their shadowed frames).
         for (target, backend, min, worst_below) in [
             ("thumbv7em-none-eabihf", "q16.16", 11, 0.10),
             ("thumbv7m-none-eabi", "q16.16", 11, 0.10),

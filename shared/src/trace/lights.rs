@@ -101,7 +101,12 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
                     }
                 }
                 let leaving = leaving_convex(surf, dir);
-                let (blocker, transparent) = self.any_opaque(&probe, t_max, leaving);
+                let seen = if T::ABSOLUTE_ROUNDING {
+                    None
+                } else {
+                    self.state.borrow().light_rects.point(light, origin)
+                };
+                let (blocker, transparent) = self.any_opaque(&probe, t_max, leaving, seen);
                 if let Some(b) = blocker {
                     if let Some(slot) = self.state.borrow_mut().blockers.get_mut(light as usize) {
                         *slot = Some(b);

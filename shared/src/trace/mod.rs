@@ -15,6 +15,7 @@
 //! Every item is re-exported here, so `links_core::render::X` (the old path) still names it.
 
 pub mod clip;
+pub mod light_rects;
 pub mod lights;
 pub mod primary;
 pub mod records;

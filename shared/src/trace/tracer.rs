@@ -17,6 +17,7 @@ use crate::image::{Camera, SceneView};
 use crate::num::Real;
 use crate::shape::boxshape::BoxBounds;
 use crate::trace::clip::RowClip;
+use crate::trace::light_rects::LightRects;
 use crate::trace::primary::{EyeRay, PlaneCache};
 use crate::trace::records::Records;
 use crate::trace::traversal::{Blocker, WalkSpace};
@@ -74,6 +75,8 @@ impl core::error::Error for RenderError {}
 pub struct TracerState<T: Real> {
     pub(super) clip: RowClip,
     pub(super) planes: PlaneCache<T>,
+    /// The nodes' rectangles in the lights' views, for shadow rays.
+    pub(super) light_rects: LightRects<T>,
     pub(super) walk: WalkSpace<T>,
     /// Per light, the shape that blocked its last shadow ray (tried first on the next).
     pub(super) blockers: [Option<Blocker>; BLOCKER_LIGHTS],
@@ -120,6 +123,7 @@ impl<T: Real> TracerState<T> {
         TracerState {
             clip: RowClip::new(),
             planes: PlaneCache::new(T::ZERO),
+            light_rects: LightRects::new(),
             walk: WalkSpace::new(),
             blockers: [None; BLOCKER_LIGHTS],
             records: Records::new(),
@@ -147,6 +151,7 @@ impl<T: Real> TracerState<T> {
         }
         self.clip.clear();
         self.planes.reset(PlaneCache::max_l1(camera));
+        self.light_rects.reset(scene);
         self.blockers = [None; BLOCKER_LIGHTS];
         self.records = Records::new();
         self.boxes = [None; CACHED_BOXES];

@@ -11,6 +11,7 @@ use crate::shape::blob::{Ball, BlobGroup, BlobStats};
 use crate::shape::boxshape::BoxHit;
 use crate::shape::ellipsoid::EllipsoidHit;
 use crate::shape::triangle::Shear;
+use crate::trace::light_rects::LightPoint;
 use crate::trace::primary::EyeRay;
 use core::borrow::BorrowMut;
 
@@ -465,11 +466,15 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     /// way. Which opaque shape is found first depends on the order of the walk, whether
     /// one is found does not. `leaving`: a convex shape the ray starts on and leaves
     /// outwards, which it cannot meet again ([`super::lights`]), so it is not tested.
+    ///
+    /// `seen`: the ray's point in its light's view ([`super::light_rects`]), when it has
+    /// one: a node whose rectangle there does not hold it is skipped before its slab test.
     pub(super) fn any_opaque(
         &mut self,
         probe: &Probe<T>,
         t_max: T,
         leaving: Option<ShapeRef>,
+        seen: Option<LightPoint>,
     ) -> (Option<Blocker>, bool) {
         let nodes = self.scene.node_table();
         let mut transparent = false;
@@ -480,6 +485,13 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             let node = nodes.get(i);
             if self.techniques.bounding_boxes {
                 self.stats.box_tests += 1;
+                // Fixed point has no rectangles: the check compiles away there.
+                if let Some(p) = seen.filter(|_| !T::ABSOLUTE_ROUNDING) {
+                    if self.state.borrow().light_rects.misses(p, i) {
+                        i = node.skip(i);
+                        continue;
+                    }
+                }
                 if !box_hit(&node, WALK_AXES, &probe.ray, &probe.inv, t_max) {
                     i = node.skip(i);
                     continue;
