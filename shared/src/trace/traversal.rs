@@ -11,7 +11,7 @@ use crate::shape::blob::{Ball, BlobGroup, BlobStats};
 use crate::shape::boxshape::BoxHit;
 use crate::shape::ellipsoid::EllipsoidHit;
 use crate::shape::triangle::Shear;
-use crate::trace::light_rects::LightPoint;
+use crate::trace::light_rects::{LeafCell, LightPoint};
 use crate::trace::primary::EyeRay;
 use core::borrow::BorrowMut;
 
@@ -479,14 +479,15 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         let nodes = self.scene.node_table();
         let mut transparent = false;
         let mut i = 0;
+        // Fixed point has no rectangles: the checks compile away there.
+        let seen = seen.filter(|_| !T::ABSOLUTE_ROUNDING && self.techniques.bounding_boxes);
         while i < nodes.len() {
             // The box is decoded one axis at a time and the leaf only past it: most nodes
             // a shadow ray visits are missed on their first or second axis.
             let node = nodes.get(i);
             if self.techniques.bounding_boxes {
                 self.stats.box_tests += 1;
-                // Fixed point has no rectangles: the check compiles away there.
-                if let Some(p) = seen.filter(|_| !T::ABSOLUTE_ROUNDING) {
+                if let Some(p) = seen {
                     if self.state.borrow().light_rects.misses(p, i) {
                         i = node.skip(i);
                         continue;
@@ -499,8 +500,11 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
             }
             if let Some(l) = node.leaf() {
                 if l.kind == ShapeKind::Triangle {
+                    // The ray's cell in the leaf's rectangle (which holds it: the node was
+                    // not rejected), for the triangles' rectangles.
+                    let cell = seen.and_then(|p| self.state.borrow().light_rects.leaf_cell(p, i));
                     // One material for the whole leaf: its first hit decides it.
-                    if let Some(k) = self.first_triangle_hit(l, probe, t_max) {
+                    if let Some(k) = self.first_triangle_hit(l, probe, t_max, cell) {
                         if self.material_is_opaque(l.material) {
                             return (Some(Blocker { leaf: l, k }), transparent);
                         }
@@ -526,13 +530,22 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
     }
 
     /// The first triangle of a leaf the probe's ray crosses in (0, t_max), in leaf order.
-    fn first_triangle_hit(&mut self, leaf: Leaf, probe: &Probe<T>, t_max: T) -> Option<u32> {
+    /// `cell`: the ray in the cells of the leaf's rectangle in its light's view
+    /// ([`super::light_rects`]): a triangle whose rectangle there does not hold it is
+    /// skipped before its test (and still counted as tested).
+    fn first_triangle_hit(
+        &mut self,
+        leaf: Leaf,
+        probe: &Probe<T>,
+        t_max: T,
+        cell: Option<LeafCell>,
+    ) -> Option<u32> {
         // One loop per axis permutation, matched once per leaf (shadow rays on photo1-d0:
         // each test called out of line spilled the vertices to the stack and back).
         let (k, hit) = match probe.shear.kz() {
-            0 => self.first_hit_permuted::<1, 2, 0>(leaf, probe, t_max),
-            1 => self.first_hit_permuted::<2, 0, 1>(leaf, probe, t_max),
-            _ => self.first_hit_permuted::<0, 1, 2>(leaf, probe, t_max),
+            0 => self.first_hit_permuted::<1, 2, 0>(leaf, probe, t_max, cell),
+            1 => self.first_hit_permuted::<2, 0, 1>(leaf, probe, t_max, cell),
+            _ => self.first_hit_permuted::<0, 1, 2>(leaf, probe, t_max, cell),
         };
         self.stats.triangle_tests += k as u64;
         hit
@@ -545,9 +558,16 @@ impl<T: Real, S: BorrowMut<TracerState<T>>> Tracer<'_, T, S> {
         leaf: Leaf,
         probe: &Probe<T>,
         t_max: T,
+        cell: Option<LeafCell>,
     ) -> (u32, Option<u32>) {
         for k in 0..leaf.count {
-            let (_, tri) = self.scene.triangle_corners::<T>(leaf.first + k);
+            let t = leaf.first + k;
+            if let Some(c) = cell {
+                if self.state.borrow().light_rects.triangle_misses(c, t) {
+                    continue;
+                }
+            }
+            let (_, tri) = self.scene.triangle_corners::<T>(t);
             if tri
                 .intersect_permuted_inline::<KX, KY, KZ>(&probe.shear, t_max)
                 .is_some()
