@@ -420,6 +420,19 @@ mod tests {
     use super::*;
     use crate::geom::{Aabb, Ray, RayInv};
 
+    /// The scene box of the random tests, and their lights: a directional one, a point
+    /// light beside the scene and one above it (kind, position, direction).
+    const TEST_ROOT: [[f32; 3]; 2] = [[-60.0, -1.0, -60.0], [60.0, 30.0, 60.0]];
+    const TEST_LIGHTS: [(LightKind, [f32; 3], [f32; 3]); 3] = [
+        (LightKind::Directional, [0.0; 3], [0.6, -1.0, 0.45]),
+        (LightKind::Point, [-20.0, 14.0, -6.0], [0.0; 3]),
+        (LightKind::Point, [5.0, 80.0, 3.0], [0.0; 3]),
+    ];
+
+    fn v3(a: [f32; 3]) -> Vec3<f32> {
+        Vec3::new(a[0], a[1], a[2])
+    }
+
     fn xorshift(seed: u64) -> impl FnMut() -> f32 {
         let mut x = seed;
         move || {
@@ -436,25 +449,11 @@ mod tests {
     #[test]
     fn a_rejected_ray_misses_the_box() {
         let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
-        let root = [
-            Vec3::new(-60.0f32, -1.0, -60.0),
-            Vec3::new(60.0, 30.0, 60.0),
-        ];
-        let lights = [
-            (
-                LightKind::Directional,
-                Vec3::zero(),
-                Vec3::new(0.6f32, -1.0, 0.45).normalize(),
-            ),
-            (
-                LightKind::Point,
-                Vec3::new(-20.0f32, 14.0, -6.0),
-                Vec3::zero(),
-            ),
-            (LightKind::Point, Vec3::new(5.0f32, 80.0, 3.0), Vec3::zero()),
-        ];
-        for (kind, pos, dir) in lights {
-            let view = LightView::new(kind, pos, dir, root).expect("a view");
+        for (kind, pos, dir) in
+            TEST_LIGHTS.map(|(k, p, d)| (k, v3(p), v3(d).try_normalize().unwrap_or(Vec3::zero())))
+        {
+            let view = LightView::new(kind, pos, dir, [v3(TEST_ROOT[0]), v3(TEST_ROOT[1])])
+                .expect("a view");
             let (mut missed, mut rejected) = (0u32, 0u32);
             for _ in 0..3000 {
                 let c = Vec3::new(next() * 100.0 - 50.0, next() * 25.0, next() * 100.0 - 50.0);
@@ -507,25 +506,11 @@ mod tests {
     fn a_rejected_ray_misses_the_triangle() {
         use crate::shape::triangle::Triangle;
         let mut next = xorshift(0x2545_f491_4f6c_dd1d);
-        let root = [
-            Vec3::new(-60.0f32, -1.0, -60.0),
-            Vec3::new(60.0, 30.0, 60.0),
-        ];
-        let lights = [
-            (
-                LightKind::Directional,
-                Vec3::zero(),
-                Vec3::new(-0.3f32, -1.0, 0.7).normalize(),
-            ),
-            (
-                LightKind::Point,
-                Vec3::new(-20.0f32, 14.0, -6.0),
-                Vec3::zero(),
-            ),
-            (LightKind::Point, Vec3::new(5.0f32, 80.0, 3.0), Vec3::zero()),
-        ];
-        for (kind, pos, dir) in lights {
-            let view = LightView::new(kind, pos, dir, root).expect("a view");
+        for (kind, pos, dir) in
+            TEST_LIGHTS.map(|(k, p, d)| (k, v3(p), v3(d).try_normalize().unwrap_or(Vec3::zero())))
+        {
+            let view = LightView::new(kind, pos, dir, [v3(TEST_ROOT[0]), v3(TEST_ROOT[1])])
+                .expect("a view");
             let (mut missed, mut rejected) = (0u32, 0u32);
             for _ in 0..3000 {
                 let c = Vec3::new(next() * 100.0 - 50.0, next() * 25.0, next() * 100.0 - 50.0);
